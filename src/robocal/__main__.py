@@ -1,0 +1,5 @@
+import sys
+
+from robocal.cli.main import main
+
+sys.exit(main())

@@ -1,0 +1,87 @@
+"""Small helpers shared by the rigs' command-line wiring.
+
+CLI code stays thin: parse arguments, call a library function that returns a
+result object, write files with these helpers, print a short summary.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import sys
+from collections.abc import Iterable
+from pathlib import Path
+
+from robocal.io import CalibrationResult, write_result
+from robocal.report import Report
+
+__all__ = [
+    "add_out_argument",
+    "add_seed_argument",
+    "prepare_out_dir",
+    "write_run",
+    "progress",
+    "examples_epilog",
+    "RawHelp",
+]
+
+
+class RawHelp(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
+    """Keeps example blocks as written and shows defaults."""
+
+
+def examples_epilog(*lines: str) -> str:
+    """An ``Examples:`` block for a parser's epilog."""
+    return "examples:\n" + "\n".join(f"  {ln}" for ln in lines)
+
+
+def add_out_argument(parser: argparse.ArgumentParser, *, help: str | None = None) -> None:
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help=help or "output directory (default: a fresh robocal-out-<command>-<time> folder)",
+    )
+
+
+def add_seed_argument(parser: argparse.ArgumentParser, default: int = 0) -> None:
+    parser.add_argument("--seed", type=int, default=default, help="seed of the random generator")
+
+
+def prepare_out_dir(out: Path | None, label: str) -> Path:
+    """Create ``out`` (or a fresh time-stamped folder named after ``label``)."""
+    if out is None:
+        stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+        out = Path(f"robocal-out-{label}-{stamp}")
+        n = 1
+        while out.exists():
+            n += 1
+            out = Path(f"robocal-out-{label}-{stamp}-{n}")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def write_run(out_dir: Path, result: CalibrationResult | None, report: Report | None, *, quiet: bool = False):
+    """Write ``out_dir/result.json`` and ``out_dir/report.html`` (atomically)."""
+    paths = []
+    if result is not None:
+        paths.append(write_result(Path(out_dir) / "result.json", result))
+    if report is not None:
+        paths.append(report.write(Path(out_dir) / "report.html"))
+    if not quiet:
+        for p in paths:
+            print(f"wrote {p}")
+        if result is not None:
+            for w in result.warnings:
+                print(f"warning: {w}", file=sys.stderr)
+    return paths
+
+
+def progress(iterable: Iterable, *, desc: str = "", total: int | None = None, enabled: bool = True):
+    """A tqdm progress bar on stderr (a plain iterator when disabled or not a terminal)."""
+    if not enabled or not sys.stderr.isatty():
+        return iterable
+    from tqdm import tqdm
+
+    return tqdm(iterable, desc=desc, total=total, leave=False, file=sys.stderr)

@@ -1,0 +1,117 @@
+"""The contract between the core CLI and a rig.
+
+A rig package exposes ``RIG = Rig(...)`` in its ``cli`` module and lists it in
+``pyproject.toml`` under ``[project.entry-points."robocal.rigs"]``; the core
+discovers rigs through that group and never imports one by name.
+
+Command convention, the same for every rig::
+
+    robocal <rig> simulate ... --out DIR      # writes simulated input files
+    robocal <rig> calibrate INPUT --out DIR   # writes DIR/result.json + DIR/report.html
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from importlib.metadata import entry_points
+from pathlib import Path
+
+import numpy as np
+
+from robocal.io import CalibrationResult
+from robocal.report import Section
+
+__all__ = ["Rig", "DemoContext", "DemoOutcome", "discover_rigs"]
+
+
+@dataclass
+class DemoContext:
+    """What ``robocal demo`` hands a rig.
+
+    Attributes
+    ----------
+    out_dir : Path
+        Folder the rig may write its own files into (``<demo out>/<rig>``).
+    rng : numpy.random.Generator
+        The only source of randomness the demo may use.
+    progress : bool
+        Whether progress bars may be shown.
+    """
+
+    out_dir: Path
+    rng: np.random.Generator
+    progress: bool = True
+
+
+@dataclass
+class DemoOutcome:
+    """What a rig's demo returns.
+
+    Attributes
+    ----------
+    summary : dict
+        A few headline figures for the demo's summary table, already formatted
+        with units (``{"rotation error": "0.011 deg"}``).
+    passed : bool
+        Whether the rig's own acceptance check held (e.g. estimate within
+        3 sigma of the simulated truth).
+    sections : list of Section
+        Report sections (plots, tables) for the demo's HTML report.
+    result : CalibrationResult, optional
+        The rig's main result, also written to ``<out_dir>/result.json``.
+    """
+
+    summary: dict[str, str]
+    passed: bool
+    sections: list[Section] = field(default_factory=list)
+    result: CalibrationResult | None = None
+
+
+@dataclass(frozen=True)
+class Rig:
+    """A registered workflow.
+
+    Attributes
+    ----------
+    name : str
+        Sub-command name (``robocal <name> ...``).
+    help : str
+        One line for ``robocal --help``.
+    description : str
+        Longer text for ``robocal <name> --help`` (examples welcome).
+    add_commands : callable
+        ``add_commands(parser)`` adds the rig's sub-commands to its parser;
+        each sub-command sets ``func=`` (``func(args) -> int``) via
+        ``set_defaults``.
+    demo : callable, optional
+        ``demo(ctx: DemoContext) -> DemoOutcome`` run by ``robocal demo``.
+    """
+
+    name: str
+    help: str
+    description: str
+    add_commands: Callable[[argparse.ArgumentParser], None]
+    demo: Callable[[DemoContext], DemoOutcome] | None = None
+
+
+def discover_rigs() -> list[Rig]:
+    """Load every rig registered in the ``robocal.rigs`` entry-point group.
+
+    A registered rig whose package is absent from this build (the module is
+    not found) is skipped; any other import error is a bug and propagates.
+    """
+    rigs = []
+    for ep in sorted(entry_points(group="robocal.rigs"), key=lambda e: e.name):
+        module = ep.value.split(":")[0]
+        try:
+            rig = ep.load()
+        except ModuleNotFoundError as exc:
+            if exc.name and module.startswith(exc.name):
+                continue
+            raise
+        if not isinstance(rig, Rig):
+            raise TypeError(f"entry point {ep.name} -> {ep.value} is not a robocal.cli.Rig")
+        rigs.append(rig)
+    return rigs

@@ -1,0 +1,147 @@
+"""``robocal`` command-line entry point.
+
+Errors a user can cause (:class:`~robocal.errors.RobocalError`) print one
+line on stderr and exit with status 2; anything else is a bug and keeps its
+traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+import robocal
+from robocal.cli._common import RawHelp, examples_epilog, prepare_out_dir
+from robocal.cli._rig import DemoContext, discover_rigs
+from robocal.errors import RobocalError
+from robocal.io import write_result
+from robocal.report import Report
+
+__all__ = ["main", "build_parser", "run_demo"]
+
+EXIT_USER_ERROR = 2
+
+
+def build_parser(rigs=None) -> argparse.ArgumentParser:
+    rigs = discover_rigs() if rigs is None else rigs
+    parser = argparse.ArgumentParser(
+        prog="robocal",
+        description=(
+            "Robot geometric calibration and sensor dead reckoning.\n"
+            "Each rig is a complete workflow: simulate data, calibrate, evaluate, report."
+        ),
+        formatter_class=RawHelp,
+        epilog=examples_epilog(
+            "robocal demo                      # every rig on embedded data, HTML report",
+            "robocal demo --out demo-out --seed 3",
+            "robocal projector --help          # one rig's commands",
+            "robocal projector calibrate examples/projector/seed_projector_A.yaml --out out",
+        ),
+    )
+    parser.add_argument("--version", action="version", version=f"robocal {robocal.__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    demo = sub.add_parser(
+        "demo",
+        help="run every rig end to end on embedded default data and write one HTML report",
+        formatter_class=RawHelp,
+        epilog=examples_epilog("robocal demo", "robocal demo --out demo-out --rigs projector,flow"),
+    )
+    demo.add_argument("--out", type=Path, default=None, help="report directory (default: a fresh folder)")
+    demo.add_argument("--seed", type=int, default=2026, help="seed of the random generator")
+    demo.add_argument("--rigs", default=None, help="comma-separated subset of rigs to run")
+    demo.add_argument("--no-progress", action="store_true", help="never show progress bars")
+    demo.set_defaults(func=lambda a: run_demo(a, rigs))
+
+    lst = sub.add_parser("rigs", help="list the installed rigs")
+    lst.set_defaults(func=lambda a: _list_rigs(rigs))
+
+    for rig in rigs:
+        p = sub.add_parser(rig.name, help=rig.help, description=rig.description, formatter_class=RawHelp)
+        rig.add_commands(p)
+        p.set_defaults(func=lambda a, p=p: (p.print_help(), 0)[1])
+    return parser
+
+
+def _list_rigs(rigs) -> int:
+    for rig in rigs:
+        print(f"{rig.name:14s} {rig.help}")
+    return 0
+
+
+def run_demo(args, rigs) -> int:
+    """Run each rig's demo, print a summary table, write ``report.html`` and per-rig results."""
+    wanted = None if args.rigs is None else [r.strip() for r in args.rigs.split(",") if r.strip()]
+    chosen = [r for r in rigs if r.demo is not None and (wanted is None or r.name in wanted)]
+    if wanted:
+        unknown = sorted(set(wanted) - {r.name for r in rigs})
+        if unknown:
+            raise RobocalError(f"--rigs: unknown rig(s) {', '.join(unknown)} (have: {', '.join(r.name for r in rigs)})")
+    out = prepare_out_dir(args.out, "demo")
+    report = Report("robocal demo", subtitle=f"seed {args.seed}; rigs: {', '.join(r.name for r in chosen) or 'none'}")
+    overview = report.section("Summary")
+    rows = []
+    failed = 0
+    seeds = np.random.SeedSequence(args.seed).spawn(max(len(chosen), 1))
+    for rig, ss in zip(chosen, seeds):
+        print(f"[{rig.name}] running ...", flush=True)
+        t0 = time.perf_counter()
+        ctx = DemoContext(out_dir=out / rig.name, rng=np.random.default_rng(ss), progress=not args.no_progress)
+        ctx.out_dir.mkdir(parents=True, exist_ok=True)
+        try:
+            outcome = rig.demo(ctx)
+        except RobocalError as exc:
+            failed += 1
+            rows.append({"rig": rig.name, "status": "error", "time [s]": time.perf_counter() - t0, "figures": str(exc)})
+            continue
+        dt = time.perf_counter() - t0
+        if outcome.result is not None:
+            write_result(ctx.out_dir / "result.json", outcome.result)
+        report.extend(outcome.sections, prefix=rig.name)
+        figures = "; ".join(f"{k}: {v}" for k, v in outcome.summary.items())
+        rows.append({"rig": rig.name, "status": "ok" if outcome.passed else "CHECK FAILED", "time [s]": dt, "figures": figures})
+        if not outcome.passed:
+            failed += 1
+    overview.table(rows, ["rig", "status", "time [s]", "figures"], digits=3)
+    if not chosen:
+        overview.text("No rig with a demo is installed.")
+    path = report.write(out / "report.html")
+    _print_table(rows)
+    print(f"report: {path}")
+    return 0 if failed == 0 else 1
+
+
+def _print_table(rows) -> None:
+    if not rows:
+        print("no rigs ran")
+        return
+    w_rig = max(4, *(len(r["rig"]) for r in rows))
+    w_st = max(6, *(len(r["status"]) for r in rows))
+    print(f"{'rig':{w_rig}s}  {'status':{w_st}s}  {'time':>7s}  figures")
+    for r in rows:
+        print(f"{r['rig']:{w_rig}s}  {r['status']:{w_st}s}  {r['time [s]']:6.1f}s  {r['figures']}")
+
+
+def main(argv=None) -> int:
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if getattr(args, "func", None) is None:
+            parser.print_help()
+            return 0
+        return int(args.func(args) or 0)
+    except RobocalError as exc:
+        msg = str(exc).replace("\n", " ")
+        print(f"robocal: error: {msg}", file=sys.stderr)
+        return EXIT_USER_ERROR
+    except KeyboardInterrupt:
+        print("robocal: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,66 @@
+"""Named warnings attached to results (not Python warnings).
+
+A :class:`Diagnostic` is data: a stable ``code`` that scripts can test for,
+a human message, and the parameters or observation indices involved. They
+travel inside result objects and result files, so a user reading a result a
+month later still sees that, say, ``p_y`` was not identifiable.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+__all__ = ["Diagnostic", "CODES"]
+
+#: The codes in use, with what each means. Rigs may add their own codes.
+CODES = {
+    "rank_deficient": "the data do not determine some parameters (named in `params`)",
+    "weakly_determined": "some parameters are determined only weakly (large standard deviation or condition number)",
+    "outliers": "residuals larger than 3 sigma (observation indices in `indices`)",
+    "degenerate_geometry": "the measurement geometry is close to degenerate",
+    "inconsistent_data": "measurements disagree beyond their noise",
+    "not_converged": "the solver stopped before convergence",
+    "near_singularity": "configuration close to a kinematic singularity",
+    "low_quality": "measurements of low quality were excluded (indices in `indices`)",
+    "dropped": "inputs were dropped (indices in `indices`)",
+}
+
+
+@dataclass(frozen=True)
+class Diagnostic:
+    """One named warning.
+
+    Attributes
+    ----------
+    code : str
+        Stable identifier, see :data:`CODES`.
+    message : str
+        One-line explanation for a person.
+    params : tuple of str
+        Parameter names involved (for rank deficiency, correlations, ...).
+    indices : tuple of int
+        Observation indices involved (for outliers, dropped inputs, ...).
+    """
+
+    code: str
+    message: str
+    params: tuple[str, ...] = field(default_factory=tuple)
+    indices: tuple[int, ...] = field(default_factory=tuple)
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["params"] = list(self.params)
+        d["indices"] = [int(i) for i in self.indices]
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Diagnostic":
+        return cls(
+            code=str(d["code"]),
+            message=str(d["message"]),
+            params=tuple(d.get("params", ())),
+            indices=tuple(int(i) for i in d.get("indices", ())),
+        )
+
+    def __str__(self) -> str:
+        return f"[{self.code}] {self.message}"

@@ -1,0 +1,161 @@
+"""The result file shared by every rig (schema ``robocal.result/1``).
+
+A result is a JSON (or YAML) mapping a user can load in any language::
+
+    schema: robocal.result/1
+    robocal_version: "0.1.0"
+    rig: projector                  # which workflow produced it
+    method: nonlinear               # solver / variant
+    created: 2026-11-22T14:03:11Z   # UTC, ISO 8601
+    command: "robocal projector calibrate room.yaml --out out"
+    inputs: {room.yaml: <sha256>}   # content hashes of every input file
+    estimate: {...}                 # named values, SI units (m, rad); matrices as nested lists
+    std: {...}                      # same keys; null where a value is not identifiable
+    units: {...}                    # unit of each estimate key ("m", "rad", "1", ...)
+    residual_rms: 0.0012            # in `residual_unit`
+    residual_unit: m
+    warnings: [{code, message, params, indices}, ...]
+    diagnostics: {...}              # solver details: iterations, cost history, rank, ...
+
+Frames follow ``T_parent_child`` naming; rotations as 3x3 lists plus a
+scalar-last quaternion where useful (see ``docs/conventions.md``).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from robocal.diagnostics import Diagnostic
+from robocal.errors import FileFormatError
+from robocal.io._atomic import atomic_write_text, sha256_file
+
+__all__ = ["SCHEMA", "CalibrationResult", "to_jsonable", "write_result", "load_result", "hash_inputs"]
+
+SCHEMA = "robocal.result/1"
+
+
+def to_jsonable(obj: Any) -> Any:
+    """Convert numpy arrays/scalars, dataclasses with ``to_dict`` and paths to JSON types.
+
+    Non-finite floats become ``None`` (JSON has no NaN), so a consumer never
+    reads a NaN it did not expect.
+    """
+    if isinstance(obj, dict):
+        return {str(k): to_jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [to_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return to_jsonable(obj.tolist())
+    if isinstance(obj, (np.floating, float)):
+        val = float(obj)
+        return val if math.isfinite(val) else None
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (np.bool_,)):
+        return bool(obj)
+    if isinstance(obj, Path):
+        return str(obj)
+    if hasattr(obj, "to_dict"):
+        return to_jsonable(obj.to_dict())
+    return obj
+
+
+def hash_inputs(paths) -> dict[str, str]:
+    """``{path: sha256}`` for each existing input file."""
+    return {str(p): sha256_file(p) for p in paths if p is not None and Path(p).is_file()}
+
+
+def _now() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat().replace("+00:00", "Z")
+
+
+@dataclass
+class CalibrationResult:
+    """A rig's calibration result in the shared schema (see module docstring)."""
+
+    rig: str
+    method: str
+    estimate: dict
+    std: dict = field(default_factory=dict)
+    units: dict = field(default_factory=dict)
+    residual_rms: float | None = None
+    residual_unit: str | None = None
+    warnings: list[Diagnostic] = field(default_factory=list)
+    inputs: dict[str, str] = field(default_factory=dict)
+    diagnostics: dict = field(default_factory=dict)
+    command: str = field(default_factory=lambda: " ".join(["robocal", *sys.argv[1:]]) if sys.argv else "")
+    created: str = field(default_factory=_now)
+    robocal_version: str = field(default_factory=lambda: __import__("robocal").__version__)
+    schema: str = SCHEMA
+
+    def to_dict(self) -> dict:
+        return to_jsonable(
+            {
+                "schema": self.schema,
+                "robocal_version": self.robocal_version,
+                "rig": self.rig,
+                "method": self.method,
+                "created": self.created,
+                "command": self.command,
+                "inputs": self.inputs,
+                "estimate": self.estimate,
+                "std": self.std,
+                "units": self.units,
+                "residual_rms": self.residual_rms,
+                "residual_unit": self.residual_unit,
+                "warnings": [w.to_dict() if isinstance(w, Diagnostic) else w for w in self.warnings],
+                "diagnostics": self.diagnostics,
+            }
+        )
+
+    @classmethod
+    def from_dict(cls, d: dict, *, source: str = "<result>") -> "CalibrationResult":
+        if not isinstance(d, dict) or d.get("schema") != SCHEMA:
+            got = d.get("schema") if isinstance(d, dict) else type(d).__name__
+            raise FileFormatError(f"not a robocal result: schema must be {SCHEMA!r}, got {got!r}", source=source)
+        try:
+            return cls(
+                rig=d["rig"],
+                method=d["method"],
+                estimate=d["estimate"],
+                std=d.get("std", {}),
+                units=d.get("units", {}),
+                residual_rms=d.get("residual_rms"),
+                residual_unit=d.get("residual_unit"),
+                warnings=[Diagnostic.from_dict(w) for w in d.get("warnings", [])],
+                inputs=d.get("inputs", {}),
+                diagnostics=d.get("diagnostics", {}),
+                command=d.get("command", ""),
+                created=d.get("created", ""),
+                robocal_version=d.get("robocal_version", ""),
+            )
+        except KeyError as exc:
+            raise FileFormatError(f"field {exc.args[0]!r} is missing", source=source) from None
+
+
+def write_result(path, result: CalibrationResult) -> Path:
+    """Write ``result`` atomically as JSON (``.json``) or YAML (``.yaml``/``.yml``)."""
+    path = Path(path)
+    d = result.to_dict()
+    if path.suffix.lower() in (".yaml", ".yml"):
+        text = yaml.safe_dump(d, sort_keys=False, allow_unicode=True)
+    else:
+        text = json.dumps(d, indent=2, allow_nan=False) + "\n"
+    return atomic_write_text(path, text)
+
+
+def load_result(path) -> CalibrationResult:
+    """Load a result file written by :func:`write_result`."""
+    from robocal.io._load import load_document
+
+    doc = load_document(path)
+    return CalibrationResult.from_dict(doc.data, source=str(path))

@@ -1,0 +1,209 @@
+"""Self-contained HTML reports: one file per run, plots embedded as PNG data URIs.
+
+Plot functions elsewhere are pure (take ``ax=None``, return the axes); a
+:class:`Report` collects their figures, tables, text and diagnostics and
+writes one HTML file that opens offline.
+
+Example
+-------
+>>> rep = Report("projector calibration")
+>>> sec = rep.section("Residuals")
+>>> sec.table([{"point": 0, "error [mm]": 1.2}])
+>>> rep.write("out/report.html")  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from robocal.diagnostics import Diagnostic
+from robocal.io import atomic_write_text
+
+__all__ = ["Report", "Section", "figure_to_data_uri", "format_value", "new_figure"]
+
+_CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:2em auto;max-width:1100px;color:#222;padding:0 1em}
+h1{border-bottom:2px solid #246;padding-bottom:.2em}h2{color:#246;margin-top:1.6em}h3{color:#357}
+table{border-collapse:collapse;margin:.6em 0;font-size:.92em}
+th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right}th{background:#eef2f7}
+td:first-child,th:first-child{text-align:left}
+.warn{background:#fff4e0;border-left:4px solid #e90;padding:.4em .8em;margin:.3em 0}
+.ok{background:#eaf7ea;border-left:4px solid #3a3;padding:.4em .8em;margin:.3em 0}
+.fail{background:#fdeaea;border-left:4px solid #c33;padding:.4em .8em;margin:.3em 0}
+figure{margin:1em 0}figcaption{color:#555;font-size:.9em}
+pre{background:#f6f6f6;padding:.6em;overflow-x:auto;font-size:.85em}
+.meta{color:#666;font-size:.85em}
+"""
+
+
+def new_figure(nrows: int = 1, ncols: int = 1, *, size=(6.4, 4.0), **kw):
+    """A matplotlib figure on the non-interactive Agg backend (no display needed)."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=size, layout="constrained")
+    axes = fig.subplots(nrows, ncols, **kw)
+    return fig, axes
+
+
+def figure_to_data_uri(fig, *, dpi: int = 100) -> str:
+    """Render a matplotlib figure to a ``data:image/png;base64,...`` URI."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def format_value(v, digits: int = 6) -> str:
+    """Compact text for a table cell (None/NaN -> an em dash)."""
+    if v is None:
+        return "—"
+    if isinstance(v, (bool, np.bool_)):
+        return "yes" if v else "no"
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, (float, np.floating)):
+        if not math.isfinite(float(v)):
+            return "—"
+        return f"{float(v):.{digits}g}"
+    if isinstance(v, np.ndarray):
+        return np.array2string(v, precision=digits, separator=", ", max_line_width=60)
+    return str(v)
+
+
+@dataclass
+class Section:
+    """A titled part of a report; items render in the order they were added."""
+
+    title: str
+    items: list[str] = field(default_factory=list)
+
+    def text(self, text: str, *, cls: str | None = None) -> "Section":
+        body = html.escape(text).replace("\n", "<br>")
+        self.items.append(f'<p class="{cls}">{body}</p>' if cls else f"<p>{body}</p>")
+        return self
+
+    def status(self, ok: bool, text: str) -> "Section":
+        return self.text(text, cls="ok" if ok else "fail")
+
+    def preformatted(self, text: str) -> "Section":
+        self.items.append(f"<pre>{html.escape(text)}</pre>")
+        return self
+
+    def table(self, rows, columns=None, *, caption: str | None = None, digits: int = 6) -> "Section":
+        """A table from a list of dicts (columns from the first row unless given)."""
+        rows = list(rows)
+        if not rows:
+            return self.text("(no rows)")
+        columns = list(columns or rows[0].keys())
+        head = "".join(f"<th>{html.escape(str(c))}</th>" for c in columns)
+        body = "".join(
+            "<tr>" + "".join(f"<td>{html.escape(format_value(r.get(c), digits))}</td>" for c in columns) + "</tr>"
+            for r in rows
+        )
+        cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
+        self.items.append(f"<table>{cap}<tr>{head}</tr>{body}</table>")
+        return self
+
+    def figure(self, fig, caption: str = "", *, dpi: int = 100) -> "Section":
+        uri = figure_to_data_uri(fig, dpi=dpi)
+        cap = f"<figcaption>{html.escape(caption)}</figcaption>" if caption else ""
+        self.items.append(f'<figure><img alt="{html.escape(caption)}" src="{uri}">{cap}</figure>')
+        return self
+
+    def image(self, image: np.ndarray, caption: str = "") -> "Section":
+        """Embed an image array (grey or RGB uint8) as PNG."""
+        import cv2
+
+        arr = np.asarray(image)
+        if arr.ndim == 3:
+            arr = arr[..., ::-1]  # RGB -> BGR for OpenCV's encoder
+        ok, png = cv2.imencode(".png", arr)
+        uri = "data:image/png;base64," + base64.b64encode(png.tobytes()).decode("ascii")
+        cap = f"<figcaption>{html.escape(caption)}</figcaption>" if caption else ""
+        self.items.append(f'<figure><img alt="{html.escape(caption)}" src="{uri}">{cap}</figure>')
+        return self
+
+    def diagnostics(self, warnings) -> "Section":
+        warnings = list(warnings)
+        if not warnings:
+            self.items.append('<p class="ok">No warnings.</p>')
+        for w in warnings:
+            if isinstance(w, Diagnostic):
+                extra = ""
+                if w.params:
+                    extra += " — parameters: " + ", ".join(w.params)
+                if w.indices:
+                    shown = ", ".join(str(i) for i in w.indices[:30])
+                    extra += f" — indices: {shown}" + (" …" if len(w.indices) > 30 else "")
+                txt = f"[{w.code}] {w.message}{extra}"
+            else:
+                txt = str(w)
+            self.items.append(f'<p class="warn">{html.escape(txt)}</p>')
+        return self
+
+    def parameters(self, estimate: dict, std: dict | None = None, units: dict | None = None) -> "Section":
+        """Parameter table: name, value, standard deviation, unit (flattening arrays)."""
+        std = std or {}
+        units = units or {}
+        rows = []
+        for name, val in estimate.items():
+            s = std.get(name)
+            arr = np.asarray(val, dtype=object)
+            if arr.ndim == 0 or arr.size == 1:
+                rows.append({"parameter": name, "value": val, "std": s, "unit": units.get(name, "")})
+            else:
+                flat_s = np.asarray(s, dtype=object).reshape(-1) if s is not None else [None] * arr.size
+                for i, (v, si) in enumerate(zip(arr.reshape(-1), flat_s)):
+                    rows.append({"parameter": f"{name}[{i}]", "value": v, "std": si, "unit": units.get(name, "")})
+        return self.table(rows, ["parameter", "value", "std", "unit"])
+
+
+class Report:
+    """A self-contained HTML report made of :class:`Section` objects."""
+
+    def __init__(self, title: str, *, subtitle: str | None = None):
+        self.title = title
+        self.subtitle = subtitle
+        self.sections: list[Section] = []
+
+    def section(self, title: str) -> Section:
+        sec = Section(title)
+        self.sections.append(sec)
+        return sec
+
+    def extend(self, sections, *, prefix: str | None = None) -> None:
+        for s in sections:
+            self.sections.append(Section(f"{prefix}: {s.title}" if prefix else s.title, list(s.items)))
+
+    def to_html(self) -> str:
+        import datetime as _dt
+
+        import robocal
+
+        toc = "".join(f'<li><a href="#s{i}">{html.escape(s.title)}</a></li>' for i, s in enumerate(self.sections))
+        body = "".join(
+            f'<section id="s{i}"><h2>{html.escape(s.title)}</h2>{"".join(s.items)}</section>'
+            for i, s in enumerate(self.sections)
+        )
+        sub = f"<p>{html.escape(self.subtitle)}</p>" if self.subtitle else ""
+        stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+        return (
+            "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
+            f"<title>{html.escape(self.title)}</title><style>{_CSS}</style></head><body>"
+            f"<h1>{html.escape(self.title)}</h1>{sub}"
+            f"<p class='meta'>robocal {html.escape(robocal.__version__)} — {stamp}</p>"
+            f"<nav><ul>{toc}</ul></nav>{body}</body></html>\n"
+        )
+
+    def write(self, path) -> Path:
+        """Write the report atomically; returns the path."""
+        return atomic_write_text(Path(path), self.to_html())

@@ -1,0 +1,133 @@
+"""Boundary validators: convert to float64 arrays, check shape and finiteness.
+
+Each ``check_*`` returns the converted array or raises a
+:class:`~robocal.errors.RobocalError` subclass whose message names the
+argument and shows expected vs got, e.g.
+``points must have shape (N, 3), got (4, 2)``. Call them where data enters
+the library; internal code may skip re-validation.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from robocal.errors import InputError, NonFiniteError, ShapeError
+
+__all__ = [
+    "check_array",
+    "check_points",
+    "check_rotation_matrix",
+    "check_transform",
+    "check_positive",
+    "format_shape",
+]
+
+
+def format_shape(shape: Sequence[int | str | None]) -> str:
+    """Render an expected shape such as ``(None, 3)`` as ``(..., 3)``."""
+    parts = ["..." if s is None else str(s) for s in shape]
+    return "(" + ", ".join(parts) + ("," if len(parts) == 1 else "") + ")"
+
+
+def check_array(
+    x,
+    name: str,
+    *,
+    shape: Sequence[int | str | None] | None = None,
+    min_ndim: int | None = None,
+    finite: bool = True,
+    dtype=np.float64,
+) -> np.ndarray:
+    """Convert ``x`` to an array and check it.
+
+    Parameters
+    ----------
+    x : array_like
+        Value to check.
+    name : str
+        Name used in error messages.
+    shape : sequence of int, str or None, optional
+        Expected trailing shape. An ``int`` must match exactly, a ``str``
+        (e.g. ``"N"``) or ``None`` matches any size. A leading ``...``-style
+        batch is allowed: only the trailing ``len(shape)`` axes are checked,
+        unless ``min_ndim`` demands more.
+    min_ndim : int, optional
+        Minimum number of dimensions.
+    finite : bool
+        Reject NaN and infinity.
+    dtype : numpy dtype
+        Target dtype (float64 by default).
+    """
+    try:
+        arr = np.asarray(x, dtype=dtype)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{name} must be numeric, got {type(x).__name__} ({exc})") from None
+    if shape is not None:
+        want = len(shape)
+        ok = arr.ndim >= want
+        if ok:
+            for got, exp in zip(arr.shape[arr.ndim - want :], shape):
+                if isinstance(exp, int) and got != exp:
+                    ok = False
+                    break
+        if not ok:
+            prefix = "(..., " if want and arr.ndim > want else "("
+            exp_txt = format_shape(shape)
+            if prefix == "(..., ":
+                exp_txt = "(..., " + exp_txt[1:]
+            raise ShapeError(f"{name} must have shape {exp_txt}, got {tuple(arr.shape)}")
+    if min_ndim is not None and arr.ndim < min_ndim:
+        raise ShapeError(f"{name} must have at least {min_ndim} dimensions, got shape {tuple(arr.shape)}")
+    if finite and np.issubdtype(arr.dtype, np.floating) and not np.all(np.isfinite(arr)):
+        bad = np.argwhere(~np.isfinite(arr))
+        where = tuple(int(i) for i in bad[0]) if bad.size else ()
+        raise NonFiniteError(f"{name} contains NaN or infinity (first at index {where})")
+    return arr
+
+
+def check_points(x, name: str = "points", *, dim: int = 3, min_count: int = 1) -> np.ndarray:
+    """Check an ``(N, dim)`` point array with at least ``min_count`` rows."""
+    arr = check_array(x, name, shape=("N", dim))
+    if arr.ndim != 2:
+        raise ShapeError(f"{name} must have shape (N, {dim}), got {tuple(arr.shape)}")
+    if arr.shape[0] < min_count:
+        from robocal.errors import NotEnoughDataError
+
+        raise NotEnoughDataError(f"{name} needs at least {min_count} points, got {arr.shape[0]}")
+    return arr
+
+
+def check_rotation_matrix(R, name: str = "R", *, atol: float = 1e-6) -> np.ndarray:
+    """Check a (batch of) 3x3 proper rotation matrices (orthonormal, det = +1)."""
+    arr = check_array(R, name, shape=(3, 3))
+    RtR = np.einsum("...ji,...jk->...ik", arr, arr)
+    err = np.abs(RtR - np.eye(3)).max(axis=(-2, -1))
+    det = np.linalg.det(arr)
+    if np.any(err > atol) or np.any(det < 0):
+        worst = float(np.max(err))
+        raise InputError(
+            f"{name} must be a rotation matrix (R^T R = I, det R = +1), got max |R^T R - I| = {worst:.3g}, "
+            f"det = {float(np.min(det)):.6g}"
+        )
+    return arr
+
+
+def check_transform(T, name: str = "T", *, atol: float = 1e-6) -> np.ndarray:
+    """Check a (batch of) 4x4 homogeneous rigid transforms."""
+    arr = check_array(T, name, shape=(4, 4))
+    check_rotation_matrix(arr[..., :3, :3], f"{name}[:3, :3]", atol=atol)
+    if np.any(np.abs(arr[..., 3, :] - np.array([0.0, 0.0, 0.0, 1.0])) > atol):
+        raise InputError(f"{name} last row must be [0, 0, 0, 1], got {arr[..., 3, :].reshape(-1, 4)[0].tolist()}")
+    return arr
+
+
+def check_positive(x, name: str, *, strict: bool = True) -> np.ndarray:
+    """Check that every element is > 0 (or >= 0 with ``strict=False``)."""
+    arr = check_array(x, name)
+    bad = arr <= 0 if strict else arr < 0
+    if np.any(bad):
+        rel = "> 0" if strict else ">= 0"
+        raise InputError(f"{name} must be {rel}, got {arr[bad].reshape(-1)[0]!r}")
+    return arr

@@ -1,0 +1,66 @@
+import json
+import os
+
+import numpy as np
+import pytest
+
+from robocal.diagnostics import Diagnostic
+from robocal.errors import FileFormatError
+from robocal.io import CalibrationResult, atomic_write_text, hash_inputs, load_result, write_result
+
+
+def _result(tmp_path):
+    inp = tmp_path / "in.yaml"
+    inp.write_text("a: 1\n")
+    return CalibrationResult(
+        rig="projector",
+        method="nonlinear",
+        estimate={"R": np.eye(3), "t": np.array([1.0, 2.0, 3.0]), "H": 2.9},
+        std={"R": None, "t": [0.001, 0.001, np.nan], "H": 0.002},
+        units={"t": "m", "H": "m"},
+        residual_rms=0.0012,
+        residual_unit="m",
+        warnings=[Diagnostic("outliers", "2 residuals > 3 sigma", indices=(3, 7))],
+        inputs=hash_inputs([inp]),
+        diagnostics={"iterations": np.int64(7)},
+    )
+
+
+@pytest.mark.parametrize("suffix", [".json", ".yaml"])
+def test_result_round_trip(tmp_path, suffix):
+    res = _result(tmp_path)
+    path = write_result(tmp_path / f"result{suffix}", res)
+    back = load_result(path)
+    assert back.rig == "projector" and back.method == "nonlinear"
+    np.testing.assert_allclose(back.estimate["R"], np.eye(3))
+    assert back.std["t"][2] is None  # NaN is never written
+    assert back.warnings[0].indices == (3, 7)
+    assert back.diagnostics["iterations"] == 7
+    assert len(next(iter(back.inputs.values()))) == 64
+    assert back.robocal_version
+
+
+def test_json_is_strict(tmp_path):
+    path = write_result(tmp_path / "r.json", _result(tmp_path))
+    json.loads(path.read_text(), parse_constant=lambda c: pytest.fail(f"non-standard constant {c}"))
+
+
+def test_load_result_rejects_other_files(tmp_path):
+    p = tmp_path / "x.json"
+    p.write_text('{"schema": "other"}')
+    with pytest.raises(FileFormatError, match="not a robocal result"):
+        load_result(p)
+
+
+def test_atomic_write_keeps_old_file_on_failure(tmp_path, monkeypatch):
+    target = tmp_path / "result.json"
+    atomic_write_text(target, "old")
+
+    def boom(*a, **k):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(os, "replace", boom)
+    with pytest.raises(OSError):
+        atomic_write_text(target, "new")
+    assert target.read_text() == "old"
+    assert [p.name for p in tmp_path.iterdir()] == ["result.json"]  # no temp file left behind

@@ -1,0 +1,31 @@
+import numpy as np
+
+from robocal.diagnostics import Diagnostic
+from robocal.report import Report, new_figure
+
+
+def test_report_is_self_contained(tmp_path):
+    rep = Report("t", subtitle="s")
+    sec = rep.section("Numbers")
+    sec.table([{"a": 1, "b": 2.5, "c": None}])
+    sec.parameters({"x": 1.0, "v": np.array([1.0, 2.0])}, {"x": 0.1, "v": [0.2, None]}, {"x": "m"})
+    sec.diagnostics([Diagnostic("rank_deficient", "p_y undetermined", params=("p_y",))])
+    fig, ax = new_figure()
+    ax.plot([0, 1], [0, 1])
+    sec.figure(fig, "a line")
+    sec.image(np.zeros((8, 8), np.uint8), "black")
+    path = rep.write(tmp_path / "report.html")
+    html = path.read_text()
+    assert html.count("data:image/png;base64,") == 2
+    assert "p_y undetermined" in html and "parameters: p_y" in html
+    assert "http://" not in html and "https://" not in html  # opens offline
+    assert "<td>—</td>" in html  # None shown as a dash, never 'None' or 'nan'
+    assert "nan" not in html.lower().replace("nav", "")
+
+
+def test_text_is_escaped(tmp_path):
+    rep = Report("<script>")
+    rep.section("x").text("<b>&")
+    html = rep.to_html()
+    assert "<script>" not in html.split("<style>")[0]
+    assert "&lt;b&gt;&amp;" in html
