@@ -1,0 +1,85 @@
+"""Mapping between all parameter elements and the solver's free vector."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from robocal.errors import InputError
+
+__all__: list[str] = []
+
+
+class _Layout:
+    """Map between the full element vector and the free vector.
+
+    ``full = M @ x_free + c``: ``M`` (N x n_free) picks free elements and adds
+    tied ones with their factor; ``c`` holds the fixed values (and factor times
+    a fixed root for elements tied to a fixed element).
+    """
+
+    def __init__(self, problem):
+        blocks = list(problem._blocks.values())
+        self.blocks = blocks
+        self.labels = problem.labels
+        n = len(self.labels)
+        self.n_full = n
+        self.x0_full = np.concatenate([b.x0 for b in blocks]) if blocks else np.zeros(0)
+        fixed = np.concatenate([b.fixed for b in blocks]) if blocks else np.zeros(0, bool)
+        lo = np.concatenate([b.lower for b in blocks]) if blocks else np.zeros(0)
+        hi = np.concatenate([b.upper for b in blocks]) if blocks else np.zeros(0)
+        idx = problem._label_index
+        tied_full = {idx[t] for t in problem._ties}
+        for t in problem._ties:
+            k = idx[t]
+            if fixed[k]:
+                raise InputError(f"'{t}' is both fixed and tied; use one or the other")
+        self.free_full = np.array([k for k in range(n) if not fixed[k] and k not in tied_full], dtype=int)
+        free_pos = {int(k): i for i, k in enumerate(self.free_full)}
+        rows = list(self.free_full)
+        cols = list(range(len(self.free_full)))
+        vals = [1.0] * len(self.free_full)
+        self.c = np.where(fixed, self.x0_full, 0.0)
+        self.tied: dict[int, tuple[int, float]] = {}
+        for t in problem._ties:
+            root, factor = t, 1.0
+            while root in problem._ties:
+                src, f = problem._ties[root]
+                factor *= f
+                root = src
+            kt, kr = idx[t], idx[root]
+            self.tied[kt] = (kr, factor)
+            if fixed[kr]:
+                self.c[kt] = factor * self.x0_full[kr]
+            else:
+                rows.append(kt)
+                cols.append(free_pos[kr])
+                vals.append(factor)
+        self.M = sp.csc_array((vals, (rows, cols)), shape=(n, len(self.free_full)))
+        self.free_pos = free_pos
+        self.lower = lo[self.free_full]
+        self.upper = hi[self.free_full]
+        scales = [b.scale if b.scale is not None else np.full(b.size, np.nan) for b in blocks]
+        sc = np.concatenate(scales)[self.free_full] if blocks else np.zeros(0)
+        self.scale = None if np.all(np.isnan(sc)) else np.where(np.isnan(sc), 1.0, sc)
+        self.units = {lab: u for b in blocks for lab, u in zip(b.labels, b.units)}
+
+    @property
+    def free_labels(self) -> list[str]:
+        return [self.labels[k] for k in self.free_full]
+
+    def full_from_free(self, x: np.ndarray) -> np.ndarray:
+        return self.M @ x + self.c
+
+    def split(self, full: np.ndarray) -> dict[str, np.ndarray]:
+        return {b.name: full[b.offset:b.offset + b.size].reshape(b.shape).copy() for b in self.blocks}
+
+    def fold_columns(self, J_full):
+        """Jacobian over all elements -> Jacobian over the free vector."""
+        if sp.issparse(J_full):
+            return sp.csr_array(sp.csr_array(J_full) @ self.M)
+        J = J_full[:, self.free_full]
+        for kt, (kr, factor) in self.tied.items():
+            if kr in self.free_pos:
+                J[:, self.free_pos[kr]] += factor * J_full[:, kt]
+        return J
