@@ -45,3 +45,22 @@ def test_fuzz_check_points_never_passes_bad_data(a):
     except RobocalError:
         return
     assert out.shape[1] == 3 and np.all(np.isfinite(out))
+
+
+@pytest.mark.parametrize(
+    "got, shape, message",
+    [
+        ((3, 3), (..., 2), "x must have shape (..., 2), got (3, 3)"),
+        ((4, 3, 3), (1,), "x must have shape (..., 1), got (4, 3, 3)"),
+        ((2,), (3,), "x must have shape (3,), got (2,)"),
+        ((5, 4, 4), (4, 3), "x must have shape (..., 4, 3), got (5, 4, 4)"),
+    ],
+)
+def test_shape_messages_read_as_expected_vs_got(got, shape, message):
+    with pytest.raises(ShapeError) as info:
+        check_array(np.zeros(got), "x", shape=shape)
+    assert str(info.value) == message
+
+
+def test_leading_ellipsis_means_any_batch():
+    assert check_array(np.zeros((7, 5, 2)), "x", shape=(..., 2)).shape == (7, 5, 2)

@@ -27,7 +27,7 @@ __all__ = [
 
 def format_shape(shape: Sequence[int | str | None]) -> str:
     """Render an expected shape such as ``(None, 3)`` as ``(..., 3)``."""
-    parts = ["..." if s is None else str(s) for s in shape]
+    parts = ["..." if s is None or s is Ellipsis else str(s) for s in shape]
     return "(" + ", ".join(parts) + ("," if len(parts) == 1 else "") + ")"
 
 
@@ -65,6 +65,10 @@ def check_array(
     except (TypeError, ValueError) as exc:
         raise InputError(f"{name} must be numeric, got {type(x).__name__} ({exc})") from None
     if shape is not None:
+        # ``(..., 3)`` and ``(3,)`` both mean "trailing axis of size 3"
+        shape = tuple(shape)
+        while shape and shape[0] is Ellipsis:
+            shape = shape[1:]
         want = len(shape)
         ok = arr.ndim >= want
         if ok:
@@ -73,10 +77,9 @@ def check_array(
                     ok = False
                     break
         if not ok:
-            prefix = "(..., " if want and arr.ndim > want else "("
             exp_txt = format_shape(shape)
-            if prefix == "(..., ":
-                exp_txt = "(..., " + exp_txt[1:]
+            if want and arr.ndim > want:
+                exp_txt = "(..., " + ", ".join(format_shape(shape)[1:-1].rstrip(",").split(", ")) + ")"
             raise ShapeError(f"{name} must have shape {exp_txt}, got {tuple(arr.shape)}")
     if min_ndim is not None and arr.ndim < min_ndim:
         raise ShapeError(f"{name} must have at least {min_ndim} dimensions, got shape {tuple(arr.shape)}")
