@@ -1,0 +1,442 @@
+"""Kinematics of a ceiling pan-tilt laser projector (seed 000, §2.1).
+
+Frames
+------
+``{W}``  world frame fixed to the floor, floor plane ``z_W = 0``.
+``{0}``  projector base frame (D-H frame 0); the floor is the plane ``z_0 = -H``.
+``{E}``  laser frame; the beam leaves along ``+z_E``.
+
+``^0P = R_0_W ^WP + t_0_W`` (seed eq. 1). Lengths in metres, angles in radians.
+
+The D-H table (seed Table 1) is in the **modified (Craig)** convention::
+
+    link   alpha    a   theta               d
+    1      pi       0   -pi/2 + theta1      d1     (R)
+    2      -pi/2    0   theta2              0      (R)
+    E      pi/2     0   0                   d2     (fixed)
+
+It reproduces seed eq. (5) for ``^0T_E``; :attr:`ProjectorModel.chain` builds it
+with :class:`robocal.kinematics.DHChain`. Joint zero offsets ``o1, o2`` are
+added to the commanded angles: the mechanism sits at ``theta + offsets``.
+
+Singular set (seed, after eq. 10): ``theta2 = 0`` (beam at the nadir, the pan
+angle is undefined and the inverse Jacobian does not exist) and
+``theta2 = pi/2`` (beam horizontal, the spot is at infinity). Functions here
+refuse with :class:`~robocal.errors.SingularConfigurationError` or warn with
+:class:`NearSingularityWarning`; they never return inf or NaN.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from robocal.errors import InputError, SingularConfigurationError
+from robocal.kinematics import DHChain
+from robocal.validation import check_array, check_rotation_matrix
+
+__all__ = [
+    "ProjectorModel",
+    "NearSingularityWarning",
+    "UnreachablePointError",
+    "wrap_angle",
+]
+
+#: Below this tilt (rad) the beam is "at the nadir": the pan angle is undetermined.
+NADIR_TOL = 1e-9
+#: Beam directions with cos(tilt) below this never reach the floor (horizon).
+HORIZON_TOL = 1e-9
+
+
+class NearSingularityWarning(UserWarning):
+    """A configuration at or near the singular set (``theta2 -> 0`` or ``pi/2``)."""
+
+
+class UnreachablePointError(InputError):
+    """A floor point lies outside the projector's reachable disc (tilt limit)."""
+
+
+def wrap_angle(a):
+    """Wrap angles to ``(-pi, pi]``."""
+    a = np.asarray(a, dtype=float)
+    w = np.mod(a + np.pi, 2.0 * np.pi) - np.pi
+    return np.where(w == -np.pi, np.pi, w)
+
+
+def _first(mask) -> tuple:
+    idx = np.argwhere(np.asarray(mask))
+    return tuple(int(i) for i in idx[0]) if idx.size else ()
+
+
+def _indices(mask) -> list[int]:
+    m = np.asarray(mask)
+    return [int(i) for i in np.flatnonzero(m.reshape(-1))] if m.ndim else ([0] if m else [])
+
+
+@dataclass(frozen=True)
+class ProjectorModel:
+    """A ceiling pan-tilt laser projector and (optionally) its pose in the world.
+
+    Parameters
+    ----------
+    H : float
+        Distance (m) from the origin of ``{0}`` down to the floor (the floor is
+        ``z_0 = -H``; seed: "ceiling height").
+    d1 : float
+        D-H offset (m) of link 1: the intersection of the pan and tilt axes is
+        at ``(0, 0, -d1)`` in ``{0}``. Only ``H - d1`` affects the spot.
+    d2 : float
+        D-H offset (m) of the laser frame along the beam (affects only the beam
+        range ``g``, seed eq. 7).
+    offsets : (float, float)
+        Joint zero offsets (rad): the mechanism is at ``theta + offsets``.
+    tilt_limit : float
+        Largest usable tilt (rad, < pi/2): the reachable floor is the disc of
+        radius ``(H - d1) tan(tilt_limit)`` around the nadir.
+    rate_limits : (float, float)
+        Joint speed limits (rad/s) used by path planning.
+    R_0_W, t_0_W : array_like, optional
+        Extrinsics ``^0P = R_0_W ^WP + t_0_W`` (seed eq. 1). Default: ``{W}``
+        directly below ``{0}``: ``R = I``, ``t = (0, 0, -H)``.
+    name : str
+        Label used in reports and multi-projector paths.
+
+    References
+    ----------
+    Seed 000, Table 1 and eqs. (1)-(10).
+    """
+
+    H: float
+    d1: float = 0.0
+    d2: float = 0.0
+    offsets: tuple = (0.0, 0.0)
+    tilt_limit: float = math.radians(75.0)
+    rate_limits: tuple = (math.radians(90.0), math.radians(90.0))
+    R_0_W: np.ndarray = field(default=None, repr=False)
+    t_0_W: np.ndarray = field(default=None, repr=False)
+    name: str = "projector"
+
+    def __post_init__(self):
+        for key in ("H", "d1", "d2", "tilt_limit"):
+            v = float(check_array(getattr(self, key), f"projector.{key}"))
+            object.__setattr__(self, key, v)
+        if not self.H > 0:
+            raise InputError(f"projector.H must be > 0 (m), got {self.H!r}")
+        if not self.H - self.d1 > 0:
+            raise InputError(f"projector: H - d1 must be > 0 (the tilt axis is above the floor), got "
+                             f"H = {self.H:g} m, d1 = {self.d1:g} m")
+        if not 0.0 < self.tilt_limit < math.pi / 2:
+            raise InputError(f"projector.tilt_limit must be in (0, 90) deg, got {math.degrees(self.tilt_limit):g} deg")
+        off = check_array(self.offsets, "projector.offsets", shape=(2,))
+        if off.ndim != 1:
+            raise InputError(f"projector.offsets must have shape (2,), got {off.shape}")
+        object.__setattr__(self, "offsets", (float(off[0]), float(off[1])))
+        rl = check_array(self.rate_limits, "projector.rate_limits", shape=(2,))
+        if rl.ndim != 1 or np.any(rl <= 0):
+            raise InputError(f"projector.rate_limits must be two values > 0 (rad/s), got {rl.tolist()}")
+        object.__setattr__(self, "rate_limits", (float(rl[0]), float(rl[1])))
+        R = np.eye(3) if self.R_0_W is None else check_rotation_matrix(self.R_0_W, "projector.R_0_W")
+        t = np.array([0.0, 0.0, -self.H]) if self.t_0_W is None else check_array(self.t_0_W, "projector.t_0_W",
+                                                                                 shape=(3,))
+        if R.shape != (3, 3) or t.shape != (3,):
+            raise InputError(f"projector extrinsics must be R (3, 3) and t (3,), got {R.shape} and {t.shape}")
+        R = np.array(R, dtype=float)
+        t = np.array(t, dtype=float)
+        R.setflags(write=False)
+        t.setflags(write=False)
+        object.__setattr__(self, "R_0_W", R)
+        object.__setattr__(self, "t_0_W", t)
+
+    # ------------------------------------------------------------ structure
+    @property
+    def h(self) -> float:
+        """``H - d1`` (m): height of the tilt axis above the floor."""
+        return self.H - self.d1
+
+    @property
+    def floor_radius(self) -> float:
+        """Radius (m) of the reachable floor disc around the nadir."""
+        return self.h * math.tan(self.tilt_limit)
+
+    def with_(self, **changes) -> "ProjectorModel":
+        """A copy with some fields replaced (``model.with_(H=3.0)``)."""
+        return replace(self, **changes)
+
+    @property
+    def chain(self) -> DHChain:
+        """The modified-D-H chain of seed Table 1 (joint offsets in the ``theta`` column)."""
+        o1, o2 = self.offsets
+        rows = [[np.pi, 0.0, -np.pi / 2 + o1, self.d1], [-np.pi / 2, 0.0, o2, 0.0], [np.pi / 2, 0.0, 0.0, self.d2]]
+        return DHChain.from_table(rows, convention="modified", joint_types="RRF", names=["pan", "tilt", "laser"])
+
+    @property
+    def T_0_W(self) -> np.ndarray:
+        T = np.eye(4)
+        T[:3, :3] = self.R_0_W
+        T[:3, 3] = self.t_0_W
+        return T
+
+    @property
+    def origin_world(self) -> np.ndarray:
+        """Origin of ``{0}`` in ``{W}`` (m), ``-R^T t``."""
+        return -self.R_0_W.T @ self.t_0_W
+
+    @property
+    def nadir_world(self) -> np.ndarray:
+        """The floor point straight below the tilt axis, in ``{W}`` (m, shape (2,))."""
+        return self.to_world(np.array([0.0, 0.0, -self.H]))[:2]
+
+    # ---------------------------------------------------------- validation
+    def _theta(self, theta) -> np.ndarray:
+        return check_array(theta, "theta", shape=(2,))
+
+    def _actual(self, theta: np.ndarray):
+        return theta[..., 0] + self.offsets[0], theta[..., 1] + self.offsets[1]
+
+    def _require_floor_hit(self, c2: np.ndarray, what: str) -> None:
+        bad = c2 <= HORIZON_TOL
+        if np.any(bad):
+            raise SingularConfigurationError(
+                f"{what}: tilt theta2 + offset reaches the horizon (theta2 = pi/2) or beyond, the beam never "
+                f"meets the floor (first at index {_first(bad)}, cos(theta2) = {float(c2[_first(bad)]):.3g})")
+
+    # ---------------------------------------------------------- kinematics
+    def pose(self, theta) -> np.ndarray:
+        """``^0T_E`` (..., 4, 4) from the D-H chain (seed eq. 5)."""
+        return self.chain.fk(self._theta(theta))
+
+    def spot(self, theta) -> np.ndarray:
+        """Spot on the floor in ``{0}``, seed eq. (6): ``f(theta)``, shape (..., 3), m.
+
+        ``f = [h s1 s2 / c2, h c1 s2 / c2, -H]`` with ``h = H - d1`` and the
+        angles including the zero offsets.
+
+        Raises
+        ------
+        SingularConfigurationError
+            Where the beam is horizontal or points upwards (no floor hit).
+        """
+        theta = self._theta(theta)
+        a1, a2 = self._actual(theta)
+        c2 = np.cos(a2)
+        self._require_floor_hit(c2, "spot")
+        rho = self.h * np.sin(a2) / c2
+        out = np.empty(theta.shape[:-1] + (3,))
+        out[..., 0] = rho * np.sin(a1)
+        out[..., 1] = rho * np.cos(a1)
+        out[..., 2] = -self.H
+        return out
+
+    def spot_from_chain(self, theta) -> np.ndarray:
+        """The spot as the intersection of the chain's beam ``z_E`` with ``z_0 = -H``.
+
+        Independent of eq. (6) (used to check it); same result and errors as :meth:`spot`.
+        """
+        T = self.pose(theta)
+        p, z = T[..., :3, 3], T[..., :3, 2]
+        self._require_floor_hit(-z[..., 2], "spot")
+        s = (-self.H - p[..., 2]) / z[..., 2]
+        return p + s[..., None] * z
+
+    def beam_range(self, theta) -> np.ndarray:
+        """Distance (m) from the laser frame origin to the spot, seed eq. (7): ``h / c2 - d2``."""
+        theta = self._theta(theta)
+        _, a2 = self._actual(theta)
+        c2 = np.cos(a2)
+        self._require_floor_hit(c2, "beam_range")
+        return self.h / c2 - self.d2
+
+    def ik(self, points, *, theta1_at_nadir: float = 0.0, on_nadir: str = "warn", check_reach: bool = True,
+           floor_tol: float = 1e-6) -> np.ndarray:
+        """Joint angles that put the spot on floor points given in ``{0}``, seed eq. (8).
+
+        ``theta1 = atan2(x, y)``, ``theta2 = atan(sqrt(x^2 + y^2) / (H - d1))``,
+        minus the zero offsets; ``theta1`` wrapped to ``(-pi, pi]``.
+
+        Parameters
+        ----------
+        points : array_like, shape (..., 3) or (..., 2)
+            Floor points in ``{0}`` (m). With 3 columns, ``z`` must be ``-H``.
+        theta1_at_nadir : float
+            Pan command (rad) returned at the nadir, where eq. (8) leaves it undefined.
+        on_nadir : {'warn', 'raise', 'ignore'}
+            At the nadir: emit :class:`NearSingularityWarning`, raise
+            :class:`~robocal.errors.SingularConfigurationError`, or stay silent.
+        check_reach : bool
+            Raise :class:`UnreachablePointError` for points beyond the tilt limit.
+        floor_tol : float
+            Tolerance (m) on ``z = -H``.
+
+        Returns
+        -------
+        ndarray, shape (..., 2)
+        """
+        xy = self._floor_xy(points, "points", floor_tol)
+        r = np.hypot(xy[..., 0], xy[..., 1])
+        a2 = np.arctan2(r, self.h)
+        if check_reach:
+            self._require_reachable(a2, r, "points")
+        nadir = r <= NADIR_TOL * self.h
+        a1 = np.where(nadir, theta1_at_nadir + self.offsets[0], np.arctan2(xy[..., 0], xy[..., 1]))
+        if np.any(nadir):
+            msg = (f"ik: point(s) {_indices(nadir)[:10]} are at the nadir (theta2 = 0): the pan angle is undefined, "
+                   f"theta1 = {theta1_at_nadir:g} rad used")
+            if on_nadir == "raise":
+                raise SingularConfigurationError(msg)
+            if on_nadir == "warn":
+                warnings.warn(msg, NearSingularityWarning, stacklevel=2)
+            elif on_nadir != "ignore":
+                raise InputError(f"on_nadir must be 'warn', 'raise' or 'ignore', got {on_nadir!r}")
+        out = np.empty(xy.shape[:-1] + (2,))
+        out[..., 0] = wrap_angle(a1 - self.offsets[0])
+        out[..., 1] = a2 - self.offsets[1]
+        return out
+
+    def _floor_xy(self, points, name: str, floor_tol: float) -> np.ndarray:
+        p = check_array(points, name)
+        if p.ndim < 1 or p.shape[-1] not in (2, 3):
+            raise InputError(f"{name} must have shape (..., 2) or (..., 3), got {tuple(p.shape)}")
+        if p.shape[-1] == 3:
+            dz = np.abs(p[..., 2] + self.H)
+            if np.any(dz > floor_tol):
+                k = _first(dz > floor_tol)
+                raise InputError(f"{name}: point {k} has z = {float(p[k + (2,)]):.6g} m but the floor is z_0 = -H = "
+                                 f"{-self.H:.6g} m (wrong units or wrong H?)")
+            p = p[..., :2]
+        return p
+
+    def _require_reachable(self, a2, r, name: str) -> None:
+        bad = a2 > self.tilt_limit + 1e-12
+        if np.any(bad):
+            idx = _indices(bad)
+            raise UnreachablePointError(
+                f"{name}: point(s) {idx[:10]}{' ...' if len(idx) > 10 else ''} are outside the reachable floor "
+                f"(distance {float(np.max(r[bad])):.4g} m from the nadir, limit {self.floor_radius:.4g} m at tilt "
+                f"{math.degrees(self.tilt_limit):g} deg)")
+
+    def reachable(self, points, *, floor_tol: float = 1e-6) -> np.ndarray:
+        """Boolean (...): floor points in ``{0}`` within the tilt limit."""
+        xy = self._floor_xy(points, "points", floor_tol)
+        return np.hypot(xy[..., 0], xy[..., 1]) <= self.floor_radius * (1 + 1e-12)
+
+    # ----------------------------------------------------------- velocity
+    def spot_jacobian(self, theta) -> np.ndarray:
+        """``d f / d theta``, seed eq. (9), shape (..., 3, 2) (third row zero), m/rad.
+
+        ``J = h / c2 [[c1 s2, s1 / c2], [-s1 s2, c1 / c2], [0, 0]]``.
+        """
+        theta = self._theta(theta)
+        a1, a2 = self._actual(theta)
+        c2 = np.cos(a2)
+        self._require_floor_hit(c2, "spot_jacobian")
+        s1, c1, s2 = np.sin(a1), np.cos(a1), np.sin(a2)
+        k = self.h / c2
+        J = np.zeros(theta.shape[:-1] + (3, 2))
+        J[..., 0, 0] = k * c1 * s2
+        J[..., 0, 1] = k * s1 / c2
+        J[..., 1, 0] = -k * s1 * s2
+        J[..., 1, 1] = k * c1 / c2
+        return J
+
+    def joint_rates(self, theta, spot_velocity, *, nadir_tol: float = 1e-6) -> np.ndarray:
+        """Joint rates (rad/s) that move the spot with a given floor velocity (inverse of eq. 9).
+
+        ``theta1' = c2 (c1 vx - s1 vy) / (h s2)``, ``theta2' = c2^2 (s1 vx + c1 vy) / h``.
+
+        Parameters
+        ----------
+        theta : array_like, shape (..., 2)
+        spot_velocity : array_like, shape (..., 2) or (..., 3)
+            Spot velocity in ``{0}`` (m/s); a third component must be 0.
+        nadir_tol : float
+            Tilt (rad) below which the inverse is refused.
+
+        Raises
+        ------
+        SingularConfigurationError
+            At (or within ``nadir_tol`` of) the nadir, where ``theta1'`` is unbounded,
+            or at the horizon.
+        """
+        theta = self._theta(theta)
+        v = check_array(spot_velocity, "spot_velocity")
+        if v.ndim < 1 or v.shape[-1] not in (2, 3):
+            raise InputError(f"spot_velocity must have shape (..., 2) or (..., 3), got {tuple(v.shape)}")
+        if v.shape[-1] == 3:
+            if np.any(np.abs(v[..., 2]) > 1e-9):
+                raise InputError("spot_velocity: the spot moves on the floor, its z component must be 0")
+            v = v[..., :2]
+        a1, a2 = self._actual(theta)
+        c2 = np.cos(a2)
+        self._require_floor_hit(c2, "joint_rates")
+        s2 = np.sin(a2)
+        bad = np.abs(s2) < math.sin(nadir_tol)
+        if np.any(bad):
+            raise SingularConfigurationError(
+                f"joint_rates: configuration {_first(bad)} is at the nadir singularity (theta2 = "
+                f"{float(np.broadcast_to(a2, bad.shape)[_first(bad)]):.3g} rad): the pan rate needed to move the spot "
+                f"is unbounded; keep the path at least {nadir_tol:g} rad of tilt away from the nadir")
+        s1, c1 = np.sin(a1), np.cos(a1)
+        vx, vy = v[..., 0], v[..., 1]
+        out = np.empty(np.broadcast_shapes(theta.shape[:-1], v.shape[:-1]) + (2,))
+        out[..., 0] = c2 * (c1 * vx - s1 * vy) / (self.h * s2)
+        out[..., 1] = c2 * c2 * (s1 * vx + c1 * vy) / self.h
+        return out
+
+    def beam_range_rate(self, theta, theta_dot) -> np.ndarray:
+        """Rate (m/s) of the beam range along ``z_E``, seed eq. (10): ``h s2 / c2^2 theta2'``."""
+        theta = self._theta(theta)
+        td = check_array(theta_dot, "theta_dot", shape=(2,))
+        _, a2 = self._actual(theta)
+        c2 = np.cos(a2)
+        self._require_floor_hit(c2, "beam_range_rate")
+        return self.h * np.sin(a2) / (c2 * c2) * td[..., 1]
+
+    def singularity_margin(self, theta) -> np.ndarray:
+        """Distance (rad) of the tilt from the singular set ``{0, pi/2}``, shape (...)."""
+        theta = self._theta(theta)
+        _, a2 = self._actual(theta)
+        return np.minimum(np.abs(a2), np.abs(math.pi / 2 - a2))
+
+    # -------------------------------------------------------- world frame
+    def to_projector(self, points_W) -> np.ndarray:
+        """``^0P = R ^WP + t`` (seed eq. 1); world points (..., 2) on the floor or (..., 3)."""
+        p = check_array(points_W, "points_W")
+        if p.ndim < 1 or p.shape[-1] not in (2, 3):
+            raise InputError(f"points_W must have shape (..., 2) or (..., 3), got {tuple(p.shape)}")
+        if p.shape[-1] == 2:
+            p = np.concatenate([p, np.zeros(p.shape[:-1] + (1,))], axis=-1)
+        return p @ self.R_0_W.T + self.t_0_W
+
+    def to_world(self, points_0) -> np.ndarray:
+        """``^WP = R^T (^0P - t)``, shape (..., 3)."""
+        p = check_array(points_0, "points_0", shape=(3,))
+        return (p - self.t_0_W) @ self.R_0_W
+
+    def spot_world(self, theta) -> np.ndarray:
+        """Spot in ``{W}`` (..., 3) for joint angles ``theta``."""
+        return self.to_world(self.spot(theta))
+
+    def ik_world(self, points_W, **kw) -> np.ndarray:
+        """Joint angles (..., 2) for world floor points (seed eqs. 1 and 8)."""
+        p0 = self.to_projector(points_W)
+        return self.ik(p0, floor_tol=kw.pop("floor_tol", 1e-6 + 1e-6 * self.H), **kw)
+
+    def joint_rates_world(self, theta, velocity_W, **kw) -> np.ndarray:
+        """Joint rates for a world floor velocity (seed eqs. 2 and 9)."""
+        v = check_array(velocity_W, "velocity_W")
+        if v.ndim < 1 or v.shape[-1] not in (2, 3):
+            raise InputError(f"velocity_W must have shape (..., 2) or (..., 3), got {tuple(v.shape)}")
+        if v.shape[-1] == 2:
+            v = np.concatenate([v, np.zeros(v.shape[:-1] + (1,))], axis=-1)
+        v0 = v @ self.R_0_W.T
+        return self.joint_rates(theta, v0[..., :2], **kw)
+
+    # -------------------------------------------------------------- files
+    def to_dict(self) -> dict:
+        """SI values (m, rad) for result files."""
+        return dict(name=self.name, H=self.H, d1=self.d1, d2=self.d2, offsets=list(self.offsets),
+                    tilt_limit=self.tilt_limit, rate_limits=list(self.rate_limits),
+                    R_0_W=self.R_0_W.tolist(), t_0_W=self.t_0_W.tolist())
