@@ -1,0 +1,14 @@
+"""Cameras: pinhole + Brown–Conrady model (OpenCV's), PnP, targets, renderer, detection.
+
+Conventions: camera frame x right, y down, z forward; pixel (0, 0) is the
+centre of the top-left pixel (OpenCV); ``T_cam_obj`` maps object-frame
+points into the camera frame; lengths in metres, image coordinates in pixels.
+See docs/camera.md.
+"""
+
+from robocal.camera._model import *  # noqa: F401,F403
+from robocal.camera._pnp import *  # noqa: F401,F403
+from robocal.camera._targets import *  # noqa: F401,F403
+from robocal.camera import _model, _pnp, _targets
+
+__all__ = [*_model.__all__, *_pnp.__all__, *_targets.__all__]
