@@ -1,0 +1,309 @@
+"""MCT -- multi-coordinate transformation (seed 004 §3, eqs. 5-12).
+
+Only the last two joints move (R2, P3), so errors of the joints before them
+do not enter; only link 3's D-H row is used.
+
+1. R2 turns: the tracker ball draws an arc -> 3D circle fit: centre ``O_A``,
+   axis ``n_A`` (oriented so that increasing q2 turns right-handed about it).
+2. P3 slides: the ball draws a line -> line fit: direction ``n_B`` (along +q3).
+3. Frame 2 in the tracker (eq. 6): ``z_2 = n_A``, P3's direction
+   (``A_3``'s z axis, from the D-H row) ``= n_B``, origin
+   ``O_A + (h1 - h0) n_A`` (h0: ball centre above P3's top face, h1: frame 2's
+   origin above it). Then ``T_T_E = T_T_2 A_3(q3)`` (eq. 7).
+4. Frame K at the ball centre with ``x = n_A``, ``y = n_B`` (eq. 8), kept for
+   the report (the block is located in the tracker frame directly).
+5. The block is probed by the tracker (three face planes -> ``T_T_B``) and
+   scanned during a P3 stroke from ``q30``: profile ``i`` at ``q3_i`` lies in
+   the laser frame at ``q30`` shifted by ``(q3_i - q30) u`` (eq. 9), ``u``
+   P3's direction in L; their union is the cloud (eq. 10). ``u`` and the
+   block pose ``T_L_B`` are fitted jointly to the three face planes
+   (eqs. 11-12): ``T_T_L = T_T_B T_L_B^-1``.
+6. ``X = T_T_E^-1 T_T_L`` (eq. 5).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from robocal.diagnostics import Diagnostic
+from robocal.errors import DegenerateGeometryError, InputError, NotEnoughDataError
+from robocal.estimation import analyze_jacobian
+from robocal.geometry import (
+    fit_circle_3d,
+    fit_line,
+    fit_plane,
+    invert_transform,
+    matrix_from_rotvec,
+    project_to_rotation,
+    transform_from,
+    wahba_rotation,
+)
+from robocal.kinematics import DHChain
+from robocal.validation import check_array, check_points
+
+__all__ = ["MCTResult", "frame2_in_tracker", "block_frame_from_planes", "fit_block_scan", "mct_calibrate"]
+
+
+@dataclass
+class MCTResult:
+    """Outcome of :func:`mct_calibrate` (tracker frame T, metres).
+
+    ``X`` = ``T_E_L``; ``T_T_2``, ``T_T_E`` (at ``q30``), ``T_T_K``, ``T_T_B``,
+    ``T_L_B``, ``T_T_L``: the intermediate frames of eqs. 6-12; ``u_L``: P3's
+    direction in L; ``X_std``: (6,) std of ``(rx, ry, rz, tx, ty, tz)`` from
+    first-order propagation of the fits' covariances; ``arc_rms``,
+    ``line_rms``, ``block_rms``, ``scan_rms``: fit residuals (m).
+    """
+
+    X: np.ndarray
+    T_T_2: np.ndarray
+    T_T_E: np.ndarray
+    T_T_K: np.ndarray
+    T_T_B: np.ndarray
+    T_L_B: np.ndarray
+    T_T_L: np.ndarray
+    u_L: np.ndarray
+    n_A: np.ndarray
+    O_A: np.ndarray
+    n_B: np.ndarray
+    arc_rms: float
+    line_rms: float
+    block_rms: float
+    scan_rms: float
+    n_scan_points: int
+    X_std: np.ndarray | None = None
+    warnings: list = field(default_factory=list)
+
+
+def _link(chain: DHChain, index: int, q_value: float) -> np.ndarray:
+    """Transform ``A_i`` of link ``index`` (0-based) at joint value ``q_value``."""
+    from robocal.kinematics._dh import _dh_matrices  # closed form of one D-H row
+
+    lk = chain.links[index]
+    theta, d = lk.theta, lk.d
+    if lk.joint == "revolute":
+        theta = theta + q_value
+    elif lk.joint == "prismatic":
+        d = d + q_value
+    return _dh_matrices(lk.alpha, lk.a, theta, d, chain.convention)
+
+
+def frame2_in_tracker(arc_T, q2_arc, line_T, q3_line, h0: float, h1: float, chain: DHChain):
+    """Eq. 6: ``T_T_2`` from the arc (R2) and the line (P3) of the tracker ball.
+
+    Returns ``(T_T_2, O_A, n_A, n_B, arc_fit, line_fit)``.
+    """
+    arc_T = check_points(arc_T, "arc points", min_count=3)
+    line_T = check_points(line_T, "line points", min_count=2)
+    q2_arc = check_array(q2_arc, "q2 of the arc", shape=(len(arc_T),))
+    q3_line = check_array(q3_line, "q3 of the line", shape=(len(line_T),))
+    if np.ptp(q2_arc) < np.deg2rad(5):
+        raise DegenerateGeometryError(f"the R2 arc spans only {np.rad2deg(np.ptp(q2_arc)):.3g} deg: "
+                                      "turn R2 by at least 5 deg (20-60 deg recommended)")
+    if np.ptp(q3_line) <= 0:
+        raise DegenerateGeometryError("the P3 stroke has no length: move P3 while the tracker records")
+    arc = fit_circle_3d(arc_T)
+    lo, hi = np.argmin(q2_arc), np.argmax(q2_arc)
+    turn = np.cross(arc_T[lo] - arc.centre, arc_T[hi] - arc.centre)
+    n_A = arc.axis * np.sign(turn @ arc.axis)
+    line = fit_line(line_T)
+    n_B = line.direction * np.sign((line_T[np.argmax(q3_line)] - line_T[np.argmin(q3_line)]) @ line.direction)
+    # P3's direction in frame 2 from link 3's D-H row; R2's axis is z_2
+    A3 = _link(chain, 2, 0.0)
+    R_T_2 = wahba_rotation(np.array([[0.0, 0.0, 1.0], A3[:3, 2]]), np.array([n_A, n_B]))
+    T_T_2 = transform_from(R_T_2, arc.centre + (h1 - h0) * n_A)
+    return T_T_2, arc.centre, n_A, n_B, arc, line
+
+
+def block_frame_from_planes(face_points) -> tuple[np.ndarray, float]:
+    """``T_X_B`` of a block corner from points on its three faces ``x_B = 0``, ``y_B = 0``, ``z_B = 0``.
+
+    Each face's plane is fitted (its normal oriented away from the other faces'
+    points, i.e. outwards); the rotation is the nearest one to the three
+    normals, the origin the planes' intersection. Returns ``(T, rms)``.
+    """
+    if len(face_points) != 3:
+        raise InputError(f"a block corner needs points on 3 faces, got {len(face_points)}")
+    fits = [fit_plane(check_points(p, f"face {k} points", min_count=3)) for k, p in enumerate(face_points)]
+    allp = np.concatenate(face_points)
+    normals, ds = [], []
+    for f in fits:
+        n, d = f.normal, f.d
+        if np.mean(allp @ n - d) > 0:  # other faces' points must lie behind (inside the block)
+            n, d = -n, -d
+        normals.append(n)
+        ds.append(d)
+    N = np.array(normals)
+    if abs(np.linalg.det(N)) < 0.1:
+        raise DegenerateGeometryError("block faces are nearly parallel: cannot build the block frame")
+    corner = np.linalg.solve(N, np.array(ds))
+    R = project_to_rotation(N.T)  # columns ~ x_B, y_B, z_B
+    rms = float(np.sqrt(np.mean(np.concatenate([f.residuals for f in fits]) ** 2)))
+    return transform_from(R, corner), rms
+
+
+def _segment(cloud: np.ndarray, n_planes: int = 3, tol: float = 0.3e-3, iters: int = 300):
+    """Greedy deterministic RANSAC: label each point with one of ``n_planes`` planes (-1: none)."""
+    labels = np.full(len(cloud), -1)
+    rest = np.arange(len(cloud))
+    rng = np.random.default_rng(12345)  # fixed: segmentation must be repeatable, not random
+    for k in range(n_planes):
+        if len(rest) < 3:
+            break
+        best = None
+        P = cloud[rest]
+        for _ in range(iters):
+            s = rng.choice(len(P), 3, replace=False)
+            n = np.cross(P[s[1]] - P[s[0]], P[s[2]] - P[s[0]])
+            nn = np.linalg.norm(n)
+            if nn < 1e-12:
+                continue
+            n /= nn
+            inl = np.abs((P - P[s[0]]) @ n) < tol
+            if best is None or inl.sum() > best.sum():
+                best = inl
+        labels[rest[best]] = k
+        rest = rest[~best]
+    return labels
+
+
+def fit_block_scan(profiles, q3, q30: float, size, *, u0=(0.0, -1.0, 0.0), tol: float = 0.3e-3):
+    """Eqs. 9-11: P3 direction ``u`` in L and block pose ``T_L_B`` from a scan of the block corner.
+
+    Parameters
+    ----------
+    profiles : sequence of (M_i, 2) arrays, ``(x, z)`` in L at P3 = ``q3[i]``
+    q3 : (S,) P3 readings; ``q30`` the reference reading
+    size : block edges (m)
+    u0 : starting guess of P3's direction in L (the profiler's nominal scan axis)
+
+    Returns
+    -------
+    T_L_B, u, rms, n_points, cov (9, 9) over (u perturbation 3, rotvec 3, t 3)
+    """
+    q3 = check_array(q3, "scan q3", shape=(len(profiles),))
+    m, s = [], []
+    for i, p in enumerate(profiles):
+        p = check_array(p, f"scan profile {i}", shape=("M", 2))
+        m.append(np.column_stack([p[:, 0], np.zeros(len(p)), p[:, 1]]))
+        s.append(np.full(len(p), q3[i] - q30))
+    m = np.concatenate(m)
+    s = np.concatenate(s)
+    if len(m) < 30:
+        raise NotEnoughDataError(f"the block scan has {len(m)} points; at least 30 on the three faces are needed")
+    u0 = np.asarray(u0, float) / np.linalg.norm(u0)
+    cloud = m + s[:, None] * u0  # eq. 9-10 with the nominal direction (an affine shear of the truth)
+    lab = _segment(cloud, 3, tol=tol + 0.05 * np.abs(s).max())  # 3 deg of shear allowed
+    use = lab >= 0
+    faces = [cloud[lab == k] for k in range(3)]
+    if min(len(f) for f in faces) < 10:
+        raise DegenerateGeometryError("the block scan does not show three faces: tilt the block so its corner "
+                                      "faces the profiler")
+    # initial pose from the sheared planes; assign the face order by right-handedness
+    fits = [fit_plane(f) for f in faces]
+    N = np.array([f.normal * (-1 if f.normal @ (f.centroid - cloud[use].mean(0)) < 0 else 1) for f in fits])
+    ds = np.array([n @ f.centroid for n, f in zip(N, fits)])
+    if np.linalg.det(N) < 0:
+        N[[0, 1]], ds[[0, 1]] = N[[1, 0]], ds[[1, 0]]
+        lab = np.where(lab == 0, 1, np.where(lab == 1, 0, lab))
+    R0 = project_to_rotation(N.T)
+    t0 = np.linalg.solve(N, ds)
+    mu, su, lu = m[use], s[use], lab[use]
+    b1 = np.cross(u0, [1.0, 0, 0]) if abs(u0[0]) < 0.9 else np.cross(u0, [0, 1.0, 0])
+    b1 /= np.linalg.norm(b1)
+    b2 = np.cross(u0, b1)
+
+    def unpack(x):
+        u = u0 + x[0] * b1 + x[1] * b2
+        u /= np.linalg.norm(u)
+        return u, matrix_from_rotvec(x[2:5]) @ R0, x[5:8]
+
+    def fun(x):
+        u, R, t = unpack(x)
+        p_B = (mu + su[:, None] * u - t) @ R  # R^T (p - t)
+        return p_B[np.arange(len(p_B)), lu]
+
+    x0 = np.r_[0, 0, 0, 0, 0, t0]
+    ls = least_squares(fun, x0, method="lm", xtol=1e-12, ftol=1e-12)
+    # second pass: relabel every point by its nearest face of the fitted corner, drop far ones
+    u, R, t = unpack(ls.x)
+    p_B = (m + s[:, None] * u - t) @ R
+    inside = np.all(p_B < 3 * tol, axis=1) & np.all(p_B > -np.asarray(size) - 3 * tol, axis=1)
+    lab2 = np.argmin(np.abs(p_B), axis=1)
+    near = inside & (np.abs(p_B[np.arange(len(p_B)), lab2]) < 3 * tol)
+    mu, su, lu, use = m[near], s[near], lab2[near], near
+    ls = least_squares(fun, ls.x, method="lm", xtol=1e-12, ftol=1e-12)
+    u, R, t = unpack(ls.x)
+    r = ls.fun
+    s2 = float(r @ r / max(len(r) - 8, 1))
+    ident = analyze_jacobian(ls.jac, ["u.a", "u.b", "B.rx", "B.ry", "B.rz", "B.tx", "B.ty", "B.tz"],
+                             residual_variance=s2)
+    return transform_from(R, t), u, float(np.sqrt(np.mean(r * r))), int(use.sum()), ident
+
+
+def mct_calibrate(data, chain: DHChain) -> MCTResult:
+    """Hand-eye matrix by the MCT method (seed 004 eqs. 5-12) from :class:`~.simulate.MCTData`-like input.
+
+    ``data`` needs: ``q_arc`` (n, 3), ``arc_T`` (n, 3), ``q_line`` (k, 3),
+    ``line_T`` (k, 3), ``h0``, ``h1``, ``q_scan0`` (3,), ``block_faces_T``
+    (3 arrays), ``block_size``, ``scan_q3`` (S,), ``scan_profiles``.
+    """
+    if chain.dof < 2 or chain.joint_types[-2:] != ("revolute", "prismatic"):
+        raise InputError(f"MCT needs a chain ending in a revolute then a prismatic joint, got {chain.joint_types}")
+    q_arc = check_array(data.q_arc, "q_arc", shape=("n", chain.dof))
+    q_line = check_array(data.q_line, "q_line", shape=("n", chain.dof))
+    if len(q_arc) != len(data.arc_T):
+        raise InputError(f"q_arc has {len(q_arc)} rows but arc_T has {len(data.arc_T)}: counts must match")
+    if len(q_line) != len(data.line_T):
+        raise InputError(f"q_line has {len(q_line)} rows but line_T has {len(data.line_T)}: counts must match")
+    if len(data.scan_q3) != len(data.scan_profiles):
+        raise InputError(f"scan_q3 has {len(data.scan_q3)} values but there are {len(data.scan_profiles)} profiles")
+    warnings: list[Diagnostic] = []
+    for name, qq, moving in (("q_arc", q_arc, chain.dof - 2), ("q_line", q_line, chain.dof - 1)):
+        still = [j for j in range(chain.dof) if j != moving]
+        drift = np.ptp(qq[:, still], axis=0).max() if still else 0.0
+        if drift > 1e-6:
+            warnings.append(Diagnostic("inconsistent_data",
+                                       f"{name}: joints other than the moving one changed by up to {drift:.3g}"))
+    T_T_2, O_A, n_A, n_B, arc, line = frame2_in_tracker(data.arc_T, q_arc[:, -2], data.line_T, q_line[:, -1],
+                                                       data.h0, data.h1, chain)
+    q_scan0 = check_array(data.q_scan0, "q_scan0", shape=(chain.dof,))
+    if abs(q_scan0[-2] - q_line[0, -2]) > 1e-9:
+        warnings.append(Diagnostic("inconsistent_data", "R2 at the block scan differs from R2 during the P3 stroke; "
+                                   "frame 2 is built at the stroke's R2 value"))
+    q30 = float(q_scan0[-1])
+    T_T_E = T_T_2 @ _link(chain, chain.n_links - 1, q30) @ chain.T_tool  # eq. 7
+    ball = line.point + n_B * ((O_A - line.point) @ n_B)
+    y_K = n_B - (n_B @ n_A) * n_A
+    y_K /= np.linalg.norm(y_K)
+    T_T_K = transform_from(np.column_stack([n_A, y_K, np.cross(n_A, y_K)]), ball)  # eq. 8
+    T_T_B, block_rms = block_frame_from_planes(data.block_faces_T)
+    # P3 direction in L starts from the nominal: frame E's z in L for the mounting X0 ~ identity-free guess
+    u0 = (0.0, -1.0, 0.0)
+    T_L_B, u_L, scan_rms, n_pts, ident = fit_block_scan(data.scan_profiles, data.scan_q3, q30, data.block_size, u0=u0)
+    # A cube corner looks the same after a 120 deg turn about its diagonal, so the
+    # scan alone cannot say which face is x_B: pick the cyclic relabelling that
+    # maps P3's direction in L (u) onto the tracker's n_B.
+    best = None
+    for perm in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        T_cand = T_L_B.copy()
+        T_cand[:3, :3] = T_L_B[:3, perm]
+        T_T_L = T_T_B @ invert_transform(T_cand)
+        score = (T_T_L[:3, :3] @ u_L) @ n_B
+        if best is None or score > best[0]:
+            best = (score, T_cand, T_T_L)
+    _, T_L_B, T_T_L = best  # eq. 12
+    X = invert_transform(T_T_E) @ T_T_L  # eq. 5
+    # consistency: P3's direction seen by the tracker (n_B) and by the scan (u in L) must agree through X
+    e_dir = np.rad2deg(np.arccos(np.clip((T_T_L[:3, :3] @ u_L) @ n_B, -1, 1)))
+    if e_dir > 0.5:
+        warnings.append(Diagnostic("inconsistent_data", f"P3 direction from the block scan and from the tracker "
+                                   f"differ by {e_dir:.3g} deg"))
+    warnings += list(arc.warnings)
+    warnings += ident.diagnostics()
+    return MCTResult(X=X, T_T_2=T_T_2, T_T_E=T_T_E, T_T_K=T_T_K, T_T_B=T_T_B, T_L_B=T_L_B, T_T_L=T_T_L, u_L=u_L,
+                     n_A=n_A, O_A=O_A, n_B=n_B, arc_rms=arc.rms, line_rms=line.rms, block_rms=block_rms,
+                     scan_rms=scan_rms, n_scan_points=n_pts, warnings=warnings)
