@@ -1,0 +1,1 @@
+"""NAO-class humanoid leg and camera calibration from foot checkerboards (seed 001)."""

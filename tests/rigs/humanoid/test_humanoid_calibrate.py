@@ -1,0 +1,118 @@
+"""LM calibration over the seed's parameter set: exactness, ties, identifiability, outliers."""
+
+import json
+
+import numpy as np
+import pytest
+
+from robocal.errors import InputError, NotEnoughDataError
+from robocal.io import write_result
+from robocal.rigs.humanoid.calibrate import calibrate, resolve_parameters
+from robocal.rigs.humanoid.simulate import draw_truth, simulate_dataset
+
+
+def test_noise_free_data_give_the_truth_from_zero(model):
+    rng = np.random.default_rng(21)
+    data = simulate_dataset(model, rng, n_per_foot=6, noise_px=0.0, resolution=0.0)
+    cal = calibrate(model, data, corner_sigma=0.3, joint_resolution=0.0)
+    seed = model.seed_parameters()
+    assert len(seed) == 21 and sorted(cal.free) == sorted(seed)
+    idx = [model.parameter_labels().index(lab) for lab in seed]
+    np.testing.assert_allclose(cal.params[idx], data.truth.params[idx], atol=1e-9)
+    assert cal.rms_xy.max() < 1e-6
+    assert cal.lsq.rank == 21 and cal.unidentifiable == []
+
+
+def test_finite_difference_jacobian_gives_the_same_estimate(model, corner_data):
+    a = calibrate(model, corner_data)
+    b = calibrate(model, corner_data, jac="2-point")
+    assert b.lsq.jac_method != a.lsq.jac_method
+    np.testing.assert_allclose(a.params, b.params, atol=1e-7)
+
+
+def test_estimate_within_three_sigma_and_result_record(model, corner_data, tmp_path):
+    cal = calibrate(model, corner_data)
+    rows = cal.parameter_rows(corner_data.truth.params)
+    z = np.array([r["error/std"] for r in rows])
+    assert np.all(np.abs(z) < 3.5), rows
+    assert 0.5 < cal.lsq.residual_variance < 2.0  # noise model (0.3 px + 0.1 deg quantisation) fits
+    assert 0.2 < cal.corner_sigma < 0.4
+    res = cal.to_result()
+    path = write_result(tmp_path / "result.json", res)
+    d = json.loads(path.read_text())
+    assert d["rig"] == "humanoid" and set(d["estimate"]) == set(model.seed_parameters())
+    assert d["units"]["camera.pitch"] == "rad" and d["units"]["board.left.x"] == "m"
+    assert len(d["diagnostics"]["views"]) == corner_data.n_views
+    assert d["diagnostics"]["rms_x_px"] > 0 and d["diagnostics"]["rms_y_px"] > 0
+    assert d["diagnostics"]["rank"] == 21 and d["diagnostics"]["condition_number"] > 1
+
+
+def test_unidentifiable_parameters_get_no_value(model, corner_data, tmp_path):
+    # with the head still, a HeadYaw offset is a camera rotation: the data cannot separate them
+    cal = calibrate(model, corner_data, parameters="all")
+    assert "HeadYaw" in cal.unidentifiable
+    for lab in cal.unidentifiable:
+        assert cal.value(lab) is None and cal.std(lab) is None
+    d = json.loads(write_result(tmp_path / "r.json", cal.to_result()).read_text())
+    assert d["estimate"]["HeadYaw"] is None and d["std"]["HeadYaw"] is None
+    assert "rank_deficient" in [w["code"] for w in d["warnings"]]
+    assert "not identifiable" in cal.summary()
+    # everything else is still estimated, with a std
+    ok = [lab for lab in cal.free if lab not in cal.unidentifiable]
+    assert all(cal.std(lab) is not None for lab in ok)
+
+
+def test_tied_hip_yaw_pitch(model, tied_model):
+    rng = np.random.default_rng(8)
+    data = simulate_dataset(tied_model, rng, n_per_foot=6)
+    cal = calibrate(tied_model, data)
+    assert len(cal.free) == 20 and "RHipYawPitch" not in cal.free
+    # parameter-level tie on the untied model: one value for both joints
+    truth = draw_truth(model, rng)
+    n = len(model.joint_names)
+    truth.params[model.joint_names.index("RHipYawPitch")] = truth.params[model.joint_names.index("LHipYawPitch")]
+    data2 = simulate_dataset(model, rng, n_per_foot=6, truth=truth)
+    cal2 = calibrate(model, data2, tie=True)
+    assert cal2.value("RHipYawPitch") == pytest.approx(cal2.value("LHipYawPitch"))
+    assert abs(cal2.value("LHipYawPitch") - truth.params[model.joint_names.index("LHipYawPitch")]) < \
+        4 * cal2.std("LHipYawPitch")
+    assert n == len(model.joint_names)
+
+
+def test_gross_corner_error_is_named(model, corner_data):
+    data = corner_data.subset(np.arange(corner_data.n_views))
+    data.corners = data.corners.copy()
+    data.corners[3, 7] += [6.0, -4.0]
+    cal = calibrate(model, data)
+    assert (data.names[3], 7) in cal.outlier_corners
+    w = [w for w in cal.warnings if w.code == "outliers"][0]
+    assert data.names[3] in w.message
+
+
+def test_views_without_a_full_board_are_dropped(model, corner_data):
+    data = corner_data.subset(np.arange(corner_data.n_views))
+    data.corners = data.corners.copy()
+    data.corners[2] = np.nan
+    cal = calibrate(model, data)
+    assert cal.data.n_views == corner_data.n_views - 1
+    assert any(w.code == "dropped" and data.names[2] in w.message for w in cal.warnings)
+
+
+def test_too_little_data(model, corner_data):
+    left = corner_data.subset([i for i, f in enumerate(corner_data.feet) if f == "left"])
+    with pytest.raises(NotEnoughDataError, match="right board"):
+        calibrate(model, left)
+    cal = calibrate(model, left, parameters="camera_rotation,LHipYawPitch,LHipRoll,LHipPitch,LKneePitch,"
+                                           "LAnklePitch,LAnkleRoll,board.left.yaw,board.left.x,board.left.y")
+    assert len(cal.free) == 12
+    one = corner_data.subset([0, corner_data.n_views - 1])
+    with pytest.raises(NotEnoughDataError):
+        calibrate(model, one)
+
+
+def test_parameter_selection(model):
+    assert resolve_parameters(model, "seed+camera_xy")[-2:] != ["camera.x", "camera.y"]  # kept in model order
+    assert len(resolve_parameters(model, "seed+camera_xy")) == 23
+    assert resolve_parameters(model, "LKneePitch, camera.roll") == ["LKneePitch", "camera.roll"]
+    with pytest.raises(InputError, match="unknown calibration parameter"):
+        resolve_parameters(model, "LElbow")
