@@ -5,6 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from robocal.camera import MarkerRectangle
 from robocal.errors import DegenerateGeometryError, InputError
 from robocal.geometry import (
     invert_transform,
@@ -16,7 +17,7 @@ from robocal.geometry import (
 from robocal.rigs.mirror.model import (
     F_X,
     T_M_OM,
-    MirrorRectangle,
+
     MirrorScene,
     householder_compose,
     mirror_plane,
@@ -125,6 +126,6 @@ def test_scene_rejects_camera_behind_mirror_and_points_behind_mirror():
 
 def test_rectangle_validation():
     with pytest.raises(InputError):
-        MirrorRectangle(-0.1, 0.2)
-    pts = MirrorRectangle(0.3, 0.2).object_points()
+        MarkerRectangle(-0.1, 0.2)
+    pts = MarkerRectangle(0.3, 0.2).object_points()
     assert np.allclose(pts[2], [0.3, 0.2, 0.0])

@@ -55,6 +55,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from robocal.camera import MarkerRectangle
 from robocal.errors import DegenerateGeometryError, InputError, ShapeError
 from robocal.geometry import (
     apply_transform,
@@ -66,12 +67,11 @@ from robocal.geometry import (
     transform_from,
     translation_of,
 )
-from robocal.validation import check_points, check_positive, check_transform
+from robocal.validation import check_points, check_transform
 
 __all__ = [
     "F_X",
     "T_M_OM",
-    "MirrorRectangle",
     "marker_object_points",
     "ri_from_r_points",
     "mirror_plane",
@@ -87,30 +87,6 @@ F_X = np.diag([-1.0, 1.0, 1.0])
 
 #: ``T_m_om``: ``om`` rotated 180 deg about its y axis is ``m`` (seed 002 eq. [5]).
 T_M_OM = transform_from(np.diag([-1.0, 1.0, -1.0]), np.zeros(3))
-
-
-@dataclass(frozen=True)
-class MirrorRectangle:
-    """The four markers on the mirror: corners of a ``width x height`` rectangle.
-
-    Parameters
-    ----------
-    width, height : float
-        Edge lengths AB and AD in metres (seed 002: 0.366 x 0.256 m).
-    """
-
-    width: float = 0.366
-    height: float = 0.256
-
-    def __post_init__(self):
-        check_positive([self.width, self.height], "mirror rectangle (width, height)")
-
-    def object_points(self) -> np.ndarray:
-        """Corners A, B, C, D in frame ``m``, shape (4, 3), metres."""
-        return marker_object_points(self.width, self.height)
-
-    def to_dict(self) -> dict:
-        return {"width": float(self.width), "height": float(self.height)}
 
 
 def marker_object_points(width: float, height: float) -> np.ndarray:
@@ -257,13 +233,14 @@ class MirrorScene:
         Marker frame of each mirror placement in the camera.
     body_points_r : array_like, shape (N, 3)
         Feature points on the robot body in ``r``, metres.
-    rectangle : MirrorRectangle
+    rectangle : robocal.camera.MarkerRectangle
+        The four mirror markers (seed 002: 0.366 x 0.256 m).
     """
 
     T_c_r: np.ndarray
     T_c_m: np.ndarray
     body_points_r: np.ndarray
-    rectangle: MirrorRectangle = field(default_factory=MirrorRectangle)
+    rectangle: MarkerRectangle = field(default_factory=lambda: MarkerRectangle(0.366, 0.256))
 
     def __post_init__(self):
         self.T_c_r = check_transform(self.T_c_r, "T_c_r")

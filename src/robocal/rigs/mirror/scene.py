@@ -37,8 +37,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from robocal.camera import MarkerRectangle
 from robocal.geometry import matrix_from_rotvec, transform_from
-from robocal.rigs.mirror.model import MirrorRectangle, MirrorScene, mirror_plane, virtual_transform
+from robocal.rigs.mirror.model import MirrorScene, mirror_plane, virtual_transform
 
 __all__ = [
     "PUBLISHED",
@@ -133,7 +134,7 @@ def published_scene(body_points_r=None) -> MirrorScene:
         T_c_r=transform_from(R_cr, t_cr),
         T_c_m=T_c_m,
         body_points_r=default_body_points() if body_points_r is None else body_points_r,
-        rectangle=MirrorRectangle(w / 1e3, h / 1e3),
+        rectangle=MarkerRectangle(w / 1e3, h / 1e3),
     )
 
 

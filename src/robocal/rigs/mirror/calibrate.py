@@ -1,0 +1,728 @@
+"""Camera-to-robot calibration from images of a plane mirror (seed 002).
+
+Two estimators:
+
+* :func:`calibrate_single` — the patent's method on one image: planar PnP of
+  the four mirror markers (both IPPE solutions, one chosen with the body
+  points, see :func:`choose_planar_solution`), PnP of the reflected body
+  points with the x-flipped object set, and the composition of
+  :func:`~robocal.rigs.mirror.model.patent_compose` (eqs. [1]-[7]).
+* :func:`calibrate` — beyond the patent: one nonlinear least-squares problem
+  over ``T_r_c`` and every mirror pose ``T_c_m_k`` of K images (mirror
+  placements), on the reprojection error of the markers and of the reflected
+  body points, started from the single-image estimates; covariance from the
+  estimation layer.
+
+For one image the joint problem splits into the two PnPs (``T_c_ri`` is a
+re-parametrisation of ``T_c_r`` for a fixed mirror), so both estimators agree
+and the joint problem's covariance is the first-order covariance of the
+patent's estimate.
+
+Parametrisation (all results): ``T_r_c`` (camera in the robot frame; the
+patent's ``(R_rc, T_rc)``); rotation uncertainty is that of the rotation
+vector ``delta`` in ``R_rc = exp(delta) R_rc_ref`` (left, robot-side
+perturbation, as ``docs/conventions.md``), in radians; translation in metres.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from robocal.camera import CameraModel, MarkerRectangle, solve_pnp, solve_pnp_planar
+from robocal.diagnostics import Diagnostic
+from robocal.errors import (
+    ConvergenceError,
+    DegenerateGeometryError,
+    InconsistentDataError,
+    InputError,
+    NotEnoughDataError,
+    ShapeError,
+)
+from robocal.estimation import LSQResult, Problem, solve
+from robocal.geometry import (
+    invert_transform,
+    matrix_from_rotvec,
+    quaternion_from_matrix,
+    rotation_angle,
+    rotvec_from_matrix,
+    skew,
+    transform_from,
+)
+from robocal.rigs.mirror.model import (
+    PatentSteps,
+    householder_compose,
+    mirror_plane,
+    patent_compose,
+    ri_from_r_points,
+)
+from robocal.validation import check_array
+
+__all__ = [
+    "MirrorObservation",
+    "PlanarChoice",
+    "SingleImageResult",
+    "MirrorCalibration",
+    "check_observation",
+    "choose_planar_solution",
+    "calibrate_single",
+    "calibrate",
+    "geometry_warnings",
+    "residual_model",
+    "predicted_covariance",
+]
+
+#: Below this many body points a warning is issued (the patent uses 10-30).
+MIN_GOOD_POINTS = 6
+#: Smallest/largest principal spread of the body points below which they count as "too flat".
+FLAT_RATIO = 0.05
+#: Angle between the optical axis and the mirror plane below which the mirror is "near-parallel".
+PARALLEL_DEG = 20.0
+
+
+@dataclass
+class MirrorObservation:
+    """What one image gives: the four markers and the imaged reflections.
+
+    Attributes
+    ----------
+    marker_uv : ndarray, shape (4, 2)
+        Markers A, B, C, D [px] in the rectangle's order (A top left, clockwise).
+    body_uv : ndarray, shape (N, 2)
+        Image of the reflection of each listed body point [px].
+    body_ids : ndarray of int, shape (N,)
+        Index of each observed point in the body point model.
+    name : str
+        Label used in messages and reports (file name, "image 3", ...).
+    """
+
+    marker_uv: np.ndarray
+    body_uv: np.ndarray
+    body_ids: np.ndarray | None = None
+    name: str = "image"
+
+    def to_dict(self) -> dict:
+        return {
+            "name": self.name,
+            "marker_uv": np.asarray(self.marker_uv).tolist(),
+            "body_uv": np.asarray(self.body_uv).tolist(),
+            "body_ids": None if self.body_ids is None else [int(i) for i in self.body_ids],
+        }
+
+
+def _signed_area(q: np.ndarray) -> float:
+    x, y = q[:, 0], q[:, 1]
+    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+def check_observation(obs: MirrorObservation, body_points_r: np.ndarray, rectangle: MarkerRectangle):
+    """Validate one observation; returns ``(marker_uv, body_uv, body_ids, p_r)`` as arrays.
+
+    Raises a :class:`~robocal.errors.RobocalError` naming the observation and field:
+    wrong shapes, mismatched counts, fewer than 4 body points, markers that are
+    not a convex quadrilateral in the documented clockwise order.
+    """
+    src = obs.name
+    m = check_array(obs.marker_uv, f"{src}: marker_uv")
+    if m.shape != (4, 2):
+        raise ShapeError(f"{src}: marker_uv must have shape (4, 2) (markers A, B, C, D), got {m.shape}")
+    q = check_array(obs.body_uv, f"{src}: body_uv")
+    if q.ndim != 2 or q.shape[1] != 2:
+        raise ShapeError(f"{src}: body_uv must have shape (N, 2), got {q.shape}")
+    P = check_array(body_points_r, "body_points_r")
+    if P.ndim != 2 or P.shape[1] != 3:
+        raise ShapeError(f"body_points_r must have shape (N, 3), got {P.shape}")
+    if obs.body_ids is None:
+        if q.shape[0] != P.shape[0]:
+            raise InputError(
+                f"{src}: {q.shape[0]} body image points but {P.shape[0]} body model points; "
+                "give body_ids to say which model point each image point is"
+            )
+        ids = np.arange(P.shape[0])
+    else:
+        ids = np.asarray(obs.body_ids)
+        if ids.shape != (q.shape[0],) or not np.issubdtype(ids.dtype, np.integer):
+            raise InputError(f"{src}: body_ids must be {q.shape[0]} integers (one per body_uv row), got shape {ids.shape}")
+        if ids.size and (ids.min() < 0 or ids.max() >= P.shape[0]):
+            raise InputError(f"{src}: body_ids must index the {P.shape[0]} body model points, got {ids.min()}..{ids.max()}")
+        if len(np.unique(ids)) != ids.size:
+            raise InputError(f"{src}: body_ids has repeated entries")
+    if q.shape[0] < 4:
+        raise NotEnoughDataError(f"{src}: needs at least 4 imaged body points for PnP, got {q.shape[0]}")
+    # markers: a convex quadrilateral A, B, C, D, clockwise in the image (v down)
+    e = np.roll(m, -1, axis=0) - m
+    cross = e[:, 0] * np.roll(e, -1, axis=0)[:, 1] - e[:, 1] * np.roll(e, -1, axis=0)[:, 0]
+    diag = max(np.linalg.norm(m[2] - m[0]), np.linalg.norm(m[3] - m[1]))
+    if diag < 4.0:
+        raise InconsistentDataError(f"{src}: marker_uv: the four markers are within {diag:.2g} px of each other")
+    if not (np.all(cross > 0) or np.all(cross < 0)):
+        raise InconsistentDataError(
+            f"{src}: marker_uv does not form a convex quadrilateral A-B-C-D (crossed or reflex corners); "
+            "check the marker order"
+        )
+    if _signed_area(m) < 0:
+        raise InconsistentDataError(
+            f"{src}: marker_uv runs counter-clockwise in the image; expected A (top left), B (top right), "
+            "C (bottom right), D (bottom left) as seen on the mirror's front"
+        )
+    # contiguous copies: cv2.solvePnP rejects strided views (core PnP passes them through)
+    return np.ascontiguousarray(m), np.ascontiguousarray(q), ids, np.ascontiguousarray(P[ids])
+
+
+@dataclass
+class PlanarChoice:
+    """Which of the two IPPE poses of the mirror markers was taken, and why.
+
+    Attributes
+    ----------
+    chosen : int
+        Index into ``candidates`` (0 = lower marker reprojection error).
+    reason : str
+        One sentence for the report.
+    decisive : bool
+        False when no test separated the two (the choice is then a guess).
+    marker_rms_px : ndarray, shape (n,)
+    marker_chi2_gap : float
+        ``(SSE_other - SSE_chosen) / sigma^2`` of the marker residuals.
+    virtual_in_front : ndarray of int, shape (n,)
+        Per candidate, how many reflected points would lie in front of the mirror
+        (impossible for a real reflection).
+    camera_body_distance : ndarray, shape (n,)
+        Per candidate, distance from the implied camera centre to the nearest
+        body point [m] (the camera is mounted on the body).
+    T_c_m : ndarray, shape (n, 4, 4)
+    T_r_c : ndarray, shape (n, 4, 4)
+        Candidate mirror poses and the camera poses they imply.
+    """
+
+    chosen: int
+    reason: str
+    decisive: bool
+    marker_rms_px: np.ndarray
+    marker_chi2_gap: float
+    virtual_in_front: np.ndarray
+    camera_body_distance: np.ndarray
+    T_c_m: np.ndarray
+    T_r_c: np.ndarray
+
+    def to_dict(self) -> dict:
+        return {
+            "chosen": int(self.chosen),
+            "reason": self.reason,
+            "decisive": bool(self.decisive),
+            "marker_rms_px": self.marker_rms_px.tolist(),
+            "marker_chi2_gap": float(self.marker_chi2_gap),
+            "virtual_in_front": [int(v) for v in self.virtual_in_front],
+            "camera_body_distance_m": self.camera_body_distance.tolist(),
+        }
+
+
+def choose_planar_solution(candidates, T_c_ri, body_points_r, *, sigma_px: float,
+                           chi2_decisive: float = 25.0, distance_ratio: float = 2.0) -> PlanarChoice:
+    """Pick the mirror pose among the IPPE candidates using the body points.
+
+    Tests, in order (the first that separates the candidates decides):
+
+    1. *Sidedness* — the reflected body points (``T_c_ri`` applied to the
+       x-flipped model) must lie behind the mirror plane: a candidate plane
+       with any of them in front is impossible.
+    2. *Marker fit* — when the marker reprojection error differs by more than
+       ``chi2_decisive`` (chi-square units at ``sigma_px``), the better fit.
+    3. *Camera on the body* — the composed ``T_r_c`` puts the camera centre at
+       some distance from the nearest body point; the camera is mounted on the
+       body, so the candidate with the smaller distance wins when the other's
+       is ``distance_ratio`` times larger.
+
+    If none separates them the lower-error IPPE pose is kept and
+    ``decisive`` is False.
+    """
+    cands = list(candidates)
+    n = len(cands)
+    T_c_m = np.stack([c.T_cam_obj for c in cands])
+    rms = np.array([c.rms_px for c in cands])
+    sse = np.array([np.sum(c.residuals**2) for c in cands])
+    p_v = ri_from_r_points(body_points_r) @ T_c_ri[:3, :3].T + T_c_ri[:3, 3]
+    nrm, d = mirror_plane(T_c_m)
+    in_front = np.array([int(np.sum(p_v @ nrm[i] <= d[i])) for i in range(n)])
+    T_r_c = np.stack([invert_transform(householder_compose(T_c_m[i], T_c_ri)) for i in range(n)])
+    dist = np.array([np.min(np.linalg.norm(body_points_r - T_r_c[i, :3, 3], axis=1)) for i in range(n)])
+    gap = float((sse[1] - sse[0]) / sigma_px**2) if n > 1 else np.inf
+
+    def done(k, reason, decisive=True):
+        other_gap = float((sse[1 - k] - sse[k]) / sigma_px**2) if n > 1 else np.inf
+        return PlanarChoice(k, reason, decisive, rms, other_gap, in_front, dist, T_c_m, T_r_c)
+
+    if n == 1:
+        return done(0, "IPPE returned a single pose in front of the camera")
+    same_rot = rotation_angle(T_c_m[0, :3, :3] @ T_c_m[1, :3, :3].T)
+    same_t = np.linalg.norm(T_c_m[0, :3, 3] - T_c_m[1, :3, 3])
+    if same_rot < 1e-6 and same_t < 1e-6 * np.linalg.norm(T_c_m[0, :3, 3]):
+        return done(0, "both IPPE poses refine to the same pose: no planar ambiguity at this view")
+    ok = in_front == 0
+    if ok.sum() == 1:
+        k = int(np.flatnonzero(ok)[0])
+        return done(k, f"with pose {1 - k} of the markers {in_front[1 - k]} reflected body point(s) would lie in "
+                       "front of the mirror, which a reflection cannot do")
+    if ok.sum() == 0:
+        raise InconsistentDataError(
+            "body points: under both marker poses some reflected body points lie in front of the mirror; "
+            "the body point model (or its x flip) does not match the image"
+        )
+    if gap > chi2_decisive:
+        return done(0, f"the markers fit pose 0 better by chi2 = {gap:.3g} (rms {rms[0]:.3g} vs {rms[1]:.3g} px)")
+    k = int(np.argmin(dist))
+    if dist[1 - k] > distance_ratio * max(dist[k], 1e-3):
+        return done(k, f"pose {k} puts the camera {dist[k]:.3g} m from the nearest body point, pose {1 - k} "
+                       f"{dist[1 - k]:.3g} m; the camera is mounted on the body")
+    return done(0, f"no test separates the two marker poses (chi2 gap {gap:.3g}, camera-body distances "
+                   f"{dist[0]:.3g} / {dist[1]:.3g} m); kept the lower-error IPPE pose", decisive=False)
+
+
+def geometry_warnings(body_points_r, T_c_m, *, name: str = "image") -> list[Diagnostic]:
+    """Degeneracy warnings for one image (see module constants for thresholds)."""
+    out = []
+    P = np.asarray(body_points_r, dtype=float)
+    if P.shape[0] < MIN_GOOD_POINTS:
+        out.append(Diagnostic("weakly_determined", f"{name}: only {P.shape[0]} body points seen (the patent uses "
+                              f"10-30; fewer than {MIN_GOOD_POINTS} makes PnP fragile)", params=("T_r_c",)))
+    s = np.linalg.svd(P - P.mean(axis=0), compute_uv=False)
+    if s[0] > 0 and s[-1] / s[0] < FLAT_RATIO:
+        out.append(Diagnostic("degenerate_geometry", f"{name}: body points are nearly coplanar (thickness/extent "
+                              f"{s[-1] / s[0]:.3g} < {FLAT_RATIO}); their PnP has a planar ambiguity of its own",
+                              params=("T_r_c",)))
+    n, _ = mirror_plane(T_c_m)
+    ang = np.degrees(np.arcsin(min(1.0, abs(float(n[2])))))
+    if ang < PARALLEL_DEG:
+        out.append(Diagnostic("degenerate_geometry", f"{name}: mirror plane is {ang:.1f} deg from the optical axis "
+                              f"(< {PARALLEL_DEG} deg): markers and reflections are seen at grazing angles",
+                              params=("T_c_m",)))
+    return out
+
+
+@dataclass
+class SingleImageResult:
+    """The patent's method on one image.
+
+    Attributes
+    ----------
+    steps : PatentSteps
+        Every intermediate transform (eqs. [1]-[7]).
+    T_c_r_householder : ndarray, shape (4, 4)
+        The compact form on the same ``T_c_m, T_c_ri`` (agrees with ``steps.T_c_r``).
+    choice : PlanarChoice
+    marker_residuals, body_residuals : ndarray, shape (4, 2), (N, 2)
+        ``observed - projected`` [px] of the two PnPs.
+    sigma_px : float
+        Pixel noise used for decisions (given, or estimated from the residuals).
+    warnings : list of Diagnostic
+    """
+
+    steps: PatentSteps
+    T_c_r_householder: np.ndarray
+    choice: PlanarChoice
+    marker_residuals: np.ndarray
+    body_residuals: np.ndarray
+    sigma_px: float
+    warnings: list = field(default_factory=list)
+
+    @property
+    def T_r_c(self) -> np.ndarray:
+        return self.steps.T_r_c
+
+    @property
+    def T_c_m(self) -> np.ndarray:
+        return self.steps.T_c_m
+
+
+def calibrate_single(camera: CameraModel, rectangle: MarkerRectangle, body_points_r, obs: MirrorObservation, *,
+                     sigma_px: float | None = None, max_body_rms_px: float = 3.0) -> SingleImageResult:
+    """The patent's method (seed 002 §2) on one image.
+
+    Parameters
+    ----------
+    camera : CameraModel
+        Known intrinsics and distortion.
+    rectangle : MarkerRectangle
+        Mirror markers, metres.
+    body_points_r : array_like, shape (M, 3)
+        Body point model in ``r`` [m].
+    obs : MirrorObservation
+    sigma_px : float, optional
+        Pixel noise; estimated from the body-point PnP residuals when absent.
+    max_body_rms_px : float
+        Without ``sigma_px``: body-point PnP residual (rms per coordinate)
+        above which the correspondences are declared wrong (with it: 5 sigma).
+
+    Raises
+    ------
+    InconsistentDataError
+        Markers not a plausible image of the rectangle, body points that do not
+        fit the model, or a pose that puts points behind the camera.
+    NotEnoughDataError, ShapeError, InputError
+        See :func:`check_observation`.
+    """
+    m_uv, b_uv, ids, P = check_observation(obs, body_points_r, rectangle)
+    src = obs.name
+    try:
+        T_c_ri_sol = solve_pnp(camera, ri_from_r_points(P), b_uv)  # eq. [2]
+    except ConvergenceError as exc:
+        raise InconsistentDataError(f"{src}: body points: {exc.message} (points behind the camera: check the "
+                                    "correspondences and that the model is in the robot frame r)") from None
+    except DegenerateGeometryError as exc:
+        raise DegenerateGeometryError(f"{src}: body_points_r: {exc.message}") from None
+    try:
+        cands = solve_pnp_planar(camera, rectangle.object_points(), m_uv)  # eq. [1], both IPPE poses
+    except ConvergenceError as exc:
+        raise InconsistentDataError(f"{src}: marker_uv: {exc.message}") from None
+    sigma_given = sigma_px is not None
+    if sigma_px is None:
+        r = T_c_ri_sol.residuals
+        dof = max(r.size - 6, 1)
+        sigma_px = max(float(np.sqrt(np.sum(r**2) / dof)), 0.05)
+    body_rms = T_c_ri_sol.rms_px / np.sqrt(2.0)  # per coordinate
+    limit = 5.0 * sigma_px if sigma_given else max_body_rms_px
+    if body_rms > limit:
+        raise InconsistentDataError(
+            f"{src}: body_uv does not match body_points_r: the best pose leaves {body_rms:.3g} px rms per "
+            f"coordinate (limit {limit:.3g} px); check the point order / body_ids and that the model is in frame r"
+        )
+    best = cands[0]
+    size_px = np.linalg.norm(m_uv[2] - m_uv[0])
+    if best.rms_px > max(5.0 * sigma_px, 0.02 * size_px, 1.0):
+        raise InconsistentDataError(
+            f"{src}: marker_uv is not a plausible image of a {rectangle.width * 1e3:.0f} x {rectangle.height * 1e3:.0f}"
+            f" mm rectangle: best pose leaves {best.rms_px:.3g} px rms (check the marker order and the rectangle size)"
+        )
+    choice = choose_planar_solution(cands, T_c_ri_sol.T_cam_obj, P, sigma_px=sigma_px)
+    T_c_m = choice.T_c_m[choice.chosen]
+    n, d = mirror_plane(T_c_m)
+    if d <= 0:
+        raise InconsistentDataError(f"{src}: the markers put the camera behind the mirror; check the marker order")
+    steps = patent_compose(T_c_m, T_c_ri_sol.T_cam_obj)  # eqs. [3]-[7]
+    warnings = geometry_warnings(P, T_c_m, name=src)
+    if not choice.decisive:
+        warnings.append(Diagnostic("degenerate_geometry", f"{src}: planar ambiguity of the mirror markers not "
+                                   f"resolved: {choice.reason}", params=("T_c_m",)))
+    return SingleImageResult(
+        steps=steps,
+        T_c_r_householder=householder_compose(T_c_m, T_c_ri_sol.T_cam_obj),
+        choice=choice,
+        marker_residuals=cands[choice.chosen].residuals,
+        body_residuals=T_c_ri_sol.residuals,
+        sigma_px=float(sigma_px),
+        warnings=warnings,
+    )
+
+
+# --------------------------------------------------------------------- joint model
+@dataclass
+class _Layout:
+    K: int
+    ids: list
+    P: list
+    marker_uv: np.ndarray
+    body_uv: list
+
+
+def _left_jacobian(v: np.ndarray) -> np.ndarray:
+    """SO(3) left Jacobian ``J_l(v)`` (..., 3, 3): ``exp(v + e) = exp(J_l e) exp(v)`` to first order."""
+    v = np.asarray(v, dtype=float)
+    th = np.linalg.norm(v, axis=-1)[..., None, None]
+    Kx = skew(v)
+    small = th < 1e-6
+    ths = np.where(small, 1.0, th)
+    a = np.where(small, 0.5 - th**2 / 24.0, (1.0 - np.cos(ths)) / ths**2)
+    b = np.where(small, 1.0 / 6.0 - th**2 / 120.0, (ths - np.sin(ths)) / ths**3)
+    return np.eye(3) + a * Kx + b * (Kx @ Kx)
+
+
+def residual_model(camera: CameraModel, rectangle: MarkerRectangle, layout: _Layout, R_rc_ref, R_cm_ref):
+    """Residual functions of the joint problem and their analytic Jacobians.
+
+    Parameters ``params`` hold ``rot_rc (3,)``, ``t_rc (3,)``, ``rot_cm (K, 3)``,
+    ``t_cm (K, 3)``: rotations as left perturbations of the reference
+    rotations, ``R = exp(rot) R_ref``. Residual = projected - observed [px].
+
+    Returns
+    -------
+    markers, body : callable
+        ``(4K, 2)`` and ``(sum N_k, 2)`` residuals.
+    markers_jac, body_jac : callable
+        ``{block: (m, block size)}`` derivatives.
+    poses : callable
+        ``params -> (T_r_c (4, 4), T_c_m (K, 4, 4))``.
+    """
+    A = rectangle.object_points()
+    K = layout.K
+
+    def poses(p):
+        R_rc = matrix_from_rotvec(p["rot_rc"]) @ R_rc_ref
+        T_r_c = transform_from(R_rc, p["t_rc"])
+        R_cm = matrix_from_rotvec(p["rot_cm"]) @ R_cm_ref
+        T_c_m = transform_from(R_cm, p["t_cm"])
+        return T_r_c, T_c_m
+
+    def _markers(p, want_jac):
+        _, T_c_m = poses(p)
+        Ra = np.einsum("kij,nj->kni", T_c_m[:, :3, :3], A)  # (K, 4, 3)
+        pc = Ra + T_c_m[:, None, :3, 3]
+        if not want_jac:
+            return (camera.project(pc, check=False) - layout.marker_uv).reshape(-1, 2)
+        _, Jp = camera.project_jacobian(pc, check=False)  # (K, 4, 2, 3)
+        Jl = _left_jacobian(p["rot_cm"])  # (K, 3, 3)
+        dR = -skew(Ra) @ Jl[:, None]  # (K, 4, 3, 3)
+        Jrot = np.zeros((K, 4, 2, K, 3))
+        Jt = np.zeros((K, 4, 2, K, 3))
+        for k in range(K):
+            Jrot[k, :, :, k] = Jp[k] @ dR[k]
+            Jt[k, :, :, k] = Jp[k]
+        m = 8 * K
+        return {"rot_cm": Jrot.reshape(m, 3 * K), "t_cm": Jt.reshape(m, 3 * K)}
+
+    def _body(p, want_jac):
+        T_r_c, T_c_m = poses(p)
+        R_rc, t_rc = T_r_c[:3, :3], T_r_c[:3, 3]
+        n, d = mirror_plane(T_c_m)
+        out, jac = [], {"rot_rc": [], "t_rc": [], "rot_cm": [], "t_cm": []}
+        Jl_rc = _left_jacobian(p["rot_rc"])
+        Jl_cm = _left_jacobian(p["rot_cm"])
+        for k in range(K):
+            q = layout.P[k] - t_rc
+            pc = q @ R_rc  # R_rc^T q
+            s = pc @ n[k] - d[k]
+            H = np.eye(3) - 2.0 * np.outer(n[k], n[k])
+            pv = pc - 2.0 * s[:, None] * n[k]
+            if not want_jac:
+                out.append(camera.project(pv, check=False) - layout.body_uv[k])
+                continue
+            _, Jp = camera.project_jacobian(pv, check=False)  # (N, 2, 3)
+            N = pc.shape[0]
+            dpc_drot = R_rc.T @ skew(q) @ Jl_rc  # (N, 3, 3)
+            dpc_dt = -R_rc.T
+            jac["rot_rc"].append(Jp @ (H @ dpc_drot))
+            jac["t_rc"].append(Jp @ (H @ dpc_dt))
+            t_cm = T_c_m[k, :3, 3]
+            dpv_dn = -2.0 * (s[:, None, None] * np.eye(3) + n[k][None, :, None] * (pc - t_cm)[:, None, :])
+            dn_drot = -skew(n[k]) @ Jl_cm[k]
+            jr = np.zeros((N, 2, K, 3))
+            jt = np.zeros((N, 2, K, 3))
+            jr[:, :, k] = Jp @ (dpv_dn @ dn_drot)
+            jt[:, :, k] = Jp @ (2.0 * np.outer(n[k], n[k]))
+            jac["rot_cm"].append(jr.reshape(N, 2, 3 * K))
+            jac["t_cm"].append(jt.reshape(N, 2, 3 * K))
+        if not want_jac:
+            return np.concatenate(out, axis=0)
+        return {b: np.concatenate(v, axis=0).reshape(-1, v[0].shape[-1]) for b, v in jac.items()}
+
+    return (lambda p: _markers(p, False), lambda p: _body(p, False),
+            lambda p: _markers(p, True), lambda p: _body(p, True), poses)
+
+
+def _labels(K):
+    return {
+        "rot_rc": ["rot_rc_x", "rot_rc_y", "rot_rc_z"],
+        "t_rc": ["t_rc_x", "t_rc_y", "t_rc_z"],
+        "rot_cm": [f"rot_cm{k}_{a}" for k in range(K) for a in "xyz"],
+        "t_cm": [f"t_cm{k}_{a}" for k in range(K) for a in "xyz"],
+    }
+
+
+def _problem(camera, rectangle, layout, T_r_c0, T_c_m0, sigma_px):
+    markers, body, mjac, bjac, poses = residual_model(camera, rectangle, layout, T_r_c0[:3, :3], T_c_m0[:, :3, :3])
+    lab = _labels(layout.K)
+    prob = Problem()
+    prob.add_block("rot_rc", np.zeros(3), labels=lab["rot_rc"], unit="rad", scale=1e-3)
+    prob.add_block("t_rc", T_r_c0[:3, 3], labels=lab["t_rc"], unit="m", scale=1e-3)
+    prob.add_block("rot_cm", np.zeros((layout.K, 3)), labels=lab["rot_cm"], unit="rad", scale=1e-3)
+    prob.add_block("t_cm", T_c_m0[:, :3, 3], labels=lab["t_cm"], unit="m", scale=1e-3)
+    sig = None if sigma_px is None else float(sigma_px)
+    prob.add_residuals(markers, name="markers", jacobian=mjac, residual_dim=2, sigma=sig)
+    prob.add_residuals(body, name="body", jacobian=bjac, residual_dim=2, sigma=sig)
+    return prob, poses
+
+
+def _layout(obs_list, body_points_r, rectangle):
+    checked = [check_observation(o, body_points_r, rectangle) for o in obs_list]
+    return _Layout(
+        K=len(checked),
+        ids=[c[2] for c in checked],
+        P=[c[3] for c in checked],
+        marker_uv=np.stack([c[0] for c in checked]),
+        body_uv=[c[1] for c in checked],
+    )
+
+
+def predicted_covariance(camera: CameraModel, rectangle: MarkerRectangle, body_points_r, T_r_c, T_c_m,
+                         obs_list, sigma_px: float) -> np.ndarray:
+    """First-order covariance of ``(rot_rc [rad], t_rc [m])`` (6, 6) for K images at given poses.
+
+    ``sigma_px^2 (J^T J)^-1`` of the joint problem, marginal over the mirror
+    poses, with the analytic Jacobian at ``(T_r_c, T_c_m)`` — e.g. the
+    simulated truth, for the Monte Carlo comparison. Only the observation
+    layout (which points are seen) is taken from ``obs_list``. For K = 1 it is
+    the first-order covariance of the patent's single-image estimate.
+    """
+    T_r_c = np.asarray(T_r_c, dtype=float)
+    T_c_m = np.asarray(T_c_m, dtype=float).reshape(-1, 4, 4)
+    layout = _layout(obs_list, body_points_r, rectangle)
+    prob, _ = _problem(camera, rectangle, layout, T_r_c, T_c_m, sigma_px)
+    J = np.asarray(prob.jacobian_at(None, jac="analytic"))
+    cov = np.linalg.inv(J.T @ J)  # residuals are already divided by sigma_px
+    return cov[:6, :6]
+
+
+@dataclass
+class MirrorCalibration:
+    """Result of :func:`calibrate` (K images, joint refinement).
+
+    Attributes
+    ----------
+    T_r_c : ndarray, shape (4, 4)
+        Camera pose in the robot frame (the answer; ``robot -> camera``).
+    T_c_m : ndarray, shape (K, 4, 4)
+        Mirror (marker) pose in each image.
+    cov : ndarray, shape (6, 6)
+        Covariance of ``(rot_rc [rad], t_rc [m])`` (rotation as a left perturbation).
+    singles : list of SingleImageResult
+        The patent's estimate from each image alone.
+    lsq : LSQResult or None
+        The joint problem's solution (None with ``refine=False``).
+    warnings : list of Diagnostic
+    """
+
+    T_r_c: np.ndarray
+    T_c_m: np.ndarray
+    cov: np.ndarray
+    singles: list
+    lsq: LSQResult | None
+    warnings: list
+    observations: list
+    rectangle: MarkerRectangle
+    body_points_r: np.ndarray
+    camera: CameraModel
+
+    @property
+    def T_c_r(self) -> np.ndarray:
+        return invert_transform(self.T_r_c)
+
+    @property
+    def std_rotation(self) -> np.ndarray:
+        """Per-axis std of the rotation [rad], (3,)."""
+        return np.sqrt(np.diag(self.cov)[:3])
+
+    @property
+    def std_translation(self) -> np.ndarray:
+        """Per-axis std of ``t_rc`` [m], (3,)."""
+        return np.sqrt(np.diag(self.cov)[3:])
+
+    def residuals(self):
+        """``(marker (K, 4, 2), body list of (N_k, 2))`` reprojection residuals [px], projected - observed."""
+        layout = _layout(self.observations, self.body_points_r, self.rectangle)
+        markers, body, _, _, _ = residual_model(self.camera, self.rectangle, layout, self.T_r_c[:3, :3],
+                                                self.T_c_m[:, :3, :3])
+        p = {"rot_rc": np.zeros(3), "t_rc": self.T_r_c[:3, 3], "rot_cm": np.zeros((layout.K, 3)),
+             "t_cm": self.T_c_m[:, :3, 3]}
+        b = body(p)
+        splits = np.cumsum([len(i) for i in layout.ids])[:-1]
+        return markers(p).reshape(layout.K, 4, 2), np.split(b, splits)
+
+
+def _consensus_choice(singles, camera, rectangle, body_points_r, obs_list):
+    """With several images, re-decide undecided planar choices by agreement of T_r_c."""
+    decided = [s for s in singles if s.choice.decisive]
+    if len(singles) < 2 or len(decided) == len(singles):
+        return singles
+    ref = decided if decided else singles
+    t_ref = np.median(np.stack([s.T_r_c[:3, 3] for s in ref]), axis=0)
+    out = []
+    for s in singles:
+        if s.choice.decisive or len(s.choice.T_r_c) < 2:
+            out.append(s)
+            continue
+        dist = np.linalg.norm(s.choice.T_r_c[:, :3, 3] - t_ref, axis=1)
+        k = int(np.argmin(dist))
+        c = s.choice
+        c.chosen = k
+        c.decisive = bool(dist[1 - k] > 2 * dist[k])
+        c.reason = (f"ambiguous alone; pose {k} agrees with the other images' camera position "
+                    f"({dist[k] * 1e3:.3g} vs {dist[1 - k] * 1e3:.3g} mm)")
+        T_c_m = c.T_c_m[k]
+        steps = patent_compose(T_c_m, s.steps.T_c_ri)
+        warnings = [w for w in s.warnings if "planar ambiguity" not in w.message]
+        if not c.decisive:
+            warnings.append(Diagnostic("degenerate_geometry", f"planar ambiguity not resolved: {c.reason}",
+                                       params=("T_c_m",)))
+        out.append(SingleImageResult(steps, householder_compose(T_c_m, s.steps.T_c_ri), c, s.marker_residuals,
+                                     s.body_residuals, s.sigma_px, warnings))
+    return out
+
+
+def calibrate(camera: CameraModel, rectangle: MarkerRectangle, body_points_r, observations, *,
+              sigma_px: float | None = None, refine: bool = True, progress: bool = False) -> MirrorCalibration:
+    """Calibrate ``T_r_c`` from K >= 1 mirror images (joint refinement).
+
+    Parameters
+    ----------
+    camera, rectangle, body_points_r
+        As :func:`calibrate_single`.
+    observations : sequence of MirrorObservation
+        One per image / mirror placement; the camera must not move on the body
+        between them.
+    sigma_px : float, optional
+        Pixel noise; when given the covariance uses it as the true noise,
+        otherwise the residual variance scales it.
+    refine : bool
+        Run the joint least squares (else: average of the single-image
+        estimates, covariance from :func:`predicted_covariance`).
+    """
+    obs_list = list(observations)
+    if not obs_list:
+        raise NotEnoughDataError("observations: need at least one image")
+    names = [o.name for o in obs_list]
+    if len(set(names)) != len(names):
+        obs_list = [MirrorObservation(o.marker_uv, o.body_uv, o.body_ids, f"{o.name} #{i}")
+                    for i, o in enumerate(obs_list)]
+    P_all = check_array(body_points_r, "body_points_r")
+    if P_all.ndim != 2 or P_all.shape[1] != 3:
+        raise ShapeError(f"body_points_r must have shape (N, 3), got {P_all.shape}")
+    singles = [calibrate_single(camera, rectangle, P_all, o, sigma_px=sigma_px) for o in obs_list]
+    singles = _consensus_choice(singles, camera, rectangle, P_all, obs_list)
+    warnings = [w for s in singles for w in s.warnings]
+    T_c_m0 = np.stack([s.T_c_m for s in singles])
+    # start from the first image's estimate, rotation-averaged over the images
+    T_r_c0 = singles[0].T_r_c.copy()
+    if len(singles) > 1:
+        dev = np.mean([rotvec_from_matrix(s.T_r_c[:3, :3] @ T_r_c0[:3, :3].T) for s in singles], axis=0)
+        T_r_c0[:3, :3] = matrix_from_rotvec(dev) @ T_r_c0[:3, :3]
+        T_r_c0[:3, 3] = np.mean([s.T_r_c[:3, 3] for s in singles], axis=0)
+        spread = max(rotation_angle(s.T_r_c[:3, :3] @ T_r_c0[:3, :3].T) for s in singles)
+        if spread > np.deg2rad(5):
+            warnings.append(Diagnostic("inconsistent_data", f"single-image estimates of R_rc disagree by up to "
+                                       f"{np.degrees(spread):.2g} deg: did the camera move on the body?",
+                                       params=("T_r_c",)))
+    layout = _layout(obs_list, P_all, rectangle)
+    if not refine:
+        sig = sigma_px if sigma_px is not None else float(np.mean([s.sigma_px for s in singles]))
+        cov = predicted_covariance(camera, rectangle, P_all, T_r_c0, T_c_m0, obs_list, sig)
+        return MirrorCalibration(T_r_c0, T_c_m0, cov, singles, None, warnings, obs_list, rectangle, P_all, camera)
+    prob, poses = _problem(camera, rectangle, layout, T_r_c0, T_c_m0, sigma_px)
+    res = solve(prob, method="lm", absolute_sigma=sigma_px is not None, progress=progress)
+    T_r_c, T_c_m = poses(res.params)
+    cov = res.cov[:6, :6]
+    warnings.extend(res.warnings)
+    return MirrorCalibration(T_r_c, T_c_m, cov, singles, res, warnings, obs_list, rectangle, P_all, camera)
+
+
+def result_estimate(cal: MirrorCalibration) -> tuple[dict, dict, dict]:
+    """``(estimate, std, units)`` dicts for a :class:`~robocal.io.CalibrationResult`."""
+    est = {
+        "T_r_c": cal.T_r_c.tolist(),
+        "t_r_c": cal.T_r_c[:3, 3].tolist(),
+        "q_r_c": quaternion_from_matrix(cal.T_r_c[:3, :3]).tolist(),
+        "rotvec_r_c": rotvec_from_matrix(cal.T_r_c[:3, :3]).tolist(),
+        "T_c_m": cal.T_c_m.tolist(),
+    }
+    std = {"t_r_c": cal.std_translation.tolist(), "rotvec_r_c": cal.std_rotation.tolist()}
+    units = {"T_r_c": "m", "t_r_c": "m", "q_r_c": "1", "rotvec_r_c": "rad", "T_c_m": "m"}
+    return est, std, units

@@ -1,0 +1,235 @@
+"""Single-image (patent) and joint calibration on simulated data; planar ambiguity; bad input."""
+
+import numpy as np
+import pytest
+
+from robocal.camera import MarkerRectangle, solve_pnp_planar
+from robocal.errors import DegenerateGeometryError, InconsistentDataError, InputError, NotEnoughDataError, ShapeError
+from robocal.geometry import rotation_angle
+from robocal.rigs.mirror.calibrate import (
+    MirrorObservation,
+    _layout,
+    _problem,
+    calibrate,
+    calibrate_single,
+    choose_planar_solution,
+    geometry_warnings,
+)
+from robocal.rigs.mirror.crossratio import diagonal_points
+from robocal.rigs.mirror.model import MirrorScene, ri_from_r_points
+from robocal.rigs.mirror.scene import published_scene
+from robocal.rigs.mirror.simulate import default_camera, default_setup, simulate_observations
+
+
+@pytest.fixture(scope="module")
+def setup():
+    return default_setup()
+
+
+def test_noise_free_single_image_recovers_truth(setup):
+    cam, scene = setup
+    obs = simulate_observations(cam, scene, np.random.default_rng(0), sigma_px=0.0)[0]
+    res = calibrate_single(cam, scene.rectangle, scene.body_points_r, obs, sigma_px=0.5)
+    assert np.allclose(res.T_r_c, scene.T_r_c, atol=1e-7)
+    assert np.allclose(res.T_c_r_householder, res.steps.T_c_r, atol=1e-12)
+    assert np.allclose(res.steps.T_c_ri, scene.T_c_ri()[0], atol=1e-7)
+    assert res.choice.decisive
+    assert not res.warnings
+
+
+def test_joint_refinement_with_one_image_is_the_patent_estimate(setup):
+    cam, scene = setup
+    obs = simulate_observations(cam, scene, np.random.default_rng(1), sigma_px=0.5)
+    single = calibrate_single(cam, scene.rectangle, scene.body_points_r, obs[0], sigma_px=0.5)
+    joint = calibrate(cam, scene.rectangle, scene.body_points_r, obs, sigma_px=0.5)
+    # both PnPs are already ML, so the joint optimum is the patent's composition
+    std_t = joint.std_translation
+    assert np.all(np.abs(joint.T_r_c[:3, 3] - single.T_r_c[:3, 3]) < 1e-3 * std_t)
+    assert rotation_angle(joint.T_r_c[:3, :3] @ single.T_r_c[:3, :3].T) < 1e-3 * joint.std_rotation.min()
+    assert joint.lsq.success
+
+
+def test_analytic_jacobian_matches_finite_differences():
+    rng = np.random.default_rng(5)
+    cam, scene = default_setup(3, rng)
+    obs = simulate_observations(cam, scene, rng)
+    prob, _ = _problem(cam, scene.rectangle, _layout(obs, scene.body_points_r, scene.rectangle), scene.T_r_c,
+                       scene.T_c_m, 0.5)
+    params = {"rot_rc": np.array([0.1, -0.2, 0.05]), "t_rc": scene.T_r_c[:3, 3] + 0.01,
+              "rot_cm": rng.normal(scale=0.1, size=(3, 3)), "t_cm": scene.T_c_m[:, :3, 3]}
+    chk = prob.check_jacobian(params)
+    assert chk.max_rel_error < 1e-6, chk
+
+
+def test_multi_placement_noise_free_and_partial_visibility():
+    rng = np.random.default_rng(7)
+    cam, scene = default_setup(4, rng)
+    obs = simulate_observations(cam, scene, rng, sigma_px=0.0)
+    # drop some body points from two images: body_ids carry the correspondence
+    obs[1] = MirrorObservation(obs[1].marker_uv, obs[1].body_uv[3:], obs[1].body_ids[3:], "partial 1")
+    obs[2] = MirrorObservation(obs[2].marker_uv, obs[2].body_uv[::2], obs[2].body_ids[::2], "partial 2")
+    cal = calibrate(cam, scene.rectangle, scene.body_points_r, obs)
+    assert np.allclose(cal.T_r_c, scene.T_r_c, atol=1e-7)
+    assert np.allclose(cal.T_c_m, scene.T_c_m, atol=1e-7)
+    m, b = cal.residuals()
+    assert m.shape == (4, 4, 2) and [len(x) for x in b] == [20, 17, 10, 20]
+
+
+def test_reported_covariance_shrinks_with_more_placements():
+    rng = np.random.default_rng(8)
+    cam, scene = default_setup(5, rng)
+    obs = simulate_observations(cam, scene, rng, sigma_px=0.5)
+    one = calibrate(cam, scene.rectangle, scene.body_points_r, obs[:1], sigma_px=0.5)
+    five = calibrate(cam, scene.rectangle, scene.body_points_r, obs, sigma_px=0.5)
+    assert np.all(five.std_translation < one.std_translation / 1.5)
+
+
+def _ambiguous_scene():
+    s0 = published_scene()
+    return MirrorScene(s0.T_c_r, s0.T_c_m, s0.body_points_r, MarkerRectangle(0.12, 0.084))
+
+
+def test_planar_ambiguity_both_candidates_reported_and_choice_explained():
+    # A small marker rectangle (120 x 84 mm) at 1.65 m: the two IPPE poses differ.
+    cam = default_camera()
+    scene = _ambiguous_scene()
+    rng = np.random.default_rng(0)
+    n_distinct = n_right = n_decisive = 0
+    for _ in range(40):
+        o = simulate_observations(cam, scene, rng)[0]
+        r = calibrate_single(cam, scene.rectangle, scene.body_points_r, o, sigma_px=0.5)
+        assert r.choice.reason
+        errs = [rotation_angle(T[:3, :3] @ scene.T_c_m[0, :3, :3].T) for T in r.choice.T_c_m]
+        if len(errs) == 2 and abs(errs[0] - errs[1]) > np.deg2rad(2):
+            n_distinct += 1
+            if r.choice.decisive:
+                n_decisive += 1
+                n_right += int(np.argmin(errs) == r.choice.chosen)
+            else:
+                assert any("planar ambiguity" in w.message for w in r.warnings)
+    assert n_distinct >= 20
+    assert n_decisive >= 10 and n_right >= 0.8 * n_decisive
+
+
+def test_sidedness_rule_rejects_impossible_plane():
+    # Flip the true plane's normal about the line of sight: the reflected points
+    # would then lie in front of the candidate, which the rule must reject.
+    cam, scene = default_setup()
+    obs = simulate_observations(cam, scene, np.random.default_rng(3), sigma_px=0.0)[0]
+    cands = solve_pnp_planar(cam, scene.rectangle.object_points(), obs.marker_uv)
+
+    class Fake:
+        def __init__(self, T, rms, res):
+            self.T_cam_obj, self.rms_px, self.residuals = T, rms, res
+
+    good = cands[0]
+    bad_T = good.T_cam_obj.copy()
+    bad_T[:3, 3] *= 2.5  # a parallel plane beyond the reflected points
+    choice = choose_planar_solution([Fake(bad_T, 0.0, np.zeros((4, 2))), good], scene.T_c_ri()[0],
+                                    scene.body_points_r, sigma_px=0.5)
+    assert choice.chosen == 1 and choice.decisive and "in front of the mirror" in choice.reason
+    assert choice.virtual_in_front[0] > 0
+
+
+def test_geometry_warnings():
+    cam, scene = default_setup()
+    flat = scene.body_points_r.copy()
+    flat[:, 0] = 0.5
+    codes = [w.code for w in geometry_warnings(flat[:5], scene.T_c_m[0])]
+    assert codes.count("weakly_determined") == 1 and "degenerate_geometry" in codes
+    # a mirror whose normal is perpendicular to the optical axis
+    T = scene.T_c_m[0].copy()
+    T[:3, :3] = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
+    msgs = [w.message for w in geometry_warnings(scene.body_points_r, T)]
+    assert any("from the optical axis" in m for m in msgs)
+    assert not geometry_warnings(scene.body_points_r, scene.T_c_m[0])
+
+
+def test_cross_ratio_points_lie_on_the_projected_diagonals_and_add_no_information(setup):
+    cam, scene = setup
+    obs = simulate_observations(cam, scene, np.random.default_rng(0), sigma_px=0.0)[0]
+    s = np.array([0.1, 0.3, 0.5, 0.8])
+    uv, p_m = diagonal_points(obs.marker_uv, s, camera=cam, width=scene.rectangle.width,
+                              height=scene.rectangle.height)
+    truth = cam.project_points(p_m.reshape(-1, 3), scene.T_c_m[0]).reshape(2, -1, 2)
+    assert np.allclose(uv, truth, atol=1e-8)
+    # without the lens model the construction is wrong by the distortion
+    assert np.abs(diagonal_points(obs.marker_uv, s) - truth).max() > 0.05
+    # the generated points are a function of the 8 corner coordinates: Jacobian rank <= 8
+    f = lambda q: diagonal_points(q.reshape(4, 2), np.linspace(0.05, 0.95, 12), camera=cam).ravel()  # noqa: E731
+    q0 = obs.marker_uv.ravel()
+    J = np.stack([(f(q0 + h) - f(q0 - h)) / 2e-4 for h in np.eye(8) * 1e-4], axis=1)
+    assert J.shape == (48, 8) and np.linalg.matrix_rank(J, tol=1e-6) <= 8
+
+
+# ------------------------------------------------------------------ bad input
+def _obs(setup, sigma=0.0):
+    cam, scene = setup
+    return cam, scene, simulate_observations(cam, scene, np.random.default_rng(0), sigma_px=sigma)[0]
+
+
+def test_markers_not_a_plausible_rectangle(setup):
+    cam, scene, o = _obs(setup)
+    swapped = o.marker_uv[[0, 2, 1, 3]]  # crossed quadrilateral
+    with pytest.raises(InconsistentDataError, match="convex"):
+        calibrate_single(cam, scene.rectangle, scene.body_points_r, MirrorObservation(swapped, o.body_uv))
+    ccw = o.marker_uv[::-1]
+    with pytest.raises(InconsistentDataError, match="counter-clockwise"):
+        calibrate_single(cam, scene.rectangle, scene.body_points_r, MirrorObservation(ccw, o.body_uv))
+    skewed = o.marker_uv.copy()
+    skewed[2] += [40.0, 25.0]  # convex, clockwise, but no rectangle of that size projects so
+    with pytest.raises(InconsistentDataError, match="plausible image"):
+        calibrate_single(cam, scene.rectangle, scene.body_points_r, MirrorObservation(skewed, o.body_uv))
+    with pytest.raises(ShapeError, match="marker_uv"):
+        calibrate_single(cam, scene.rectangle, scene.body_points_r, MirrorObservation(o.marker_uv[:3], o.body_uv))
+
+
+def test_too_few_body_points(setup):
+    cam, scene, o = _obs(setup)
+    with pytest.raises(NotEnoughDataError, match="at least 4"):
+        calibrate_single(cam, scene.rectangle, scene.body_points_r,
+                         MirrorObservation(o.marker_uv, o.body_uv[:3], np.arange(3)))
+
+
+def test_mismatched_counts(setup):
+    cam, scene, o = _obs(setup)
+    with pytest.raises(InputError, match="body_ids"):
+        calibrate_single(cam, scene.rectangle, scene.body_points_r, MirrorObservation(o.marker_uv, o.body_uv[:-2]))
+    with pytest.raises(InputError, match="one per body_uv row"):
+        calibrate_single(cam, scene.rectangle, scene.body_points_r,
+                         MirrorObservation(o.marker_uv, o.body_uv, np.arange(5)))
+    with pytest.raises(InputError, match="index the 20"):
+        calibrate_single(cam, scene.rectangle, scene.body_points_r,
+                         MirrorObservation(o.marker_uv, o.body_uv, np.arange(20) + 3))
+
+
+def test_body_points_not_matching_the_model(setup):
+    cam, scene, o = _obs(setup, sigma=0.3)
+    wrong_order = scene.body_points_r[::-1]
+    with pytest.raises(InconsistentDataError, match="does not match body_points_r"):
+        calibrate_single(cam, scene.rectangle, wrong_order, o)
+    with pytest.raises(InconsistentDataError, match="does not match body_points_r"):
+        calibrate_single(cam, scene.rectangle, wrong_order, o, sigma_px=0.3)
+
+
+def test_points_behind_the_camera(setup, monkeypatch):
+    cam, scene, o = _obs(setup)
+    # simulation: a mirror seen so obliquely that a reflected point lands behind the camera
+    from robocal.geometry import transform_from
+
+    T_c_m = transform_from(np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]), [0.3, 0.0, 1.0])
+    T_c_r = transform_from(np.eye(3), [-0.6, 0.0, -1.0])
+    sc = MirrorScene(T_c_r, T_c_m, np.array([[0.0, 0.0, 0.0], [0.1, 0, 0], [0, 0.1, 0], [0, 0, 0.1]]),
+                     scene.rectangle)
+    with pytest.raises(DegenerateGeometryError, match="behind the camera"):
+        simulate_observations(cam, sc, np.random.default_rng(0))
+    # calibration: a PnP that can only explain the data with points behind the camera
+    import robocal.rigs.mirror.calibrate as mod
+    from robocal.errors import ConvergenceError
+
+    def behind(*a, **k):
+        raise ConvergenceError("PnP pose puts points behind the camera (indices [0, 1])")
+
+    monkeypatch.setattr(mod, "solve_pnp", behind)
+    with pytest.raises(InconsistentDataError, match="behind the camera"):
+        calibrate_single(cam, scene.rectangle, scene.body_points_r, o)
