@@ -1,0 +1,166 @@
+"""Files of the line-profiler rig: profile CSVs, pose lists (CSV/YAML), time alignment.
+
+Profiles CSV (one row per point, as profiler software exports them)::
+
+    profile, x [mm], z [mm], q1 [mm], q2 [deg], q3 [mm]      # joint values per row
+    profile, x [mm], z [mm], t [s]                           # or a timestamp
+
+``profile`` is the profile index; joint columns are ``q1 .. qn`` with their
+units (length or angle) in the header; rows of one profile must repeat the
+same joint values / timestamp.
+
+Pose lists: CSV ``t [s], x [m], y [m], z [m], qx, qy, qz, qw`` or YAML
+``{units: {length: mm}, poses: [{t: .., p: [x, y, z], q: [qx, qy, qz, qw]}]}``
+(quaternions **scalar-last**, ``T_parent_child``; ``R: 3x3`` accepted in YAML
+instead of ``q``). Non-unit quaternions, non-orthonormal matrices, NaN and
+mismatched counts are errors naming file and row.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+from robocal.errors import FileFormatError, InputError
+from robocal.geometry import transform_from
+from robocal.io import atomic_write_text, load_csv, load_document, to_si, unit_kind
+from robocal.validation import check_rotation_matrix
+
+__all__ = ["load_profiles_csv", "write_profiles_csv", "load_poses", "write_poses_csv", "interpolate_poses"]
+
+
+def load_profiles_csv(path, *, dof: int | None = None):
+    """Read profiles; returns ``(profiles list of (M, 2) in m, q (N, dof) in m/rad or None, t (N,) or None)``."""
+    tab = load_csv(path, required=("profile", "x", "z"))
+    src = str(path)
+    x = tab.column("x", kind="length")
+    z = tab.column("z", kind="length")
+    idx = tab.column("profile")
+    if np.any(idx != np.round(idx)) or np.any(idx < 0):
+        raise FileFormatError("column 'profile' must hold non-negative integers", source=src)
+    qcols = sorted([c for c in tab.columns if c.startswith("q") and c[1:].isdigit()], key=lambda c: int(c[1:]))
+    if dof is not None and qcols and len(qcols) != dof:
+        raise FileFormatError(f"the arm has {dof} joints but the file has joint columns {qcols}", source=src)
+    q = None
+    if qcols:
+        cols = []
+        for c in qcols:
+            unit = tab.units.get(c)
+            if unit is None:
+                raise FileFormatError(f"column '{c}' needs a unit, e.g. '{c} [mm]' or '{c} [deg]'", source=src)
+            cols.append(to_si(tab.columns[c], unit, unit_kind(unit), name=f"column '{c}'"))
+        q = np.column_stack(cols)
+    t = tab.column("t", kind="time") if "t" in tab else None
+    if q is None and t is None:
+        raise FileFormatError("need joint columns q1..qn or a timestamp column 't [s]'", source=src)
+    ids = np.unique(idx).astype(int)
+    profiles, qs, ts = [], [], []
+    for i in ids:
+        rows = idx == i
+        profiles.append(np.column_stack([x[rows], z[rows]]))
+        for arr, out, name in ((q, qs, "joint values"), (t, ts, "timestamp")):
+            if arr is None:
+                continue
+            a = arr[rows]
+            if np.ptp(a, axis=0).max() > 1e-12:
+                raise FileFormatError(f"profile {i}: {name} differ between its rows", source=src)
+            out.append(a[0])
+    return profiles, (np.array(qs) if q is not None else None), (np.array(ts) if t is not None else None)
+
+
+def write_profiles_csv(path, profiles, q=None, t=None, *, angle_joints=()) -> Path:
+    """Write profiles (m) as mm; joints in mm, or deg for indices in ``angle_joints``."""
+    head = ["profile", "x [mm]", "z [mm]"]
+    if q is not None:
+        head += [f"q{j + 1} [{'deg' if j in angle_joints else 'mm'}]" for j in range(np.shape(q)[1])]
+    if t is not None:
+        head.append("t [s]")
+    lines = [", ".join(head)]
+    for i, p in enumerate(profiles):
+        extra = []
+        if q is not None:
+            extra += [f"{np.rad2deg(v) if j in angle_joints else 1e3 * v:.6f}" for j, v in enumerate(q[i])]
+        if t is not None:
+            extra.append(f"{t[i]:.6f}")
+        tail = (", " + ", ".join(extra)) if extra else ""
+        lines += [f"{i}, {1e3 * a:.5f}, {1e3 * b:.5f}{tail}" for a, b in p]
+    return atomic_write_text(path, "\n".join(lines) + "\n")
+
+
+def _rotations_from_quats(qs, src: str):
+    qs = np.asarray(qs, float)
+    n = np.linalg.norm(qs, axis=1)
+    bad = np.flatnonzero(np.abs(n - 1) > 1e-3)
+    if bad.size:
+        raise FileFormatError(f"row {bad[0] + 1}: quaternion (qx, qy, qz, qw) has norm {n[bad[0]]:.6g}, "
+                              "expected a unit quaternion (scalar-last)", source=src)
+    return Rotation.from_quat(qs).as_matrix()
+
+
+def load_poses(path):
+    """Read a pose list; returns ``(T (N, 4, 4) in m, t (N,) or None)``."""
+    path = Path(path)
+    src = str(path)
+    if path.suffix.lower() == ".csv":
+        tab = load_csv(path, required=("x", "y", "z", "qx", "qy", "qz", "qw"))
+        p = np.column_stack([tab.column(c, kind="length") for c in "xyz"])
+        R = _rotations_from_quats(np.column_stack([tab.column(c) for c in ("qx", "qy", "qz", "qw")]), src)
+        t = tab.column("t", kind="time") if "t" in tab else None
+        return transform_from(R, p), t
+    doc = load_document(path)
+    items = doc.items_list("poses")
+    if not items:
+        raise FileFormatError("field 'poses' is empty", source=src)
+    Ts, ts = [], []
+    for k, it in enumerate(items):
+        p = it.array("p", kind="length", shape=(3,))
+        if "q" in it:
+            R = _rotations_from_quats(it.array("q", shape=(4,))[None], f"{src}: poses[{k}]")[0]
+        elif "R" in it:
+            try:
+                R = check_rotation_matrix(it.array("R", shape=(3, 3)), f"poses[{k}].R", atol=1e-4)
+            except InputError as exc:
+                raise FileFormatError(exc.message, source=src) from None
+        else:
+            raise FileFormatError(f"poses[{k}] needs 'q' (qx, qy, qz, qw) or 'R'", source=src)
+        Ts.append(transform_from(R, p))
+        if "t" in it:
+            ts.append(it.float("t", kind="time"))
+    if ts and len(ts) != len(Ts):
+        raise FileFormatError("either every pose has a timestamp 't' or none", source=src)
+    return np.array(Ts), (np.array(ts) if ts else None)
+
+
+def write_poses_csv(path, T, t=None) -> Path:
+    """Write poses as ``t [s], x [m], y [m], z [m], qx, qy, qz, qw`` (scalar-last, w >= 0)."""
+    q = Rotation.from_matrix(np.asarray(T)[:, :3, :3]).as_quat(canonical=True)
+    head = (["t [s]"] if t is not None else []) + ["x [m]", "y [m]", "z [m]", "qx", "qy", "qz", "qw"]
+    rows = [", ".join(head)]
+    for i, Ti in enumerate(T):
+        vals = ([f"{t[i]:.6f}"] if t is not None else []) + [f"{v:.9f}" for v in (*Ti[:3, 3], *q[i])]
+        rows.append(", ".join(vals))
+    return atomic_write_text(path, "\n".join(rows) + "\n")
+
+
+def interpolate_poses(t_src, T_src, t_query) -> np.ndarray:
+    """Poses at ``t_query``: SLERP (scipy) for rotation, linear for translation.
+
+    Raises :class:`~robocal.errors.InputError` for unsorted source times or
+    queries outside ``[t_src[0], t_src[-1]]`` (no extrapolation).
+    """
+    t_src = np.asarray(t_src, float)
+    t_query = np.asarray(t_query, float)
+    T_src = np.asarray(T_src, float)
+    if len(t_src) != len(T_src):
+        raise InputError(f"{len(t_src)} timestamps but {len(T_src)} poses: counts must match")
+    if len(t_src) < 2 or np.any(np.diff(t_src) <= 0):
+        raise InputError("pose timestamps must be strictly increasing (at least 2)")
+    out = (t_query < t_src[0]) | (t_query > t_src[-1])
+    if np.any(out):
+        raise InputError(f"{out.sum()} query time(s) outside the pose stream [{t_src[0]:g}, {t_src[-1]:g}] s, "
+                         f"first {t_query[out][0]:g} s: no extrapolation")
+    R = Slerp(t_src, Rotation.from_matrix(T_src[:, :3, :3]))(t_query).as_matrix()
+    p = np.column_stack([np.interp(t_query, t_src, T_src[:, k, 3]) for k in range(3)])
+    return transform_from(R, p)

@@ -1,0 +1,89 @@
+"""CLI on the example files, file formats and their errors, pose interpolation, the demo."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from robocal.cli import DemoContext
+from robocal.cli.main import main
+from robocal.errors import FileFormatError, InputError
+from robocal.geometry import matrix_from_rotvec, transform_from
+from robocal.rigs.lineprofiler.cli import HANDEYE, RIG
+from robocal.rigs.lineprofiler.io import interpolate_poses, load_poses, load_profiles_csv, write_poses_csv
+
+EX = Path(__file__).resolve().parents[3] / "examples" / "lineprofiler"
+
+
+def test_calibrate_example_names_undetermined_component(tmp_path, capsys):
+    assert main(["lineprofiler", "calibrate", str(EX / "fpdp_input.yaml"), "--out", str(tmp_path)]) == 0
+    res = json.loads((tmp_path / "result.json").read_text())
+    assert res["estimate"]["T_E_L.translation"][1] is None  # never a silent 0
+    assert "X.ty" in res["diagnostics"]["undetermined"]
+    assert any(w["code"] == "rank_deficient" for w in res["warnings"])
+    assert abs(res["estimate"]["T_E_L.translation"][0] - 0.035) < 2e-4
+    assert (tmp_path / "report.html").stat().st_size > 10000
+    assert main(["lineprofiler", "report", str(tmp_path / "result.json"), "--out", str(tmp_path / "r")]) == 0
+
+
+def test_handeye_example(tmp_path):
+    assert main(["handeye", "calibrate", str(EX / "gripper_poses.csv"), str(EX / "target_poses.csv"),
+                 "--method", "park", "--out", str(tmp_path)]) == 0
+    res = json.loads((tmp_path / "result.json").read_text())
+    assert np.allclose(np.array(res["estimate"]["T_gripper_cam"])[:3, 3], [0.035, 0.06, 0.12], atol=2e-3)
+
+
+def test_cli_bad_input_is_one_line(tmp_path, capsys):
+    bad = tmp_path / "p.csv"
+    bad.write_text("t [s], x [m], y [m], z [m], qx, qy, qz, qw\n0, 0, 0, 0, 0, 0, 0.5, 0.5\n")
+    assert main(["handeye", "calibrate", str(bad), str(bad), "--out", str(tmp_path / "o")]) == 2
+    assert "unit quaternion" in capsys.readouterr().err
+
+
+def test_pose_files_errors(tmp_path):
+    f = tmp_path / "p.csv"
+    f.write_text("x [m], y [m], z [m], qx, qy, qz, qw\n0, 0, nan, 0, 0, 0, 1\n")
+    with pytest.raises(FileFormatError, match="nan"):
+        load_poses(f)
+    y = tmp_path / "p.yaml"
+    y.write_text("units: {length: mm}\nposes:\n  - {p: [1, 2, 3], R: [[1, 0, 0], [0, 1, 0], [0, 0.1, 1]]}\n")
+    with pytest.raises(FileFormatError, match="rotation matrix"):
+        load_poses(y)
+    y.write_text("units: {length: mm, time: s}\nposes:\n  - {p: [1, 2, 3], q: [0, 0, 0, 1], t: 0.5}\n")
+    T, t = load_poses(y)
+    assert np.allclose(T[0, :3, 3], [1e-3, 2e-3, 3e-3]) and t[0] == 0.5
+
+
+def test_profiles_csv_round_trip_and_errors(tmp_path):
+    profiles, q, t = load_profiles_csv(EX / "fpdp_profiles.csv", dof=3)
+    assert len(profiles) == len(q) == 16 and t is None
+    assert 0.15 < profiles[0][:, 1].mean() < 0.4  # z in metres
+    f = tmp_path / "x.csv"
+    f.write_text("profile, x [mm], z [mm], q1 [mm]\n0, 1, 2, 3\n0, 1, 2, 4\n")
+    with pytest.raises(FileFormatError, match="differ between its rows"):
+        load_profiles_csv(f)
+    f.write_text("profile, x [mm], z [mm], q1\n0, 1, 2, 3\n")
+    with pytest.raises(FileFormatError, match="needs a unit"):
+        load_profiles_csv(f)
+
+
+def test_slerp_interpolation_between_streams(tmp_path):
+    t = np.array([0.0, 1.0, 2.0])
+    T = transform_from(matrix_from_rotvec([[0, 0, 0], [0, 0, 0.4], [0, 0, 0.8]]), [[0, 0, 0], [1, 0, 0], [2, 0, 0]])
+    write_poses_csv(tmp_path / "s.csv", T, t)
+    T2, t2 = load_poses(tmp_path / "s.csv")
+    Ti = interpolate_poses(t2, T2, [0.5, 1.75])
+    assert np.allclose(Ti[0], transform_from(matrix_from_rotvec([0, 0, 0.2]), [0.5, 0, 0]), atol=1e-9)
+    assert np.allclose(Ti[1, :3, 3], [1.75, 0, 0])
+    with pytest.raises(InputError, match="no extrapolation"):
+        interpolate_poses(t, T, [2.5])
+    with pytest.raises(InputError, match="counts must match"):
+        interpolate_poses(t[:2], T, [0.5])
+
+
+def test_rigs_registered_and_demo(tmp_path):
+    assert RIG.name == "lineprofiler" and HANDEYE.name == "handeye"
+    out = RIG.demo(DemoContext(tmp_path, np.random.default_rng(2026), progress=False))
+    assert out.passed, out.summary
+    assert "undetermined" in out.summary
