@@ -67,8 +67,7 @@ def test_published_R_reproduced_when_the_world_origin_is_the_reference_point():
     point listed first in §3) and "P2" is [60 60 0]. The published t is then
     ^0P - R ^WP at that reference point, exactly [240, -90, -290] cm.
     """
-    pw, p0 = SEED_A_POINTS_W[REFERENCE_FIRST], SEED_A_POINTS_0[REFERENCE_FIRST]
-    est = seed_method(pw, p0)
+    est = seed_method(SEED_A_POINTS_W, SEED_A_POINTS_0, order=REFERENCE_FIRST)
     R_init = est.extra["R_init"]
     assert np.array_equal(_truncate4(R_init), SEED_A_R_INIT)
     assert np.array_equal(_truncate4(est.R_0_W), SEED_A_R_OPT)

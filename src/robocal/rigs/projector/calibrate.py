@@ -327,7 +327,7 @@ def seed_initial_rotation(a, b, c, d) -> np.ndarray:
 
 
 def seed_method(points_W, points_0, *, alpha: float = 0.5, eps0: float = 1e-12, max_iter: int = 500,
-                reference: int = -1) -> ExtrinsicEstimate:
+                order=None) -> ExtrinsicEstimate:
     """The seed's extrinsic calibration, as published (seed 000 eqs. 12-29).
 
     1. Unit difference vectors to the reference point (eq. 12): for N = 3 with
@@ -354,8 +354,10 @@ def seed_method(points_W, points_0, *, alpha: float = 0.5, eps0: float = 1e-12, 
     eps0 : float
         Stopping threshold of Step 3.
     max_iter : int
-    reference : int
-        Index of the point the differences are taken to (eq. 12's ``P_3``).
+    order : sequence of int, optional
+        The points in the roles ``P_1, P_2, ..., P_N`` of eq. (12): the last is
+        the reference every difference is taken to, the first two give the
+        eq.-(23) initial value. Default: as given.
 
     Returns
     -------
@@ -367,8 +369,11 @@ def seed_method(points_W, points_0, *, alpha: float = 0.5, eps0: float = 1e-12, 
     n = pw.shape[0]
     if not 0 < alpha <= 1:
         raise InputError(f"alpha must be in (0, 1], got {alpha!r}")
-    ref = reference % n
-    others = [i for i in range(n) if i != ref]
+    order = list(range(n)) if order is None else [int(i) for i in order]
+    if sorted(order) != list(range(n)):
+        raise InputError(f"seed order must be a permutation of 0..{n - 1}, got {order}")
+    ref = order[-1]
+    others = order[:-1]
     A = np.array([_unit(pw[i] - pw[ref], f"^WP{i} - ^WP{ref}") for i in others])
     B = np.array([_unit(p0[i] - p0[ref], f"^0P{i} - ^0P{ref}") for i in others])
     R = seed_initial_rotation(A[0], B[0], A[1], B[1])
@@ -402,7 +407,7 @@ def seed_method(points_W, points_0, *, alpha: float = 0.5, eps0: float = 1e-12, 
         warns.append(Diagnostic("not_converged", f"seed method: |eps_(k+1) - eps_k| >= {eps0:g} after {max_iter} "
                                                  f"iterations (alpha = {alpha:g})"))
     return ExtrinsicEstimate("seed", R, t, {"yaw": None, "t_x": None, "t_y": None}, res, _rms(res), np.array(costs),
-                             it, warns, {"R_init": R_init, "alpha": alpha, "reference": ref, "converged": converged,
+                             it, warns, {"R_init": R_init, "alpha": alpha, "order": order, "converged": converged,
                                          "seed_cost": costs[-1]})
 
 
@@ -574,7 +579,8 @@ def nonlinear(points_W, *, theta=None, points_0=None, model: ProjectorModel | No
 
     prob.add_residuals(residuals, name="floor", jacobian=jacobian, residual_dim=2,
                        sigma=sigma if sigma else None)
-    res = solve(prob, method="trf" if loss != "linear" else "lm", loss=loss, absolute_sigma=absolute_sigma and bool(sigma))
+    # trf, not lm: MINPACK keeps iterating on an exact (zero-residual) fit until max_nfev
+    res = solve(prob, method="trf", loss=loss, absolute_sigma=absolute_sigma and bool(sigma))
     if not np.all(np.isfinite(res.x)):
         raise ConvergenceError("nonlinear: the solver returned a non-finite estimate")
     yaw = float(res.params["R"][2])
@@ -626,7 +632,7 @@ class CalibrationRun:
 
 def calibrate(points_W, *, theta=None, points_0=None, model: ProjectorModel | None = None,
               methods=METHODS, estimate=(), sigma: float | None = None, strict: bool = False,
-              seed_alpha: float = 0.5) -> CalibrationRun:
+              seed_alpha: float = 0.5, seed_order=None) -> CalibrationRun:
     """Run the consistency check and the chosen solvers on one data set.
 
     Parameters
@@ -642,6 +648,8 @@ def calibrate(points_W, *, theta=None, points_0=None, model: ProjectorModel | No
     estimate : extra parameters for the nonlinear solver, see :func:`nonlinear`
     sigma : float, optional
         World measurement noise (m).
+    seed_alpha, seed_order
+        Step factor and point order of :func:`seed_method`.
     strict : bool
         Raise :class:`~robocal.errors.InconsistentDataError` when the distance
         check fails instead of warning.
@@ -688,7 +696,7 @@ def calibrate(points_W, *, theta=None, points_0=None, model: ProjectorModel | No
         raise InconsistentDataError(cons.warnings[0].message)
     ests = {}
     if "seed" in methods:
-        ests["seed"] = seed_method(pw, p0, alpha=seed_alpha)
+        ests["seed"] = seed_method(pw, p0, alpha=seed_alpha, order=seed_order)
     if "closed_form" in methods or "nonlinear" in methods:
         ests["closed_form"] = closed_form(pw, p0, sigma=sigma)
     if "nonlinear" in methods:

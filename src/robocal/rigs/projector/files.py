@@ -1,0 +1,204 @@
+"""Input files of the projector rig (YAML/JSON with explicit units, CSV with units in headers).
+
+Calibration input (``robocal projector calibrate INPUT``)::
+
+    units: {length: cm, angle: deg}          # document defaults per kind
+    projector:                               # the head (seed Table 1)
+      name: A
+      H: 290                                 # floor at z_0 = -H
+      d1: 12                                 # optional, default 0
+      d2: 5                                  # optional
+      offsets: [0, 0]                        # joint zero offsets, optional
+      tilt_limit: 75                         # optional (angle)
+      rate_limits: {value: [90, 90], unit: deg/s}   # optional
+    points:
+      world: [[0, 0], [60, 60], [0, 90]]     # ^W P_i, (N, 2) or (N, 3) with z = 0
+      projector: [[240, -90, -290], ...]     # ^0 P_i (N, 3) -- or:
+      joint_angles: [[t1, t2], ...]          # theta_i (N, 2) -- or:
+      file: points.csv                       # columns x, y [length], theta1, theta2 [angle]
+    noise: {value: 5, unit: mm}              # optional: world measurement sigma
+    methods: [seed, closed_form, nonlinear]  # optional
+    estimate: [h, tilt_offset]               # optional extra unknowns (needs joint angles)
+    seed: {alpha: 0.5, order: [2, 1, 0]}     # optional: eq. (29) step, eq. (12) roles
+    strict: false                            # true: inconsistent distances are an error
+    truth: {...}                             # optional (written by `simulate`): true projector
+
+Path input (``robocal projector path INPUT``)::
+
+    units: {length: m, angle: deg, speed: m/s, time: s, angular_rate: deg/s}
+    projectors: [ {name, H, d1, ..., yaw, t_0_W: [x, y, z]} | {name, H, ..., result: result.json}, ...]
+    walls: [[x0, y0, x1, y1], ...]           # optional, floor-to-ceiling partitions
+    path: {waypoints: [[x, y], ...], speed: 0.3, dt: 0.1}   # or {file: path.csv} with t, x, y
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from robocal.errors import FileFormatError, RobocalError
+from robocal.geometry import rotz
+from robocal.io import Document, load_csv, load_document, load_result
+from robocal.rigs.projector.model import ProjectorModel
+
+__all__ = ["CalibrationInput", "load_calibration_input", "projector_from_doc", "projector_to_yaml",
+           "load_path_input", "PathInput"]
+
+
+def projector_from_doc(doc: Document, *, extrinsics: bool = False) -> ProjectorModel:
+    """A :class:`ProjectorModel` from a ``projector:`` mapping (units from the document)."""
+    kw = dict(H=doc.float("H", kind="length", positive=True))
+    kw["d1"] = doc.float("d1", kind="length", default=0.0)
+    kw["d2"] = doc.float("d2", kind="length", default=0.0)
+    if "offsets" in doc:
+        kw["offsets"] = tuple(doc.array("offsets", kind="angle", shape=(2,)))
+    if "tilt_limit" in doc:
+        kw["tilt_limit"] = doc.float("tilt_limit", kind="angle")
+    if "rate_limits" in doc:
+        kw["rate_limits"] = tuple(doc.array("rate_limits", kind="angular_rate", shape=(2,)))
+    kw["name"] = str(doc.raw("name", "projector"))
+    if extrinsics:
+        if "result" in doc:
+            res = load_result(doc.path("result"))
+            e = res.estimate
+            try:
+                kw["R_0_W"] = np.asarray(e["R_0_W"], dtype=float)
+                kw["t_0_W"] = np.asarray(e["t_0_W"], dtype=float)
+                if "h" in e:
+                    kw["d1"] = kw["H"] - float(e["h"])
+                if "offsets" in e:
+                    kw["offsets"] = tuple(float(v) for v in e["offsets"])
+            except (KeyError, TypeError, ValueError) as exc:
+                raise doc.error("result", f"not a projector result (missing/invalid {exc})") from None
+        else:
+            if "yaw" in doc:
+                kw["R_0_W"] = rotz(doc.float("yaw", kind="angle"))
+            elif "R_0_W" in doc:
+                kw["R_0_W"] = doc.array("R_0_W", shape=(3, 3))
+            kw["t_0_W"] = doc.array("t_0_W", kind="length", shape=(3,))
+    try:
+        return ProjectorModel(**kw)
+    except RobocalError as exc:
+        raise type(exc)(f"field '{doc.prefix or 'projector'}': {exc.message}", source=doc.source) from None
+
+
+def projector_to_yaml(m: ProjectorModel, *, extrinsics: bool = False) -> dict:
+    """A ``projector:`` mapping in mm / deg (what :func:`projector_from_doc` reads)."""
+    d = {"name": m.name, "H": {"value": round(m.H * 1e3, 6), "unit": "mm"},
+         "d1": {"value": round(m.d1 * 1e3, 6), "unit": "mm"}, "d2": {"value": round(m.d2 * 1e3, 6), "unit": "mm"},
+         "offsets": {"value": [float(np.degrees(o)) for o in m.offsets], "unit": "deg"},
+         "tilt_limit": {"value": float(np.degrees(m.tilt_limit)), "unit": "deg"},
+         "rate_limits": {"value": [float(np.degrees(r)) for r in m.rate_limits], "unit": "deg/s"}}
+    if extrinsics:
+        d["yaw"] = {"value": float(np.degrees(math.atan2(m.R_0_W[1, 0], m.R_0_W[0, 0]))), "unit": "deg"}
+        d["t_0_W"] = {"value": [float(v * 1e3) for v in m.t_0_W], "unit": "mm"}
+    return d
+
+
+@dataclass
+class CalibrationInput:
+    source: str
+    model: ProjectorModel
+    points_W: np.ndarray
+    points_0: np.ndarray | None
+    theta: np.ndarray | None
+    sigma: float | None
+    methods: tuple
+    estimate: tuple
+    seed_alpha: float
+    seed_order: list | None
+    strict: bool
+    truth: ProjectorModel | None
+    files: list
+
+
+def load_calibration_input(path) -> CalibrationInput:
+    """Read and validate a calibration input file (see the module docstring)."""
+    doc = load_document(path)
+    model = projector_from_doc(doc.sub("projector"))
+    pts = doc.sub("points")
+    files = [path]
+    p0 = th = None
+    if "file" in pts:
+        csv_path = pts.path("file")
+        files.append(csv_path)
+        tab = load_csv(csv_path, required=("x", "y"))
+        pw = np.column_stack([tab.column("x", kind="length"), tab.column("y", kind="length")])
+        if "theta1" in tab and "theta2" in tab:
+            th = np.column_stack([tab.column("theta1", kind="angle"), tab.column("theta2", kind="angle")])
+        elif all(c in tab for c in ("x0", "y0", "z0")):
+            p0 = np.column_stack([tab.column(c, kind="length") for c in ("x0", "y0", "z0")])
+        else:
+            raise FileFormatError("needs columns theta1, theta2 (angles) or x0, y0, z0 (projector frame)",
+                                  source=str(csv_path))
+    else:
+        pw = pts.array("world", kind="length", shape=("N", None))
+        if pw.shape[-1] not in (2, 3):
+            raise pts.error("world", f"must have shape (N, 2) or (N, 3), got {tuple(pw.shape)}")
+        if "joint_angles" in pts:
+            th = pts.array("joint_angles", kind="angle", shape=("N", 2))
+        elif "projector" in pts:
+            p0 = pts.array("projector", kind="length", shape=("N", 3))
+        else:
+            raise pts.error("projector", "is missing: give 'projector' (^0P, (N, 3)) or 'joint_angles' ((N, 2))")
+        n_other = (th if th is not None else p0).shape[0]
+        if pw.shape[0] != n_other:
+            raise pts.error("world", f"has {pw.shape[0]} points but the projector side has {n_other}")
+    sigma = doc.float("noise", kind="length", default=None)
+    if sigma is not None and not sigma > 0:
+        raise doc.error("noise", f"must be > 0, got {sigma:g}")
+    methods = doc.raw("methods", ["seed", "closed_form", "nonlinear"])
+    estimate = doc.raw("estimate", [])
+    for key, val in (("methods", methods), ("estimate", estimate)):
+        if not isinstance(val, list) or not all(isinstance(v, str) for v in val):
+            raise doc.error(key, f"must be a list of names, got {val!r}")
+    seed = doc.sub("seed", {})
+    alpha = seed.float("alpha", default=0.5)
+    order = seed.raw("order", None)
+    if order is not None and (not isinstance(order, list) or not all(isinstance(i, int) for i in order)):
+        raise seed.error("order", f"must be a list of point indices, got {order!r}")
+    truth = projector_from_doc(doc.sub("truth"), extrinsics=True) if "truth" in doc else None
+    return CalibrationInput(str(path), model, pw, p0, th, sigma, tuple(methods), tuple(estimate), alpha, order,
+                            doc.bool("strict", default=False), truth, files)
+
+
+@dataclass
+class PathInput:
+    source: str
+    projectors: list
+    walls: np.ndarray
+    t: np.ndarray
+    points: np.ndarray
+    velocity: np.ndarray | None
+    files: list
+
+
+def load_path_input(path) -> PathInput:
+    """Read a path-planning input file (see the module docstring)."""
+    from robocal.rigs.projector.path import sample_polyline
+
+    doc = load_document(path)
+    projs = [projector_from_doc(d, extrinsics=True) for d in doc.items_list("projectors")]
+    if not projs:
+        raise doc.error("projectors", "must list at least one projector")
+    walls = doc.array("walls", kind="length", shape=("W", 4), default=np.zeros((0, 4)))
+    pth = doc.sub("path")
+    files = [path]
+    if "file" in pth:
+        f = pth.path("file")
+        files.append(f)
+        tab = load_csv(f, required=("t", "x", "y"))
+        t = tab.column("t", kind="time")
+        pts = np.column_stack([tab.column("x", kind="length"), tab.column("y", kind="length")])
+        vel = None
+    else:
+        wp = pth.array("waypoints", kind="length", shape=("M", 2))
+        speed = pth.float("speed", kind="speed", positive=True)
+        dt = pth.float("dt", kind="time", default=0.05, positive=True)
+        try:
+            t, pts, vel = sample_polyline(wp, speed, dt)
+        except RobocalError as exc:
+            raise pth.error("waypoints", exc.message, type(exc)) from None
+    return PathInput(str(path), projs, walls, t, pts, vel, files)

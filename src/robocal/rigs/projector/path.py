@@ -1,0 +1,349 @@
+"""Spot paths: world path -> timed joint commands, over one or several projectors.
+
+A world path is given as waypoints plus a speed (:func:`sample_polyline`) or
+as timed samples. Each sample goes through seed eqs. (1) and (8) to joint
+angles, and the spot velocity through eqs. (2) and (9)^-1 to joint rates. A
+sample is infeasible when the spot is outside the reachable floor, within
+``nadir_margin`` of the nadir singularity (the pan rate is unbounded there),
+or when a joint would exceed its speed limit; infeasible samples are grouped
+into segments with their reason and the slow-down factor that would fix a
+speed violation.
+
+With several projectors (the seed's room has A and B), every sample is served
+by a projector that reaches it, whose beam is not blocked by a wall (walls
+are floor-to-ceiling partitions given as 2D segments; the beam's floor
+projection runs from the projector's nadir to the spot), and that stays
+feasible; the current projector is kept while it can serve (few hand-overs),
+otherwise the one farthest from its singular set and tilt limit takes over.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from robocal.errors import InputError, NotEnoughDataError, ShapeError
+from robocal.rigs.projector.model import ProjectorModel
+from robocal.validation import check_array
+
+__all__ = ["sample_polyline", "JointTrajectory", "joint_trajectory", "segments_blocked", "MultiPlan",
+           "plan_multi"]
+
+
+def sample_polyline(waypoints, speed: float, dt: float):
+    """Constant-speed samples along a polyline.
+
+    Parameters
+    ----------
+    waypoints : array_like, shape (M, 2)
+        World floor points (m), M >= 2.
+    speed : float
+        Spot speed (m/s), > 0.
+    dt : float
+        Sample period (s), > 0.
+
+    Returns
+    -------
+    t : ndarray, shape (K,)
+    points : ndarray, shape (K, 2)
+    velocity : ndarray, shape (K, 2)
+        The polyline's velocity (m/s); at a corner the outgoing segment's.
+    """
+    w = check_array(waypoints, "waypoints", shape=("M", 2))
+    if w.ndim != 2:
+        raise ShapeError(f"waypoints must have shape (M, 2), got {tuple(w.shape)}")
+    if w.shape[0] < 2:
+        raise NotEnoughDataError(f"a path needs at least 2 waypoints, got {w.shape[0]}")
+    if not (math.isfinite(speed) and speed > 0) or not (math.isfinite(dt) and dt > 0):
+        raise InputError(f"speed and dt must be > 0, got speed={speed!r} m/s, dt={dt!r} s")
+    seg = np.diff(w, axis=0)
+    L = np.linalg.norm(seg, axis=1)
+    if np.any(L == 0):
+        k = int(np.flatnonzero(L == 0)[0])
+        raise InputError(f"waypoints {k} and {k + 1} coincide (zero-length segment)")
+    s_cum = np.concatenate([[0.0], np.cumsum(L)])
+    total = s_cum[-1]
+    n = int(math.floor(total / (speed * dt) + 1e-9)) + 1
+    if n > 2_000_000:
+        raise InputError(f"path would have {n} samples: increase dt or speed")
+    s = np.minimum(np.arange(n) * speed * dt, total)
+    if s[-1] < total - 1e-12:
+        s = np.append(s, total)
+    t = s / speed
+    k = np.clip(np.searchsorted(s_cum, s, side="right") - 1, 0, len(L) - 1)
+    u = (s - s_cum[k]) / L[k]
+    pts = w[k] + u[:, None] * seg[k]
+    vel = speed * seg[k] / L[k][:, None]
+    return t, pts, vel
+
+
+def _timed(t, points, velocity):
+    t = check_array(t, "t", shape=("K",))
+    p = check_array(points, "points", shape=("K", 2))
+    if t.ndim != 1 or p.ndim != 2 or p.shape[0] != t.shape[0]:
+        raise ShapeError(f"t must have shape (K,) and points (K, 2) with the same K, got {t.shape} and {p.shape}")
+    if t.size < 2:
+        raise NotEnoughDataError(f"a timed path needs at least 2 samples, got {t.size}")
+    if np.any(np.diff(t) <= 0):
+        k = int(np.flatnonzero(np.diff(t) <= 0)[0])
+        raise InputError(f"times must increase strictly, got t[{k}] = {t[k]:g} s >= t[{k + 1}] = {t[k + 1]:g} s")
+    if velocity is None:
+        v = np.gradient(p, t, axis=0)
+    else:
+        v = check_array(velocity, "velocity", shape=("K", 2))
+        if v.shape != p.shape:
+            raise ShapeError(f"velocity must have shape {p.shape}, got {v.shape}")
+    return t, p, v
+
+
+@dataclass
+class JointTrajectory:
+    """Timed joint commands for one projector along a world path.
+
+    Attributes
+    ----------
+    name : str
+    t : ndarray, shape (K,)
+    points : ndarray, shape (K, 2)
+    theta : ndarray, shape (K, 2)
+        Commanded angles (rad), pan unwrapped to be continuous.
+    theta_dot : ndarray, shape (K, 2)
+        Joint rates (rad/s): eq. (9) inverted where defined, else finite
+        differences (never inf/NaN).
+    feasible : ndarray of bool, shape (K,)
+    reason : list of str
+        Per sample, '' when feasible.
+    margin : ndarray, shape (K,)
+        Distance (rad) of the tilt from the nadir and from the tilt limit.
+    segments : list of dict
+        Infeasible runs: ``start, stop`` (sample indices, inclusive), ``t0, t1``,
+        ``reason``, and ``slowdown`` (factor the path speed must be divided by
+        to respect the rate limits, when speed is the problem).
+    """
+
+    name: str
+    t: np.ndarray
+    points: np.ndarray
+    theta: np.ndarray
+    theta_dot: np.ndarray
+    feasible: np.ndarray
+    reason: list
+    margin: np.ndarray
+    segments: list = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return bool(np.all(self.feasible))
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    m = np.concatenate([[False], mask, [False]]).astype(int)
+    d = np.diff(m)
+    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1))
+
+
+def joint_trajectory(model: ProjectorModel, t, points_W, velocity_W=None, *, nadir_margin: float = math.radians(2),
+                     limit_margin: float = 0.0) -> JointTrajectory:
+    """Joint angles and rates that move the spot along a timed world path (seed eqs. 1, 2, 8, 9).
+
+    Parameters
+    ----------
+    model : ProjectorModel
+        Calibrated projector (extrinsics, ``rate_limits``, ``tilt_limit``).
+    t : array_like, shape (K,)
+        Sample times (s), strictly increasing.
+    points_W : array_like, shape (K, 2)
+        Spot positions on the floor (m).
+    velocity_W : array_like, shape (K, 2), optional
+        Spot velocities (m/s); default: numerical derivative of the points.
+    nadir_margin : float
+        Tilt (rad) under which a sample counts as at the nadir singularity.
+    limit_margin : float
+        Tilt (rad) kept free below the tilt limit.
+    """
+    t, p, v = _timed(t, points_W, velocity_W)
+    p0 = model.to_projector(p)
+    r = np.hypot(p0[:, 0], p0[:, 1])
+    tilt_actual = np.arctan2(r, model.h)
+    theta = model.ik(p0, check_reach=False, on_nadir="ignore")
+    theta[:, 0] = np.unwrap(theta[:, 0])
+    margin = np.minimum(tilt_actual, model.tilt_limit - tilt_actual)
+    reach = tilt_actual <= model.tilt_limit - limit_margin
+    nadir = tilt_actual < nadir_margin
+    rates = np.gradient(theta, t, axis=0)
+    good = reach & ~nadir
+    if np.any(good):
+        rates[good] = model.joint_rates_world(theta[good], v[good], nadir_tol=nadir_margin * 0.5)
+    lim = np.asarray(model.rate_limits)
+    ratio = np.max(np.abs(rates) / lim, axis=1)
+    fast = ratio > 1.0 + 1e-9
+    reason = []
+    for i in range(len(t)):
+        if not reach[i]:
+            reason.append(f"outside the reachable floor (tilt {math.degrees(tilt_actual[i]):.1f} deg > "
+                          f"{math.degrees(model.tilt_limit - limit_margin):.1f} deg)")
+        elif nadir[i]:
+            reason.append(f"within {math.degrees(nadir_margin):g} deg of the nadir singularity")
+        elif fast[i]:
+            j = int(np.argmax(np.abs(rates[i]) / lim))
+            reason.append(f"{'pan' if j == 0 else 'tilt'} rate {math.degrees(abs(rates[i, j])):.1f} deg/s > "
+                          f"{math.degrees(lim[j]):.1f} deg/s")
+        else:
+            reason.append("")
+    feasible = reach & ~nadir & ~fast
+    segments = []
+    for a, b in _runs(~feasible):
+        kinds = sorted({reason[i].split(" (")[0].split(" rate")[0] for i in range(a, b + 1)})
+        seg = dict(start=int(a), stop=int(b), t0=float(t[a]), t1=float(t[b]), reason="; ".join(kinds))
+        if np.all(reach[a:b + 1] & ~nadir[a:b + 1]):
+            seg["slowdown"] = float(ratio[a:b + 1].max())
+        segments.append(seg)
+    return JointTrajectory(model.name, t, p, theta, rates, feasible, reason, margin, segments)
+
+
+def segments_blocked(starts, ends, walls) -> np.ndarray:
+    """Whether each 2D segment ``starts[k] -> ends[k]`` crosses any wall ``[x0, y0, x1, y1]``.
+
+    Returns a bool array (K,). Touching an end point counts as crossing.
+    """
+    a = np.asarray(starts, dtype=float)
+    b = np.asarray(ends, dtype=float)
+    W = np.asarray(walls, dtype=float).reshape(-1, 4)
+    if W.size == 0:
+        return np.zeros(np.broadcast_shapes(a.shape, b.shape)[:-1], dtype=bool)
+    c, d = W[:, :2], W[:, 2:]
+    a, b = a[..., None, :], b[..., None, :]
+
+    def orient(p, q, r):
+        return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])
+
+    o1, o2 = orient(a, b, c), orient(a, b, d)
+    o3, o4 = orient(c, d, a), orient(c, d, b)
+    return np.any((o1 * o2 <= 0) & (o3 * o4 <= 0) & ~((o1 == 0) & (o2 == 0)), axis=-1)
+
+
+@dataclass
+class MultiPlan:
+    """Assignment of a path's samples to several projectors, with hand-overs.
+
+    Attributes
+    ----------
+    names : list of str
+    t, points : the path samples
+    assignment : ndarray of int, shape (K,)
+        Index of the serving projector, -1 where none can serve.
+    trajectories : list of JointTrajectory
+        Per projector, over the whole path.
+    available : ndarray of bool, shape (P, K)
+        Reachable, not occluded, feasible.
+    occluded : ndarray of bool, shape (P, K)
+    handovers : list of dict
+        ``index, t, point, from, to``.
+    segments : list of dict
+        Contiguous runs ``projector, start, stop, t0, t1``.
+    infeasible : list of dict
+        Runs nobody can serve, with each projector's reason at the first sample.
+    """
+
+    names: list
+    t: np.ndarray
+    points: np.ndarray
+    assignment: np.ndarray
+    trajectories: list
+    available: np.ndarray
+    occluded: np.ndarray
+    handovers: list
+    segments: list
+    infeasible: list
+
+    @property
+    def ok(self) -> bool:
+        return bool(np.all(self.assignment >= 0))
+
+    def commands(self) -> dict:
+        """Per-sample commands of the serving projector: t, x, y, projector, theta, theta_dot (NaN if none)."""
+        K = len(self.t)
+        th = np.full((K, 2), np.nan)
+        td = np.full((K, 2), np.nan)
+        for k, tr in enumerate(self.trajectories):
+            m = self.assignment == k
+            th[m] = tr.theta[m]
+            td[m] = tr.theta_dot[m]
+        return dict(t=self.t, x=self.points[:, 0], y=self.points[:, 1], projector=self.assignment, theta=th,
+                    theta_dot=td)
+
+    def to_dict(self) -> dict:
+        return dict(names=self.names, ok=self.ok, n_samples=len(self.t), handovers=self.handovers,
+                    segments=self.segments, infeasible=self.infeasible)
+
+
+def plan_multi(projectors, t, points_W, velocity_W=None, *, walls=None, nadir_margin: float = math.radians(2),
+               limit_margin: float = math.radians(2)) -> MultiPlan:
+    """Choose which projector serves each sample of a path and where to hand over.
+
+    Rules: a projector is *available* at a sample when its trajectory there is
+    feasible (reach with ``limit_margin``, ``nadir_margin``, rate limits) and
+    the beam's floor projection (nadir -> spot) crosses no wall. The serving
+    projector is kept while available; otherwise the available one with the
+    largest singularity margin takes over (a hand-over point). Samples no
+    projector can serve are reported as infeasible.
+
+    Parameters
+    ----------
+    projectors : sequence of ProjectorModel
+        Calibrated projectors with distinct names.
+    t, points_W, velocity_W : see :func:`joint_trajectory`
+    walls : array_like, shape (W, 4), optional
+        Wall segments ``[x0, y0, x1, y1]`` on the floor (m).
+    """
+    projectors = list(projectors)
+    if not projectors:
+        raise InputError("plan_multi needs at least one projector")
+    names = [p.name for p in projectors]
+    if len(set(names)) != len(names):
+        raise InputError(f"projector names must be unique, got {names}")
+    t, p, v = _timed(t, points_W, velocity_W)
+    W = np.zeros((0, 4)) if walls is None else check_array(walls, "walls", shape=("W", 4)).reshape(-1, 4)
+    trajs, avail, occl, score = [], [], [], []
+    for proj in projectors:
+        tr = joint_trajectory(proj, t, p, v, nadir_margin=nadir_margin, limit_margin=limit_margin)
+        occ = segments_blocked(np.broadcast_to(proj.nadir_world, p.shape), p, W)
+        trajs.append(tr)
+        occl.append(occ)
+        avail.append(tr.feasible & ~occ)
+        score.append(tr.margin)
+    avail = np.array(avail)
+    occl = np.array(occl)
+    score = np.where(avail, np.array(score), -np.inf)
+    K = len(t)
+    assign = np.full(K, -1)
+    cur = -1
+    for i in range(K):
+        if cur >= 0 and avail[cur, i]:
+            assign[i] = cur
+            continue
+        best = int(np.argmax(score[:, i]))
+        cur = best if avail[best, i] else -1
+        assign[i] = cur
+    handovers, segments, infeasible = [], [], []
+    for i in range(1, K):
+        if assign[i] != assign[i - 1] and assign[i] >= 0 and assign[i - 1] >= 0:
+            handovers.append(dict(index=i, t=float(t[i]), point=p[i].tolist(), **{"from": names[assign[i - 1]],
+                                                                                   "to": names[assign[i]]}))
+    start = 0
+    for i in range(1, K + 1):
+        if i == K or assign[i] != assign[start]:
+            if assign[start] >= 0:
+                segments.append(dict(projector=names[assign[start]], start=start, stop=i - 1, t0=float(t[start]),
+                                     t1=float(t[i - 1])))
+            else:
+                why = {}
+                for k, tr in enumerate(trajs):
+                    why[names[k]] = "beam blocked by a wall" if occl[k, start] and tr.feasible[start] else (
+                        tr.reason[start] or ("beam blocked by a wall" if occl[k, start] else "unavailable"))
+                infeasible.append(dict(start=start, stop=i - 1, t0=float(t[start]), t1=float(t[i - 1]),
+                                       reasons=why))
+            start = i
+    return MultiPlan(names, t, p, assign, trajs, avail, occl, handovers, segments, infeasible)

@@ -1,0 +1,160 @@
+"""Plots of the projector rig (pure: take ``ax``, return it) and the report sections."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from robocal.report import Section, new_figure
+
+__all__ = ["plot_cost_curves", "plot_residuals", "plot_error_map", "plot_path", "calibration_sections",
+           "evaluation_sections"]
+
+
+def plot_cost_curves(estimates: dict, ax=None):
+    """Cost per iteration of each iterative solver (the seed's Fig. 4), log scale."""
+    if ax is None:
+        _, ax = new_figure()
+    for name, est in estimates.items():
+        h = np.asarray(est.cost_history, dtype=float)
+        if h.size > 1:
+            ax.semilogy(np.arange(h.size), np.maximum(h, 1e-300), marker="o", ms=3,
+                        label=f"{name} ({'eps^T eps, eq. 27' if name == 'seed' else '0.5 sum r^2/sigma^2'})")
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("cost")
+    ax.set_title("cost per iteration (cf. seed Fig. 4)")
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=8)
+    return ax
+
+
+def plot_residuals(points_W: np.ndarray, residuals: np.ndarray, ax=None, *, scale: float | None = None):
+    """Floor residuals (m) as arrows at the measured points (exaggerated by ``scale``)."""
+    if ax is None:
+        _, ax = new_figure()
+    r = np.asarray(residuals)
+    n = np.linalg.norm(r, axis=1)
+    if scale is None:
+        span = float(np.ptp(points_W[:, :2], axis=0).max()) or 1.0
+        scale = 0.1 * span / max(float(n.max()), 1e-12)
+    ax.scatter(points_W[:, 0], points_W[:, 1], c="k", s=12)
+    ax.quiver(points_W[:, 0], points_W[:, 1], r[:, 0] * scale, r[:, 1] * scale, angles="xy", scale_units="xy",
+              scale=1, color="tab:red")
+    for i, p in enumerate(points_W):
+        ax.annotate(f"{i}: {1000 * n[i]:.1f} mm", p[:2], fontsize=7, xytext=(3, 3), textcoords="offset points")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x_W [m]")
+    ax.set_ylabel("y_W [m]")
+    ax.set_title(f"floor residuals (arrows x{scale:.3g})")
+    return ax
+
+
+def plot_error_map(xs, ys, err, ax=None, *, points=None, nadir=None):
+    """Heat map of the spot error magnitude (mm) over the floor."""
+    if ax is None:
+        _, ax = new_figure()
+    im = ax.pcolormesh(xs, ys, 1000 * np.asarray(err), shading="auto", cmap="viridis")
+    ax.figure.colorbar(im, ax=ax, label="spot error [mm]")
+    if points is not None:
+        ax.scatter(points[:, 0], points[:, 1], c="w", edgecolors="k", s=25, label="grid")
+    if nadir is not None:
+        ax.plot(*nadir, "r+", ms=10, label="nadir")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x_W [m]")
+    ax.set_ylabel("y_W [m]")
+    ax.set_title("floor error: landed - desired")
+    return ax
+
+
+def plot_path(plan, ax=None, *, walls=None, projectors=None):
+    """World path coloured by serving projector, walls, nadirs, hand-overs and infeasible samples."""
+    if ax is None:
+        _, ax = new_figure(size=(6.4, 5.0))
+    colors = ["tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown"]
+    pts = plan.points
+    for k, name in enumerate(plan.names):
+        m = plan.assignment == k
+        ax.scatter(pts[m, 0], pts[m, 1], s=4, color=colors[k % len(colors)], label=f"served by {name}")
+    bad = plan.assignment < 0
+    if np.any(bad):
+        ax.scatter(pts[bad, 0], pts[bad, 1], s=10, color="red", marker="x", label="infeasible")
+    for h in plan.handovers:
+        ax.plot(*h["point"], "k*", ms=10)
+    if walls is not None:
+        for w in np.asarray(walls):
+            ax.plot(w[[0, 2]], w[[1, 3]], "k-", lw=3)
+    if projectors is not None:
+        for p in projectors:
+            ax.plot(*p.nadir_world, "k^", ms=8)
+            ax.annotate(p.name, p.nadir_world, xytext=(4, 4), textcoords="offset points")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x_W [m]")
+    ax.set_ylabel("y_W [m]")
+    ax.legend(fontsize=7, loc="best")
+    ax.set_title("spot path (stars: hand-over points)")
+    return ax
+
+
+def calibration_sections(run, *, truth=None) -> list[Section]:
+    """Report sections for a :class:`~robocal.rigs.projector.calibrate.CalibrationRun`."""
+    secs = []
+    s = Section("Consistency of pairwise distances")
+    c = run.consistency
+    s.status(c.consistent, "distances in {W} and {0} agree within " + c.threshold if c.consistent
+             else f"inconsistent: suspect point(s) {c.suspects}")
+    s.table([dict(pair=f"{r['i']}-{r['j']}", **{"d_W [mm]": 1000 * r["d_W"], "d_0 [mm]": 1000 * r["d_0"],
+                                                 "diff [mm]": 1000 * r["diff"], "diff [%]": 100 * r["rel"],
+                                                 "ok": r["ok"]}) for r in c.rows()[:60]], digits=5)
+    s.diagnostics(c.warnings)
+    secs.append(s)
+    s = Section("Extrinsics by method")
+    rows = []
+    for name, e in run.estimates.items():
+        row = {"method": name, "yaw [deg]": math.degrees(e.yaw),
+               "std yaw [deg]": None if e.std.get("yaw") is None else math.degrees(e.std["yaw"]),
+               "t_x [m]": e.t_0_W[0], "t_y [m]": e.t_0_W[1], "t_z [m]": e.t_0_W[2], "rms [mm]": 1000 * e.rms,
+               "iterations": e.iterations}
+        if truth is not None:
+            row["yaw error [mrad]"] = 1000 * (e.yaw - math.atan2(truth.R_0_W[1, 0], truth.R_0_W[0, 0]))
+            row["t error [mm]"] = 1000 * float(np.linalg.norm(e.t_0_W[:2] - truth.t_0_W[:2]))
+        rows.append(row)
+    s.table(rows, digits=6)
+    if "seed" in run.estimates:
+        Ri = run.estimates["seed"].extra["R_init"]
+        s.text(f"seed method: eq. (23) initial yaw {math.degrees(math.atan2(Ri[1, 0], Ri[0, 0])):.4f} deg, "
+               f"refined {math.degrees(run.estimates['seed'].yaw):.4f} deg after "
+               f"{run.estimates['seed'].iterations} iterations of eq. (29).")
+    best = run.best
+    s.text(f"Primary estimate: {run.primary}. Standard deviations are sampling error under the model "
+           f"(noise on the world measurements), not model error.")
+    est = {"yaw [rad]": best.yaw, "t_x [m]": best.t_0_W[0], "t_y [m]": best.t_0_W[1]}
+    std = {"yaw [rad]": best.std.get("yaw"), "t_x [m]": best.std.get("t_x"), "t_y [m]": best.std.get("t_y")}
+    for k in ("h", "tilt_offset", "pan_offset"):
+        if k in best.std:
+            val = best.extra["h"] if k == "h" else best.extra["offsets"][0 if k == "pan_offset" else 1]
+            est[k] = val
+            std[k] = best.std[k]
+    s.parameters(est, std)
+    s.diagnostics(run.warnings)
+    secs.append(s)
+    s = Section("Cost curves and residuals")
+    fig, ax = new_figure(1, 2, size=(11, 4.2))
+    plot_cost_curves(run.estimates, ax[0])
+    plot_residuals(run.points_W, best.residuals, ax[1])
+    s.figure(fig, "left: cost per iteration (seed Fig. 4 for the seed's method); right: floor residuals of the "
+                  "primary estimate")
+    secs.append(s)
+    return secs
+
+
+def evaluation_sections(ev, emap=None, *, nadir=None, title="Evaluation (seed Table 2 protocol)") -> list[Section]:
+    s = Section(title)
+    s.text(f"{int(ev.reached.sum())} of {len(ev.reached)} desired points reached; spot error RMS "
+           f"{1000 * ev.rms:.2f} mm, max {1000 * ev.max:.2f} mm.")
+    s.table(ev.rows(), digits=5)
+    if emap is not None:
+        fig, ax = new_figure(size=(6.4, 5.0))
+        plot_error_map(*emap, ax, points=ev.desired, nadir=nadir)
+        s.figure(fig, "spot error over the reachable floor (simulated true rig driven by the calibrated model)")
+    return [s]
