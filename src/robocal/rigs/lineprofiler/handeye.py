@@ -317,7 +317,7 @@ def _rot_horaud(alpha, beta):
 def _rot_andreff(RA, RB):
     """Andreff: (R_A (x) I - I (x) R_B^T) vec(R_X) = 0 (row-major vec), null vector -> SO(3)."""
     K = np.concatenate([np.kron(a, np.eye(3)) - np.kron(np.eye(3), b.T) for a, b in zip(RA, RB)])
-    v = np.linalg.svd(K)[2][-1]
+    v = np.linalg.svd(K, full_matrices=False)[2][-1]
     Rx = v.reshape(3, 3)
     Rx *= np.sign(np.linalg.det(Rx)) / abs(np.linalg.det(Rx)) ** (1 / 3)
     return project_to_rotation(Rx)
@@ -359,7 +359,7 @@ def _daniilidis(A, B):
         S[3:, 4] = a[1:] - b[1:]
         S[3:, 5:8] = skew(a[1:] + b[1:])
         rows.append(S)
-    Vt = np.linalg.svd(np.concatenate(rows))[2]
+    Vt = np.linalg.svd(np.concatenate(rows), full_matrices=False)[2]
     u1, v1 = Vt[-2, :4], Vt[-2, 4:]
     u2, v2 = Vt[-1, :4], Vt[-1, 4:]
     a_, b_, c_ = u1 @ v1, u1 @ v2 + u2 @ v1, u2 @ v2
@@ -524,7 +524,7 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
 def _rw_rotation(RA, RB):
     """Shah: (R_A (x) I) vec R_X - (I (x) R_B^T) vec R_Z = 0, null vector of the 9N x 18 system."""
     K = np.concatenate([np.hstack([np.kron(a, np.eye(3)), -np.kron(np.eye(3), b.T)]) for a, b in zip(RA, RB)])
-    _, s, Vt = np.linalg.svd(K)
+    _, s, Vt = np.linalg.svd(K, full_matrices=False)
     if s[-2] < 1e-6 * s[0]:
         raise DegenerateGeometryError(
             "AX = ZB: the rotations do not determine X and Z (null space of dimension > 1); "
