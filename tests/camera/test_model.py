@@ -3,7 +3,7 @@ import dataclasses
 import cv2
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from robocal.camera import CameraModel, camera_from_document
@@ -62,7 +62,7 @@ def test_behind_camera_raises_with_indices(cam):
         cam.project_points(p, np.eye(4))
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=150, deadline=None)
 @given(
     u=st.floats(0.0, 639.0),
     v=st.floats(0.0, 479.0),
@@ -72,6 +72,12 @@ def test_behind_camera_raises_with_indices(cam):
     p2=st.floats(-2e-3, 2e-3),
 )
 def test_undistort_round_trip_property(u, v, k1, k2, p1, p2):
+    # Only lenses whose radial distortion stays monotone out to beyond the image
+    # corner (r_d = 0.667 here) are invertible there; others fold over (see the NaN test).
+    r = np.linspace(0.0, 3.0, 3001)
+    rd = r * (1 + k1 * r**2 + k2 * r**4)
+    fold = np.flatnonzero(np.diff(rd) <= 0)
+    assume(fold.size == 0 or rd[: fold[0] + 1].max() > 0.75)
     cam = CameraModel(600.0, 600.0, 319.5, 239.5, (k1, k2, p1, p2, 0.0), 640, 480)
     xy = cam.undistort_points([u, v])
     assert np.all(np.isfinite(xy))

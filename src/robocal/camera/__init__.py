@@ -9,6 +9,8 @@ See docs/camera.md.
 from robocal.camera._model import *  # noqa: F401,F403
 from robocal.camera._pnp import *  # noqa: F401,F403
 from robocal.camera._targets import *  # noqa: F401,F403
-from robocal.camera import _model, _pnp, _targets
+from robocal.camera._render import *  # noqa: F401,F403
+from robocal.camera._detect import *  # noqa: F401,F403
+from robocal.camera import _detect, _model, _pnp, _render, _targets
 
-__all__ = [*_model.__all__, *_pnp.__all__, *_targets.__all__]
+__all__ = [*_model.__all__, *_pnp.__all__, *_targets.__all__, *_render.__all__, *_detect.__all__]

@@ -58,6 +58,9 @@ class Checkerboard:
     square: float
     margin: float | None = None
 
+    #: shade() anti-aliases its edges itself (the renderer needs no supersampling).
+    analytic_aa = True
+
     def __post_init__(self):
         for name in ("rows", "cols"):
             val = getattr(self, name)
@@ -143,26 +146,26 @@ class Checkerboard:
     def shade(self, x, y, dx, dy):
         """Reflectance and coverage (see the module doc); edges anti-aliased with a 1-sample box."""
         s = self.square
-        # Square coordinates: square (0, 0) spans [-1, 0) in units of s.
-        qx = x / s + 1.0
-        qy = y / s + 1.0
-        # Signed distance [samples] to the nearest square edge, times the
-        # parity of the square: a smooth +-1 field whose product is the board.
-        fx = qx - np.floor(qx)
-        fy = qy - np.floor(qy)
-        ex = (np.minimum(fx, 1.0 - fx) * s) / dx  # distance [samples] to the nearest x-edge
-        ey = (np.minimum(fy, 1.0 - fy) * s) / dy
-        px = np.where(np.floor(qx) % 2 == 0, 1.0, -1.0)
-        py = np.where(np.floor(qy) % 2 == 0, 1.0, -1.0)
-        sx = px * (2.0 * _ramp(ex) - 1.0)
-        sy = py * (2.0 * _ramp(ey) - 1.0)
-        # Clamp to the squared area: outside it the board is white (quiet zone).
+
+        def axis(q, n, d):
+            # Square index clamped to the board, its parity, and the distance
+            # [samples] to the nearest *interior* edge (the board's outer edge is
+            # handled by the coverage ramp below, not as a colour change).
+            k = np.clip(np.floor(q), 0, n - 1)
+            left = np.where(k >= 1, q - k, np.inf)
+            right = np.where(k + 1 <= n - 1, k + 1 - q, np.inf)
+            e = np.minimum(left, right) * s / d
+            parity = np.where(k % 2 == 0, 1.0, -1.0)
+            return parity * (2.0 * _ramp(e) - 1.0)
+
+        # Square coordinates: square (0, 0) spans [-1, 0) in units of s; a smooth
+        # +-1 field per axis whose product is the board (+1: black).
+        sx = axis(x / s + 1.0, self.squares_x, dx)
+        sy = axis(y / s + 1.0, self.squares_y, dy)
         xmin, xmax, ymin, ymax = self._squares_extent()
-        inside_x = _ramp(np.minimum(x - xmin, xmax - x) / dx)
-        inside_y = _ramp(np.minimum(y - ymin, ymax - y) / dy)
-        checker = 0.5 - 0.5 * sx * sy  # parity (+,+) -> black
-        inside = inside_x * inside_y
-        refl = inside * checker + (1.0 - inside)
+        inside = _ramp(np.minimum(x - xmin, xmax - x) / dx) * _ramp(np.minimum(y - ymin, ymax - y) / dy)
+        black = inside * (0.5 + 0.5 * sx * sy)
+        refl = 1.0 - black
         # Coverage by the whole board (squares + quiet zone).
         Xmin, Xmax, Ymin, Ymax = self.extent()
         alpha = _ramp(np.minimum(x - Xmin, Xmax - x) / dx) * _ramp(np.minimum(y - Ymin, Ymax - y) / dy)
@@ -184,6 +187,8 @@ class MarkerRectangle:
     width: float
     height: float
     marker_radius: float | None = None
+
+    analytic_aa = True
 
     def __post_init__(self):
         object.__setattr__(self, "width", _positive(self.width, "MarkerRectangle.width [m]"))
@@ -215,6 +220,8 @@ class DotPattern:
     ``reflectance`` is the discs' grey (0 black). Useful for marker dots,
     feature points, retro-reflectors.
     """
+
+    analytic_aa = True
 
     def __init__(self, centers, radius: float, reflectance: float = 0.0):
         c = check_array(centers, "centers", shape=("N", 2))
@@ -260,6 +267,8 @@ class PlaneTexture:
         (markers, ArUco/AprilTag images); "linear" suits photographs.
     """
 
+    analytic_aa = False
+
     def __init__(self, image, size, origin=(0.0, 0.0), interpolation: str = "nearest"):
         img = np.asarray(image)
         if img.ndim != 2 or img.shape[0] < 1 or img.shape[1] < 1:
@@ -290,18 +299,25 @@ class PlaneTexture:
         h, w = self.texture.shape
         x0, y0 = self.origin
         # Texture pixel coordinates in OpenCV's centre convention.
-        mx = ((x - x0) / self.size[0] * w - 0.5).astype(np.float32)
-        my = ((y - y0) / self.size[1] * h - 0.5).astype(np.float32)
+        with np.errstate(invalid="ignore"):
+            mx = (x - x0) / self.size[0] * w - 0.5
+            my = (y - y0) / self.size[1] * h - 0.5
+        # Points off the plane (inf/NaN) read the border; their alpha is 0 anyway.
+        mx = np.where(np.isfinite(mx), np.clip(mx, -2.0, w + 1.0), -2.0).astype(np.float32)
+        my = np.where(np.isfinite(my), np.clip(my, -2.0, h + 1.0), -2.0).astype(np.float32)
         inter = cv2.INTER_NEAREST if self.interpolation == "nearest" else cv2.INTER_LINEAR
-        flat_x = mx.reshape(1, -1) if mx.ndim != 2 else mx
-        flat_y = my.reshape(1, -1) if my.ndim != 2 else my
         if self.interpolation == "nearest":
-            # INTER_NEAREST rounds; floor(m + 0.5) is the covering texel.
-            flat_x = np.floor(flat_x + 0.5).astype(np.float32)
-            flat_y = np.floor(flat_y + 0.5).astype(np.float32)
-        val = cv2.remap(
-            self.texture.astype(np.float32), flat_x, flat_y, inter, borderMode=cv2.BORDER_REPLICATE
-        ).reshape(np.shape(x))
+            # floor(m + 0.5) is the texel covering the point (no rounding-mode surprises).
+            mx = np.floor(mx + 0.5)
+            my = np.floor(my + 0.5)
+        # cv2.remap maps must be 2-D with sides < 32767: lay the samples out in rows of 4096.
+        n = mx.size
+        width = 4096
+        pad = (-n) % width
+        fx = np.concatenate([mx.ravel(), np.zeros(pad, np.float32)]).reshape(-1, width)
+        fy = np.concatenate([my.ravel(), np.zeros(pad, np.float32)]).reshape(-1, width)
+        val = cv2.remap(self.texture.astype(np.float32), fx, fy, inter, borderMode=cv2.BORDER_REPLICATE)
+        val = val.ravel()[:n].reshape(np.shape(x))
         xmin, xmax, ymin, ymax = self.extent()
         alpha = _ramp(np.minimum(x - xmin, xmax - x) / dx) * _ramp(np.minimum(y - ymin, ymax - y) / dy)
         return val.astype(float), alpha

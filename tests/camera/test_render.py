@@ -1,0 +1,148 @@
+import cv2
+import numpy as np
+import pytest
+
+from robocal.camera import (
+    CameraModel,
+    Checkerboard,
+    DotPattern,
+    MarkerRectangle,
+    PlaneTexture,
+    add_blur_and_noise,
+    render_planar_target,
+    render_plane_texture,
+)
+from robocal.errors import InputError
+from robocal.geometry import transform_from_rotvec
+
+PLAIN = CameraModel(500.0, 500.0, 319.5, 239.5, (0, 0, 0, 0), 640, 480)
+BIG = Checkerboard(3, 3, 0.1, margin=0.0)
+
+
+def _frontal(edge_u):
+    # Board x = 0 (an edge between two squares) at image column u = edge_u, depth 1 m.
+    return transform_from_rotvec([0, 0, 0], [(edge_u - PLAIN.cx) / PLAIN.fx, -0.1, 1.0])
+
+
+@pytest.mark.parametrize("frac", [0.0, 0.13, 0.37, 0.5, 0.81])
+@pytest.mark.parametrize("supersample", [1, 4])
+def test_edge_pixel_is_its_area_coverage(frac, supersample):
+    """A pixel cut by an edge gets exactly the covered fraction (box filter), to one grey level."""
+    edge_u = 299.5 + frac  # pixel 300 spans [299.5, 300.5]
+    img = render_planar_target(PLAIN, _frontal(edge_u), BIG, black=0, white=255, supersample=supersample)
+    # row 280: board y = 0.181 -> squares row 2; left of x = 0 is square column 1 ((2+1) odd: white)... or black:
+    left, right = int(img[280, 295]), int(img[280, 305])
+    assert {left, right} == {0, 255}
+    expect = left * frac + right * (1 - frac)
+    assert abs(int(img[280, 300]) - expect) <= 1.0
+    # neighbours untouched by the edge
+    assert img[280, 299] == left and img[280, 301] == right
+
+
+def test_corner_pixel_of_x_junction_is_mean_grey():
+    # An X-junction at the centre of a pixel: two black and two white quarters.
+    T = transform_from_rotvec([0, 0, 0], [0.5 / 500, 0.5 / 500, 1.0])  # corner 0 at pixel centre (320, 240)
+    img = render_planar_target(PLAIN, T, Checkerboard(3, 3, 0.05), black=0, white=254)
+    assert abs(int(img[240, 320]) - 127) <= 1
+    assert img[239, 319] == 0 and img[241, 321] == 0 and img[239, 321] == 254
+
+
+def test_renders_only_near_the_target_and_onto_images():
+    T = transform_from_rotvec([0.2, 0.1, 0], [0.0, 0.0, 0.8])
+    board = Checkerboard(4, 5, 0.02)
+    img = render_planar_target(PLAIN, T, board, background=77)
+    uv = PLAIN.project_points(board.outline(with_margin=True), T)
+    lo, hi = np.floor(uv.min(0)).astype(int) - 1, np.ceil(uv.max(0)).astype(int) + 1
+    outside = np.ones(img.shape, bool)
+    outside[lo[1] : hi[1] + 1, lo[0] : hi[0] + 1] = False
+    assert np.all(img[outside] == 77)
+    assert img.dtype == np.uint8 and img.shape == (480, 640)
+    # drawing onto an image keeps what is not covered
+    base = np.full((480, 640), 10, np.uint8)
+    base[0:5, 0:5] = 200
+    both = render_planar_target(PLAIN, T, board, image=base)
+    assert np.all(both[0:5, 0:5] == 200)
+    inner = np.round(PLAIN.project_points(board.object_points(), T)).astype(int)
+    assert np.array_equal(both[inner[:, 1], inner[:, 0]], img[inner[:, 1], inner[:, 0]])
+
+
+def test_target_behind_camera_or_edge_on_draws_nothing():
+    board = Checkerboard(4, 5, 0.02)
+    behind = transform_from_rotvec([0, 0, 0], [0, 0, -0.5])
+    assert np.all(render_planar_target(PLAIN, behind, board, background=50) == 50)
+    edge_on = transform_from_rotvec([0, np.pi / 2, 0], [0, 0, 0.5])
+    assert np.all(render_planar_target(PLAIN, edge_on, board, background=50) == 50)
+
+
+def test_distorted_render_puts_dots_where_project_says():
+    cam = CameraModel(600, 605, 321.3, 238.7, (-0.28, 0.11, 8e-4, -6e-4, -0.02), 640, 480)
+    centers = np.array([[x, y] for x in np.linspace(-0.25, 0.25, 5) for y in np.linspace(-0.18, 0.18, 4)])
+    dots = DotPattern(centers, 0.006)
+    T = transform_from_rotvec([0.05, -0.05, 0], [0, 0, 0.6])
+    img = render_planar_target(cam, T, dots, background=255, black=0, white=255, supersample=2)
+    truth = cam.project_points(np.column_stack([centers, np.zeros(len(centers))]), T)
+    w = 255.0 - img.astype(float)
+    for u, v in truth:
+        i0, j0 = int(round(v)) - 12, int(round(u)) - 12
+        patch = w[i0 : i0 + 25, j0 : j0 + 25]
+        jj, ii = np.meshgrid(np.arange(25) + j0, np.arange(25) + i0)
+        cu, cv = (patch * jj).sum() / patch.sum(), (patch * ii).sum() / patch.sum()
+        # distortion/perspective shift a disc's centroid by ~1e-3 px at this size
+        assert np.hypot(cu - u, cv - v) < 0.03
+
+
+def test_texture_renders_a_detectable_aruco_marker():
+    dictionary = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50)
+    marker = cv2.aruco.generateImageMarker(dictionary, 7, 60)
+    border = np.full((80, 80), 255, np.uint8)
+    border[10:70, 10:70] = marker
+    T = transform_from_rotvec([0.3, -0.2, 0.1], [-0.04, -0.03, 0.5])
+    img = render_plane_texture(PLAIN, T, border, 0.08)
+    corners, ids, _ = cv2.aruco.ArucoDetector(dictionary).detectMarkers(img)
+    assert ids is not None and ids.ravel().tolist() == [7]
+    # marker corners are texture pixels 10 and 70 of 80 -> plane 0.01 .. 0.07 m
+    p = np.array([[0.01, 0.01, 0], [0.07, 0.01, 0], [0.07, 0.07, 0], [0.01, 0.07, 0]])
+    assert np.max(np.abs(corners[0].reshape(4, 2) - PLAIN.project_points(p, T))) < 1.0
+    # the texture object itself is a planar pattern too
+    tex = PlaneTexture(border, (0.08, 0.08), interpolation="linear")
+    assert tex.extent() == (0.0, 0.08, 0.0, 0.08)
+
+
+def test_marker_rectangle_renders_four_dots():
+    m = MarkerRectangle(0.2, 0.1, marker_radius=0.01)
+    T = transform_from_rotvec([0, 0, 0], [-0.1, -0.05, 0.7])
+    img = render_planar_target(PLAIN, T, m, background=200)
+    n, _ = cv2.connectedComponents((img < 100).astype(np.uint8))
+    assert n - 1 == 4
+
+
+def test_blur_and_noise():
+    T = transform_from_rotvec([0, 0, 0], [-0.05, -0.05, 0.6])
+    board = Checkerboard(4, 5, 0.02)
+    clean = render_planar_target(PLAIN, T, board)
+    noisy = render_planar_target(PLAIN, T, board, noise_sigma=3.0, rng=np.random.default_rng(1))
+    d = noisy.astype(float) - clean
+    assert 2.7 < d[100:140, 100:140].std() < 3.3  # background region
+    blurred = render_planar_target(PLAIN, T, board, blur_sigma=1.5)
+    assert np.abs(np.diff(blurred.astype(float), axis=1)).max() < np.abs(np.diff(clean.astype(float), axis=1)).max()
+    again = add_blur_and_noise(clean, blur_sigma=1.5)
+    assert np.abs(again.astype(int) - blurred).max() <= 1  # blurred before vs after rounding
+
+
+def test_render_bad_inputs():
+    board = Checkerboard(4, 5, 0.02)
+    T = transform_from_rotvec([0, 0, 0], [0, 0, 0.6])
+    with pytest.raises(InputError, match="rng"):
+        render_planar_target(PLAIN, T, board, noise_sigma=1.0)
+    with pytest.raises(InputError, match="planar pattern"):
+        render_planar_target(PLAIN, T, "board")
+    with pytest.raises(InputError, match=r"image must have shape \(height, width\) = \(480, 640\)"):
+        render_planar_target(PLAIN, T, board, image=np.zeros((10, 10)))
+    with pytest.raises(InputError, match="supersample"):
+        render_planar_target(PLAIN, T, board, supersample=0)
+    with pytest.raises(InputError, match="T_cam_target"):
+        render_planar_target(PLAIN, np.eye(3), board)
+    with pytest.raises(InputError, match="camera"):
+        render_planar_target(None, T, board)
+    with pytest.raises(InputError, match="texture image"):
+        render_plane_texture(PLAIN, T, np.zeros((3, 3, 3)), 0.1)
