@@ -182,17 +182,13 @@ def distance_consistency(points_W, points_0, *, sigma: float | None = None, n_si
     """
     pw, p0 = check_correspondences(points_W, points_0)
     n = pw.shape[0]
-    pairs, bad = [], []
-    for i in range(n):
-        for j in range(i + 1, n):
-            dw = float(np.linalg.norm(pw[i] - pw[j]))
-            d0 = float(np.linalg.norm(p0[i] - p0[j]))
-            df = d0 - dw
-            rel = df / dw
-            pairs.append((i, j, dw, d0, df, rel))
-            limit = n_sigma * math.sqrt(2.0) * sigma if sigma else rel_tol * dw
-            if abs(df) > limit:
-                bad.append((i, j, dw, d0, df, rel))
+    iu, ju = np.triu_indices(n, 1)
+    dW = np.linalg.norm(pw[iu] - pw[ju], axis=1)
+    d0 = np.linalg.norm(p0[iu] - p0[ju], axis=1)
+    diff = d0 - dW
+    limit = n_sigma * math.sqrt(2.0) * sigma if sigma else rel_tol * dW
+    pairs = [(int(i), int(j), float(a), float(b), float(c), float(c / a)) for i, j, a, b, c in zip(iu, ju, dW, d0, diff)]
+    bad = [pr for pr, b in zip(pairs, np.abs(diff) > limit) if b]
     threshold = (f"{n_sigma:g} sqrt(2) sigma = {n_sigma * math.sqrt(2) * sigma * 1e3:.3g} mm" if sigma
                  else f"{100 * rel_tol:g} % of the distance")
     suspects: list[int] = []
@@ -383,7 +379,7 @@ def seed_method(points_W, points_0, *, alpha: float = 0.5, eps0: float = 1e-12, 
     def step(R):
         Yh = A @ R.T
         eps = Y - Yh.reshape(-1)
-        J = -np.concatenate([skew(y) for y in Yh], axis=0)  # eq. 26
+        J = -skew(Yh).reshape(-1, 3)  # eq. 26: -[[b^]x; [d^]x; ...]
         return eps, J
 
     eps, J = step(R)

@@ -1,0 +1,125 @@
+"""Projector rig throughput: spot FK and IK vectorised vs per-point loops; calibration time.
+
+Measured in one run on the same data (seed 000's projector A, tilt up to 75 deg):
+
+* ``FK eq. 6 vectorised``  -- :meth:`ProjectorModel.spot` on N angle pairs in one call;
+* ``FK D-H chain vectorised`` -- :meth:`ProjectorModel.spot_from_chain` (DHChain.fk + beam/floor
+  intersection) on N pairs in one call;
+* ``FK eq. 6 per point``   -- the same method called once per angle pair (Python loop);
+* ``FK pure Python``       -- eq. (6) with ``math`` in a loop (the floor a caller could write);
+* ``IK ...``               -- the same four for :meth:`ProjectorModel.ik` / eq. (8).
+
+All variants are checked to agree (1e-12) before timing. Calibration: median wall time
+of each solver on simulated data with N points (seed method, closed form, nonlinear
+pose only, nonlinear with h and tilt offset, the full ``calibrate`` driver).
+
+Run: ``python bench/bench_projector.py`` (``--quick`` for a shorter run).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import platform
+import time
+
+import numpy as np
+
+import robocal
+from robocal.rigs.projector.calibrate import calibrate, closed_form, nonlinear, seed_method
+from robocal.rigs.projector.simulate import default_nominal, default_truth, simulate_calibration
+
+
+def best_of(fn, repeat: int) -> float:
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return min(times)
+
+
+def median_of(fn, repeat: int) -> float:
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times))
+
+
+def pure_fk(th, h, H):
+    out = []
+    for t1, t2 in th:
+        r = h * math.tan(t2)
+        out.append((r * math.sin(t1), r * math.cos(t1), -H))
+    return out
+
+
+def pure_ik(pts, h):
+    return [(math.atan2(x, y), math.atan(math.hypot(x, y) / h)) for x, y, _ in pts]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("-n", type=int, default=100_000, help="points for the vectorised calls")
+    ap.add_argument("--quick", action="store_true")
+    args = ap.parse_args()
+    n = 10_000 if args.quick else args.n
+    n_loop = 2_000 if args.quick else 10_000
+    rep = 3 if args.quick else 7
+    rng = np.random.default_rng(0)
+    m = default_truth().with_(offsets=(0.0, 0.0))
+    th = np.column_stack([rng.uniform(-math.pi + 1e-6, math.pi, n), rng.uniform(0.01, m.tilt_limit, n)])
+    p = m.spot(th)
+    # agreement first
+    assert np.abs(m.spot_from_chain(th[:1000]) - p[:1000]).max() < 1e-12
+    assert np.abs(np.array(pure_fk(th[:1000], m.h, m.H)) - p[:1000]).max() < 1e-12
+    assert np.abs(m.ik(p) - th).max() < 1e-12
+    assert np.abs(np.array(pure_ik(p[:1000], m.h)) - th[:1000]).max() < 1e-12
+
+    print(f"robocal {robocal.__version__}, numpy {np.__version__}, Python {platform.python_version()}, "
+          f"{platform.machine()}; N = {n} vectorised, {n_loop} per-point")
+    rows = []
+    t_vec = best_of(lambda: m.spot(th), rep)
+    t_chain = best_of(lambda: m.spot_from_chain(th), rep)
+    t_loop = best_of(lambda: [m.spot(x) for x in th[:n_loop]], 1) / n_loop
+    t_pure = best_of(lambda: pure_fk(th[:n_loop], m.h, m.H), rep) / n_loop
+    rows += [("FK eq. 6 vectorised", n / t_vec, 1.0), ("FK D-H chain vectorised", n / t_chain, t_chain / t_vec),
+             ("FK eq. 6 per point (robocal loop)", 1 / t_loop, t_loop * n / t_vec),
+             ("FK pure Python loop", 1 / t_pure, t_pure * n / t_vec)]
+    i_vec = best_of(lambda: m.ik(p), rep)
+    i_loop = best_of(lambda: [m.ik(x) for x in p[:n_loop]], 1) / n_loop
+    i_pure = best_of(lambda: pure_ik(p[:n_loop], m.h), rep) / n_loop
+    rows += [("IK eq. 8 vectorised", n / i_vec, 1.0), ("IK eq. 8 per point (robocal loop)", 1 / i_loop,
+                                                       i_loop * n / i_vec),
+             ("IK pure Python loop", 1 / i_pure, i_pure * n / i_vec)]
+    print(f"\n| {'variant':36s} | {'points/s':>12s} | {'slower than vectorised':>22s} |")
+    print(f"|{'-' * 38}|{'-' * 14}|{'-' * 24}|")
+    for name, rate, ratio in rows:
+        print(f"| {name:36s} | {rate:12.3g} | {ratio:21.1f}x |")
+
+    print("\ncalibration (median wall time per solve):")
+    print(f"| {'solver':44s} | {'N = 8':>9s} | {'N = 50':>9s} |")
+    print(f"|{'-' * 46}|{'-' * 11}|{'-' * 11}|")
+    truth = default_truth()
+    nominal = default_nominal(truth)
+    scs = {k: simulate_calibration(np.random.default_rng(k), truth=truth, nominal=nominal, n_points=k, sigma=0.005)
+           for k in (8, 50)}
+    solvers = [
+        ("seed method (eqs. 12-29, alpha 0.5)", lambda s: seed_method(s.points_W, nominal.spot(s.theta))),
+        ("closed form (Umeyama)", lambda s: closed_form(s.points_W, nominal.spot(s.theta))),
+        ("nonlinear LS, pose", lambda s: nonlinear(s.points_W, theta=s.theta, model=nominal)),
+        ("nonlinear LS, pose + h + tilt offset",
+         lambda s: nonlinear(s.points_W, theta=s.theta, model=nominal, estimate=("h", "tilt_offset"))),
+        ("calibrate(): check + all three methods",
+         lambda s: calibrate(s.points_W, theta=s.theta, model=nominal, estimate=("h", "tilt_offset"), sigma=0.005)),
+    ]
+    r = 5 if args.quick else 21
+    for name, fn in solvers:
+        ts = [median_of(lambda s=s: fn(s), r) for s in scs.values()]
+        print(f"| {name:44s} | {1e3 * ts[0]:6.2f} ms | {1e3 * ts[1]:6.2f} ms |")
+
+
+if __name__ == "__main__":
+    main()
