@@ -16,7 +16,7 @@ from robocal.rigs.mirror.calibrate import (
     geometry_warnings,
 )
 from robocal.rigs.mirror.crossratio import diagonal_points
-from robocal.rigs.mirror.model import MirrorScene, ri_from_r_points
+from robocal.rigs.mirror.model import MirrorScene
 from robocal.rigs.mirror.scene import published_scene
 from robocal.rigs.mirror.simulate import default_camera, default_setup, simulate_observations
 

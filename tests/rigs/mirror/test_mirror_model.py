@@ -8,7 +8,6 @@ from hypothesis import strategies as st
 from robocal.camera import MarkerRectangle
 from robocal.errors import DegenerateGeometryError, InputError
 from robocal.geometry import (
-    invert_transform,
     matrix_from_rotvec,
     reflect_points,
     rotation_angle,

@@ -658,6 +658,24 @@ def _consensus_choice(singles, camera, rectangle, body_points_r, obs_list):
     return out
 
 
+def _consistency_warnings(camera, rectangle, P_all, singles, obs_list, T_r_c, sigma_px):
+    """Flag images whose own estimate disagrees with the joint one beyond its predicted covariance."""
+    from scipy.stats import chi2
+
+    bad = []
+    for k, (s, o) in enumerate(zip(singles, obs_list)):
+        sig = sigma_px if sigma_px is not None else s.sigma_px
+        C = predicted_covariance(camera, rectangle, P_all, s.T_r_c, s.T_c_m, [o], sig)
+        e = np.concatenate([rotvec_from_matrix(s.T_r_c[:3, :3] @ T_r_c[:3, :3].T), s.T_r_c[:3, 3] - T_r_c[:3, 3]])
+        if e @ np.linalg.solve(C, e) > chi2.isf(1e-3, 6):
+            bad.append(k)
+    if not bad:
+        return []
+    return [Diagnostic("inconsistent_data", f"single-image estimates of images {bad} disagree with the joint "
+                       "estimate beyond their predicted covariance (p < 0.001): did the camera move on the body, "
+                       "or are some correspondences wrong?", params=("T_r_c",), indices=tuple(bad))]
+
+
 def calibrate(camera: CameraModel, rectangle: MarkerRectangle, body_points_r, observations, *,
               sigma_px: float | None = None, refine: bool = True, progress: bool = False) -> MirrorCalibration:
     """Calibrate ``T_r_c`` from K >= 1 mirror images (joint refinement).
@@ -696,11 +714,6 @@ def calibrate(camera: CameraModel, rectangle: MarkerRectangle, body_points_r, ob
         dev = np.mean([rotvec_from_matrix(s.T_r_c[:3, :3] @ T_r_c0[:3, :3].T) for s in singles], axis=0)
         T_r_c0[:3, :3] = matrix_from_rotvec(dev) @ T_r_c0[:3, :3]
         T_r_c0[:3, 3] = np.mean([s.T_r_c[:3, 3] for s in singles], axis=0)
-        spread = max(rotation_angle(s.T_r_c[:3, :3] @ T_r_c0[:3, :3].T) for s in singles)
-        if spread > np.deg2rad(5):
-            warnings.append(Diagnostic("inconsistent_data", f"single-image estimates of R_rc disagree by up to "
-                                       f"{np.degrees(spread):.2g} deg: did the camera move on the body?",
-                                       params=("T_r_c",)))
     layout = _layout(obs_list, P_all, rectangle)
     if not refine:
         sig = sigma_px if sigma_px is not None else float(np.mean([s.sigma_px for s in singles]))
@@ -711,6 +724,8 @@ def calibrate(camera: CameraModel, rectangle: MarkerRectangle, body_points_r, ob
     T_r_c, T_c_m = poses(res.params)
     cov = res.cov[:6, :6]
     warnings.extend(res.warnings)
+    if len(singles) > 1:
+        warnings.extend(_consistency_warnings(camera, rectangle, P_all, singles, obs_list, T_r_c, sigma_px))
     return MirrorCalibration(T_r_c, T_c_m, cov, singles, res, warnings, obs_list, rectangle, P_all, camera)
 
 

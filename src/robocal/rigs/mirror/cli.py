@@ -1,0 +1,110 @@
+"""Command line of the ``mirror`` rig: ``robocal mirror simulate | calibrate | report``.
+
+Thin wiring over :mod:`robocal.rigs.mirror.workflow`.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from robocal.cli import DemoContext, DemoOutcome, Rig
+from robocal.cli._common import RawHelp, add_out_argument, add_seed_argument, examples_epilog, prepare_out_dir, write_run
+from robocal.io import load_result
+from robocal.rigs.mirror import workflow
+
+__all__ = ["RIG"]
+
+EXAMPLES = Path("examples/mirror")
+
+
+def _add_commands(parser: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="subcommand", metavar="COMMAND")
+    p = sub.add_parser(
+        "simulate", help="write simulated mirror observations of the patent's example (with ground truth)",
+        formatter_class=RawHelp,
+        description="The default scene reproduces the patent's published T_cm, T_cri and T_rc and distortion; "
+                    "see docs/rigs/mirror.md for what had to be assumed.",
+        epilog=examples_epilog("robocal mirror simulate --out sim",
+                               "robocal mirror simulate --placements 4 --sigma 0.5 --seed 3 --out sim",
+                               "robocal mirror simulate --images --out sim   # rendered images, ArUco body tags",
+                               "robocal mirror calibrate sim/mirror_input.yaml --out cal"))
+    p.add_argument("--placements", type=int, default=1, help="number of mirror placements (images)")
+    p.add_argument("--sigma", type=float, default=0.5, help="pixel noise sigma [px] (point files)")
+    p.add_argument("--images", action="store_true",
+                   help="render images with ArUco tags on the body instead of writing image points")
+    add_seed_argument(p)
+    add_out_argument(p)
+    p.set_defaults(func=_cmd_simulate)
+
+    p = sub.add_parser(
+        "calibrate", help="estimate the camera pose in the robot frame: result.json + report.html",
+        formatter_class=RawHelp,
+        description="Input: intrinsics, mirror marker rectangle, body point model and, per image, the marker "
+                    "and reflected body image points (or an image with ArUco tags). Format: docs/rigs/mirror.md "
+                    "or robocal.rigs.mirror.files.",
+        epilog=examples_epilog(f"robocal mirror calibrate {EXAMPLES}/published_single.yaml --out cal",
+                               f"robocal mirror calibrate {EXAMPLES}/four_placements.yaml --out cal",
+                               f"robocal mirror calibrate {EXAMPLES}/aruco_images.yaml --out cal",
+                               f"robocal mirror calibrate {EXAMPLES}/published_single.yaml --no-refine --out cal"))
+    p.add_argument("input", type=Path, help="calibration input (YAML/JSON)")
+    p.add_argument("--no-refine", action="store_true",
+                   help="patent's single-image estimates only (averaged over images), no joint least squares")
+    add_out_argument(p)
+    p.set_defaults(func=_cmd_calibrate)
+
+    p = sub.add_parser(
+        "report", help="redraw report.html from a result.json", formatter_class=RawHelp,
+        epilog=examples_epilog("robocal mirror report cal/result.json --out cal"))
+    p.add_argument("result", type=Path, help="result.json written by 'robocal mirror calibrate'")
+    add_out_argument(p)
+    p.set_defaults(func=_cmd_report)
+
+
+def _cmd_simulate(args) -> int:
+    out = prepare_out_dir(args.out, "mirror-simulate")
+    paths = workflow.simulate_files(out, placements=args.placements, sigma_px=args.sigma, seed=args.seed,
+                                    images=args.images)
+    for p in paths:
+        print(f"wrote {p}")
+    return 0
+
+
+def _cmd_calibrate(args) -> int:
+    out = prepare_out_dir(args.out, "mirror-calibrate")
+    cal, result, report = workflow.calibrate_file(args.input, refine=not args.no_refine)
+    write_run(out, result, report)
+    t = cal.T_r_c[:3, 3] * 1e3
+    s = cal.std_translation * 1e3
+    print(f"t_r_c = [{t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}] mm  (std {s[0]:.1f}, {s[1]:.1f}, {s[2]:.1f} mm); "
+          f"rotation std {np.degrees(cal.std_rotation).max():.3g} deg")
+    return 0
+
+
+def _cmd_report(args) -> int:
+    from robocal.rigs.mirror.report import build_report
+
+    result = load_result(args.result)
+    out = prepare_out_dir(args.out, "mirror-report")
+    write_run(out, None, build_report(result))
+    return 0
+
+
+def _demo(ctx: DemoContext) -> DemoOutcome:
+    return workflow.demo(ctx.out_dir, ctx.rng, progress=ctx.progress)
+
+
+RIG = Rig(
+    name="mirror",
+    help="camera-to-robot-body calibration from one image of a plane mirror (seed 002)",
+    description=(
+        "Foot-eye calibration of a mobile robot: a plane mirror with four markers (a known rectangle) in front\n"
+        "of the robot; the camera sees the markers and the reflection of feature points on the body.\n"
+        "One image gives the camera pose in the robot frame (the patent's method); several mirror\n"
+        "placements are refined jointly with uncertainty."
+    ),
+    add_commands=_add_commands,
+    demo=_demo,
+)

@@ -1,0 +1,218 @@
+"""Result record and HTML report of a mirror calibration.
+
+:func:`result_from_calibration` packs a :class:`MirrorCalibration` into the
+shared ``robocal.result/1`` schema, keeping in ``diagnostics`` everything
+needed to redraw the report (camera, rectangle, body model, image points,
+per-image patent estimates and planar choices); :func:`build_report` draws
+from that record alone, so ``robocal mirror report result.json`` needs no
+other file.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from robocal.camera import CameraModel, MarkerRectangle
+from robocal.geometry import euler_from_matrix, invert_transform, rotvec_from_matrix
+from robocal.io import CalibrationResult
+from robocal.report import Report, new_figure
+from robocal.rigs.mirror.calibrate import MirrorCalibration, MirrorObservation, residual_model, _layout
+from robocal.rigs.mirror.model import mirror_plane, virtual_transform
+
+__all__ = ["result_from_calibration", "build_report", "draw_image_overlay"]
+
+
+def result_from_calibration(cal: MirrorCalibration, *, inputs=None, image_paths=None, truth=None) -> CalibrationResult:
+    """The shared result record (SI units; ``T_r_c`` is ``robot -> camera``)."""
+    est = {
+        "T_r_c": cal.T_r_c.tolist(),
+        "t_r_c": cal.T_r_c[:3, 3].tolist(),
+        "q_r_c": _quat(cal.T_r_c),
+        "rotvec_r_c": rotvec_from_matrix(cal.T_r_c[:3, :3]).tolist(),
+        "T_c_m": cal.T_c_m.tolist(),
+    }
+    std = {"t_r_c": cal.std_translation.tolist(), "rotvec_r_c": cal.std_rotation.tolist()}
+    units = {"T_r_c": "m", "t_r_c": "m", "q_r_c": "1", "rotvec_r_c": "rad", "T_c_m": "m"}
+    m_res, b_res = cal.residuals()
+    allres = np.concatenate([m_res.reshape(-1, 2), *b_res])
+    singles = []
+    for s in cal.singles:
+        singles.append({
+            "name": s.steps and s.choice and None,
+            "T_r_c": s.T_r_c.tolist(),
+            "T_c_m": s.T_c_m.tolist(),
+            "T_c_ri": s.steps.T_c_ri.tolist(),
+            "T_m_ri": s.steps.T_m_ri.tolist(),
+            "T_om_r": s.steps.T_om_r.tolist(),
+            "T_m_r": s.steps.T_m_r.tolist(),
+            "householder_minus_patent": float(np.abs(s.T_c_r_householder - s.steps.T_c_r).max()),
+            "planar_choice": s.choice.to_dict(),
+            "marker_rms_px": float(np.sqrt(np.mean(s.marker_residuals**2))),
+            "body_rms_px": float(np.sqrt(np.mean(s.body_residuals**2))),
+        })
+    for o, d in zip(cal.observations, singles):
+        d["name"] = o.name
+    diag = {
+        "camera": cal.camera.to_dict(),
+        "rectangle": {"width": cal.rectangle.width, "height": cal.rectangle.height},
+        "body_points_r": cal.body_points_r.tolist(),
+        "observations": [o.to_dict() for o in cal.observations],
+        "images": dict(image_paths or {}),
+        "single_image": singles,
+        "cov_rot_t": cal.cov.tolist(),
+        "n_images": len(cal.observations),
+    }
+    if cal.lsq is not None:
+        diag["solver"] = {"iterations": cal.lsq.iterations, "cost_history": cal.lsq.cost_history.tolist(),
+                          "rank": cal.lsq.rank, "condition_number": cal.lsq.condition_number,
+                          "success": bool(cal.lsq.success), "message": cal.lsq.message}
+    if truth is not None:
+        diag["truth_T_r_c"] = np.asarray(truth).tolist()
+    return CalibrationResult(
+        rig="mirror",
+        method="patent single-image (seed 002) + joint refinement" if cal.lsq is not None else "patent single-image",
+        estimate=est, std=std, units=units,
+        residual_rms=float(np.sqrt(np.mean(allres**2))), residual_unit="px",
+        warnings=list(cal.warnings), inputs=dict(inputs or {}), diagnostics=diag,
+    )
+
+
+def _quat(T):
+    from robocal.geometry import quaternion_from_matrix
+
+    return quaternion_from_matrix(np.asarray(T)[:3, :3]).tolist()
+
+
+def draw_image_overlay(camera: CameraModel, rectangle: MarkerRectangle, body_points_r, obs: MirrorObservation,
+                       T_r_c, T_c_m, image=None, ax=None, title: str = ""):
+    """Image with detected and reprojected points and the frames m and ri drawn (pure; returns ax)."""
+    if ax is None:
+        _, ax = new_figure(size=(7.0, 5.4))
+    if image is not None:
+        ax.imshow(image, cmap="gray", vmin=0, vmax=255)
+    else:
+        ax.imshow(np.full((camera.height, camera.width), 200, np.uint8), cmap="gray", vmin=0, vmax=255)
+    T_c_r = invert_transform(np.asarray(T_r_c))
+    n, d = mirror_plane(T_c_m)
+    T_c_ri = virtual_transform(T_c_r, n, d)
+    ids = np.arange(len(body_points_r)) if obs.body_ids is None else np.asarray(obs.body_ids)
+    p_v = (body_points_r[ids] @ T_c_r[:3, :3].T + T_c_r[:3, 3])
+    p_v = p_v - 2.0 * (p_v @ n - d)[:, None] * n
+    uv_b = camera.project(p_v, check=False)
+    uv_m = camera.project_points(rectangle.object_points(), T_c_m, check=False)
+    ax.plot(*obs.marker_uv.T, "o", mfc="none", mec="tab:red", ms=9, label="markers (detected)")
+    ax.plot(*uv_m.T, "x", color="gold", ms=7, label="markers (reprojected)")
+    ax.plot(*obs.body_uv.T, "+", color="tab:blue", ms=8, label="reflected body points (detected)")
+    ax.plot(*uv_b.T, "x", color="tab:orange", ms=5, label="reflected body points (reprojected)")
+    for T, L, name in ((T_c_m, 0.1, "m"), (T_c_ri, 0.2, "ri")):
+        o = camera.project(T[:3, 3][None], check=False)[0]
+        for axis, col in zip(range(3), ("r", "g", "b")):
+            e = camera.project((T[:3, 3] + L * T[:3, axis])[None], check=False)[0]
+            if np.all(np.isfinite([*o, *e])):
+                ax.plot([o[0], e[0]], [o[1], e[1]], "-", color=col, lw=2)
+        if np.all(np.isfinite(o)):
+            ax.annotate(name, o, color="k", fontsize=9, xytext=(4, 4), textcoords="offset points")
+    pts = np.vstack([obs.marker_uv, obs.body_uv])
+    lo, hi = pts.min(axis=0) - 60, pts.max(axis=0) + 60
+    ax.set_xlim(max(lo[0], -0.5), min(hi[0], camera.width - 0.5))
+    ax.set_ylim(min(hi[1], camera.height - 0.5), max(lo[1], -0.5))
+    ax.set_title(title or obs.name)
+    ax.legend(loc="lower left", fontsize=7)
+    return ax
+
+
+def _frames_3d(T_r_c, T_c_m, body_points_r, ax=None):
+    """Robot frame r, camera c, mirror(s) m and body points, in r (pure; returns ax)."""
+    if ax is None:
+        import matplotlib.pyplot as plt
+
+        fig = plt.figure(figsize=(6.4, 5.0))
+        ax = fig.add_subplot(projection="3d")
+    T_r_c = np.asarray(T_r_c)
+    ax.scatter(*np.asarray(body_points_r).T, s=8, c="tab:blue", label="body points")
+    frames = [("r", np.eye(4), 0.2), ("c", T_r_c, 0.15)]
+    frames += [(f"m{k}", T_r_c @ T, 0.15) for k, T in enumerate(np.asarray(T_c_m).reshape(-1, 4, 4))]
+    for name, T, L in frames:
+        for axis, col in zip(range(3), ("r", "g", "b")):
+            e = T[:3, 3] + L * T[:3, axis]
+            ax.plot([T[0, 3], e[0]], [T[1, 3], e[1]], [T[2, 3], e[2]], color=col)
+        ax.text(*T[:3, 3], name)
+    ax.set_xlabel("x_r [m]")
+    ax.set_ylabel("y_r [m]")
+    ax.set_zlabel("z_r [m]")
+    ax.set_title("frames in the robot frame r")
+    return ax
+
+
+def build_report(result: CalibrationResult, *, title: str = "robocal mirror — camera-to-robot calibration",
+                 images=None) -> Report:
+    """HTML report from a result record (see :func:`result_from_calibration`)."""
+    d = result.diagnostics
+    cam = CameraModel.from_dict(d["camera"])
+    rect = MarkerRectangle(d["rectangle"]["width"], d["rectangle"]["height"])
+    body = np.asarray(d["body_points_r"], dtype=float)
+    obs = [MirrorObservation(np.asarray(o["marker_uv"]), np.asarray(o["body_uv"]),
+                             None if o["body_ids"] is None else np.asarray(o["body_ids"], dtype=int), o["name"])
+           for o in d["observations"]]
+    T_r_c = np.asarray(result.estimate["T_r_c"])
+    T_c_m = np.asarray(result.estimate["T_c_m"]).reshape(-1, 4, 4)
+    rep = Report(title, subtitle=f"{len(obs)} image(s); method: {result.method}")
+    s = rep.section("Camera in the robot frame (robot -> camera)")
+    rpy = np.degrees(euler_from_matrix("xyz", T_r_c[:3, :3]))
+    std_t = np.asarray(result.std["t_r_c"]) * 1e3
+    std_r = np.degrees(np.asarray(result.std["rotvec_r_c"]))
+    rows = [{"quantity": f"t_r_c {a} [mm]", "value": T_r_c[i, 3] * 1e3, "std": std_t[i]} for i, a in enumerate("xyz")]
+    rows += [{"quantity": f"rpy {a} [deg]", "value": rpy[i], "std": std_r[i]} for i, a in enumerate(("roll", "pitch", "yaw"))]
+    if "truth_T_r_c" in d:
+        Tt = np.asarray(d["truth_T_r_c"])
+        e_r = np.degrees(rotvec_from_matrix(T_r_c[:3, :3] @ Tt[:3, :3].T))
+        e_t = (T_r_c[:3, 3] - Tt[:3, 3]) * 1e3
+        for i, r in enumerate(rows):
+            r["error vs truth"] = e_t[i] if i < 3 else e_r[i - 3]
+    s.table(rows, digits=4, caption="std: first-order (sampling) uncertainty; rotation std is per axis of the "
+                                    "robot-side rotation vector, shown next to roll/pitch/yaw for scale")
+    s.text(f"Residual RMS {result.residual_rms:.3g} px over markers and reflected body points.")
+    s.diagnostics(result.warnings)
+    s2 = rep.section("Per image: the patent's single-image estimate and the planar (IPPE) choice")
+    rows = []
+    for si in d["single_image"]:
+        Ts = np.asarray(si["T_r_c"])
+        rows.append({"image": si["name"], "t_r_c [mm]": np.round(Ts[:3, 3] * 1e3, 1).tolist(),
+                     "marker rms [px]": si["marker_rms_px"], "body rms [px]": si["body_rms_px"],
+                     "|Householder - patent|": si["householder_minus_patent"],
+                     "IPPE chosen": si["planar_choice"]["chosen"], "why": si["planar_choice"]["reason"]})
+    s2.table(rows, digits=4)
+    s3 = rep.section("Images: detected and reprojected points, frames m and ri")
+    images = images or {}
+    for k, o in enumerate(obs[:4]):
+        img = images.get(o.name)
+        if img is None and o.name in d.get("images", {}) and Path(d["images"][o.name]).exists():
+            import cv2
+
+            img = cv2.imread(d["images"][o.name], cv2.IMREAD_GRAYSCALE)
+        fig, ax = new_figure(size=(7.0, 5.4))
+        draw_image_overlay(cam, rect, body, o, T_r_c, T_c_m[k], image=img, ax=ax)
+        s3.figure(fig, caption=f"{o.name}: circles/plus = detected, crosses = reprojected from the estimate; "
+                               "axes x red, y green, z blue")
+    s4 = rep.section("Geometry")
+    ax = _frames_3d(T_r_c, T_c_m, body)
+    s4.figure(ax.figure, caption="robot frame r, camera c and mirror frames m_k (in r)")
+    layout = _layout(obs, body, rect)
+    mk, bd, _, _, _ = residual_model(cam, rect, layout, T_r_c[:3, :3], T_c_m[:, :3, :3])
+    p = {"rot_rc": np.zeros(3), "t_rc": T_r_c[:3, 3], "rot_cm": np.zeros((len(obs), 3)), "t_cm": T_c_m[:, :3, 3]}
+    fig, ax = new_figure()
+    ax.hist(np.concatenate([mk(p).ravel(), bd(p).ravel()]), bins=30, color="tab:gray")
+    ax.set_xlabel("reprojection residual [px]")
+    ax.set_ylabel("count")
+    s4.figure(fig, caption="residuals of markers and reflected body points (u and v)")
+    if "solver" in d and len(d["solver"]["cost_history"]) > 1:
+        fig, ax = new_figure()
+        ax.semilogy(d["solver"]["cost_history"], "o-")
+        ax.set_xlabel("iteration")
+        ax.set_ylabel("cost")
+        s4.figure(fig, caption="joint refinement: cost per accepted step")
+    return rep
+
+
