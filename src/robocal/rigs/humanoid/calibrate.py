@@ -87,13 +87,16 @@ def noise_weights(model: HumanoidModel, data: HumanoidDataset, x, *, corner_sigm
     noise plus the joint readings' error (quantisation to 0.1 deg is a uniform
     error of std ``0.1 deg / sqrt(12)``), which moves all corners of a view
     together. ``J_theta`` equals the offset Jacobian (an offset adds to the
-    reading), evaluated at ``x``.
+    reading), evaluated at ``x``, over the joints whose reading changes
+    between views: a joint that stays still (the head) has one constant
+    reading error, a bias the camera rotation absorbs, not noise.
     """
     V, N = data.corners.shape[:2]
     n = len(model.joint_names)
-    if joint_sigma > 0:
+    moving = np.ptp(data.theta, axis=0) > 0
+    if joint_sigma > 0 and np.any(moving):
         _, J = model.project(data.theta, data.feet, x, jacobian=True, check=False)
-        Jt = J[..., :n].reshape(V, 2 * N, n)
+        Jt = J[..., :n][..., moving].reshape(V, 2 * N, int(moving.sum()))
         S = corner_sigma ** 2 * np.eye(2 * N) + joint_sigma ** 2 * Jt @ Jt.transpose(0, 2, 1)
     else:
         S = np.broadcast_to(corner_sigma ** 2 * np.eye(2 * N), (V, 2 * N, 2 * N))
@@ -131,7 +134,7 @@ def build_problem(model: HumanoidModel, data: HumanoidDataset, free: Sequence[st
     Residuals: ``uv_pred - uv_meas`` [px] of each view, whitened by
     :func:`noise_weights` (so they are in units of the assumed noise; with
     ``joint_sigma = 0`` simply divided by ``corner_sigma``), shape
-    ``(V * N, 2)``, view-major. ``tie`` ties the RHipYawPitch offset to
+    ``(V, 2N)``: one observation per view. ``tie`` ties the RHipYawPitch offset to
     LHipYawPitch (one motor) when the tree does not already do so. Returns the
     problem and the per-view noise covariances (V, 2N, 2N) [px^2].
     """
@@ -144,7 +147,7 @@ def build_problem(model: HumanoidModel, data: HumanoidDataset, free: Sequence[st
 
     def fun(p):
         r = (model.project(theta, feet, p["p"], check=False) - meas).reshape(V, 2 * N)
-        return np.einsum("vij,vj->vi", W, r).reshape(V * N, 2)
+        return np.einsum("vij,vj->vi", W, r)
 
     def jac(p):
         _, J = model.project(theta, feet, p["p"], jacobian=True, check=False)
@@ -153,7 +156,9 @@ def build_problem(model: HumanoidModel, data: HumanoidDataset, free: Sequence[st
     units = model.parameter_units()
     scale = np.where(np.array(units) == "m", 1e-3, np.radians(0.5))
     prob = Problem().add_block("p", x0, fixed=fixed, labels=labels, unit=units, scale=scale)
-    prob.add_residuals(fun, name="corners", jacobian=jac if analytic else None, residual_dim=2)
+    # one observation per view: the whitening mixes the corners of a view (corner outliers are
+    # tested separately on the raw residuals, see calibrate)
+    prob.add_residuals(fun, name="views", jacobian=jac if analytic else None, residual_dim=2 * N)
     if tie and not model.tied and "RHipYawPitch" in labels and "LHipYawPitch" in labels:
         if ("RHipYawPitch" in free) != ("LHipYawPitch" in free):
             raise InputError("tie needs both LHipYawPitch and RHipYawPitch among the free parameters")

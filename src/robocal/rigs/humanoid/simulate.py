@@ -36,8 +36,9 @@ __all__ = [
 
 #: Joint sensor resolution of NAO's servos (seed 001: 0.1 deg) [rad].
 JOINT_RESOLUTION = np.radians(0.1)
-#: Head pose during the run: looking down at the raised feet (HeadYaw, HeadPitch) [rad].
-DEFAULT_HEAD = (0.0, 0.45)
+#: Head pose during the run: looking down at the raised feet (HeadYaw, HeadPitch) [rad];
+#: on the 0.1 deg grid so that the still head adds no constant reading error.
+DEFAULT_HEAD = (0.0, np.radians(25.8))
 #: Rest angles of the leg that is not being viewed (a straight leg) [rad].
 _REST = 0.0
 
@@ -172,8 +173,8 @@ def _views_ok(model, q, foot, params, margin, min_facing, min_clearance):
 
 def sample_poses(model: HumanoidModel, n_per_foot: int, rng: np.random.Generator, *,
                  truth: Truth | None = None, head=DEFAULT_HEAD, margin: float = 15.0,
-                 min_facing: float = 0.5, min_clearance: float = 0.2, batch: int = 4000,
-                 max_batches: int = 50) -> tuple[list, np.ndarray]:
+                 min_facing: float = 0.5, min_clearance: float = 0.2, batch: int | None = None,
+                 max_batches: int = 200) -> tuple[list, np.ndarray]:
     """Random leg poses within the joint limits that show one board fully.
 
     For each view, the joints of the viewed leg are drawn uniformly within
@@ -196,6 +197,7 @@ def sample_poses(model: HumanoidModel, n_per_foot: int, rng: np.random.Generator
     n = len(names)
     lim = np.array([model.tree.joint(j).limits or (-np.pi, np.pi) for j in names])
     alpha = params[:n]
+    batch = batch or max(64, 10 * n_per_foot)  # about 20 % of random leg poses show the board
     feet, poses = [], []
     for foot in FEET:
         legs = [names.index(j) for j in model.mounts[foot].leg_joints]

@@ -1,0 +1,240 @@
+"""Outputs of a humanoid calibration: files a robot framework loads, plots, the HTML report.
+
+* ``result.json`` -- shared schema (:meth:`HumanoidCalibration.to_result`);
+* ``offsets.yaml`` -- per-joint offset table (deg and rad) and the camera
+  mounting correction, the form a robot framework loads;
+* ``<robot>_calibrated.urdf`` -- the URDF with the offsets and the camera
+  correction folded into the joint origins (use it with raw sensor angles);
+* ``report.html`` -- reprojection overlays of a few views, residual
+  histograms, per-view RMS, parameter table with uncertainties, the
+  identifiability analysis and every warning.
+
+Plot functions are pure: they take ``ax=None`` and return the axes.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from robocal.io import CalibrationResult, atomic_write_text
+from robocal.report import Report, new_figure
+from robocal.rigs.humanoid.calibrate import HumanoidCalibration
+
+__all__ = [
+    "overlay_image",
+    "plot_residual_histograms",
+    "plot_view_rms",
+    "plot_cost",
+    "offsets_document",
+    "build_report",
+    "report_from_result",
+    "write_outputs",
+]
+
+
+def overlay_image(cal: HumanoidCalibration, view: int, *, magnify: float = 20.0) -> np.ndarray:
+    """RGB image of one view: detected corners (green), reprojected ones (red), and
+    the residual vectors magnified ``magnify`` times (yellow)."""
+    import cv2
+
+    from robocal.rigs.humanoid.detect import load_image
+
+    img = cal.data.images[view]
+    if img is None:
+        img = np.full((cal.model.camera.height, cal.model.camera.width), 128, np.uint8)
+    elif not isinstance(img, np.ndarray):
+        img = load_image(img)
+    rgb = cv2.cvtColor(np.asarray(img, np.uint8), cv2.COLOR_GRAY2RGB) if np.ndim(img) == 2 else np.array(img)
+    det = cal.data.corners[view]
+    pred = det + cal.residuals[view]
+    for d, p in zip(det, pred):
+        end = d + magnify * (p - d)
+        cv2.line(rgb, _pt(d), _pt(end), (240, 200, 0), 1, cv2.LINE_AA)
+        cv2.circle(rgb, _pt(d), 4, (0, 200, 0), 1, cv2.LINE_AA)
+        cv2.drawMarker(rgb, _pt(p), (230, 0, 0), cv2.MARKER_CROSS, 7, 1, cv2.LINE_AA)
+    return rgb
+
+
+def _pt(p):
+    return (int(round(float(p[0]))), int(round(float(p[1]))))
+
+
+def plot_residual_histograms(residuals, ax=None):
+    """Histograms of the x and y corner residuals [px] on one axes; returns the axes."""
+    if ax is None:
+        _, ax = new_figure()
+    r = np.asarray(residuals).reshape(-1, 2)
+    lim = max(float(np.max(np.abs(r))), 1e-6)
+    bins = np.linspace(-lim, lim, 41)
+    ax.hist(r[:, 0], bins=bins, alpha=0.6, label=f"x (RMS {np.sqrt(np.mean(r[:, 0] ** 2)):.3f} px)")
+    ax.hist(r[:, 1], bins=bins, alpha=0.6, label=f"y (RMS {np.sqrt(np.mean(r[:, 1] ** 2)):.3f} px)")
+    ax.set_xlabel("residual (predicted - detected) [px]")
+    ax.set_ylabel("corners")
+    ax.legend()
+    return ax
+
+
+def plot_view_rms(names, feet, rms, ax=None):
+    """Bar chart of per-view residual RMS [px], coloured by foot; returns the axes."""
+    if ax is None:
+        _, ax = new_figure(size=(7.0, 3.2))
+    colours = ["C0" if f == "left" else "C1" for f in feet]
+    ax.bar(np.arange(len(rms)), rms, color=colours)
+    ax.set_xticks(np.arange(len(rms)))
+    ax.set_xticklabels(names, rotation=90, fontsize=7)
+    ax.set_ylabel("RMS [px]")
+    ax.set_title("per-view residual RMS (blue: left board, orange: right board)")
+    return ax
+
+
+def plot_cost(history, ax=None):
+    """Cost at each accepted LM iterate (log scale); returns the axes."""
+    if ax is None:
+        _, ax = new_figure(size=(5.0, 3.0))
+    ax.semilogy(np.arange(len(history)), history, "o-")
+    ax.set_xlabel("LM iteration")
+    ax.set_ylabel("cost (whitened)")
+    return ax
+
+
+def offsets_document(cal: HumanoidCalibration) -> dict:
+    """Per-joint offset table and camera correction, units explicit (``offsets.yaml``)."""
+    joints = {}
+    for r in cal.offsets_table():
+        joints[r["joint"]] = {
+            "offset_deg": None if r["offset [deg]"] is None else round(r["offset [deg]"], 6),
+            "std_deg": None if r["std [deg]"] is None else round(r["std [deg]"], 6),
+            "estimated": r["estimated"],
+        }
+    cam = cal.camera_correction()
+    return {
+        "description": "q = theta (sensor) + offset; camera: T_head_camera = T_head_camera0 @ Trans(x, y, 0) @ "
+                       "Rz(yaw) Ry(pitch) Rx(roll); null = not determined by the data (left at 0 in the URDF)",
+        "joint_offsets": joints,
+        "camera_correction": {
+            "frame": cal.model.camera_link,
+            "roll_deg": _deg(cam["roll"]), "pitch_deg": _deg(cam["pitch"]), "yaw_deg": _deg(cam["yaw"]),
+            "x_mm": _mm(cam["x"]), "y_mm": _mm(cam["y"]),
+        },
+    }
+
+
+def _deg(v):
+    return None if v is None else round(float(np.degrees(v)), 6)
+
+
+def _mm(v):
+    return None if v is None else round(float(v) * 1e3, 6)
+
+
+def build_report(cal: HumanoidCalibration, *, title: str = "NAO leg and camera calibration", truth=None,
+                 n_overlays: int = 4, extra_sections=()) -> Report:
+    """The HTML report of one calibration (optionally with the simulation truth)."""
+    rep = Report(title, subtitle=f"{cal.data.n_views} views, {len(cal.free)} parameters, seed 001 method")
+    lsq = cal.lsq
+    s = rep.section("Summary")
+    s.table([
+        {"quantity": "views used", "value": cal.data.n_views},
+        {"quantity": "residual RMS x [px]", "value": float(cal.rms_xy[0])},
+        {"quantity": "residual RMS y [px]", "value": float(cal.rms_xy[1])},
+        {"quantity": "corner noise used [px]", "value": cal.corner_sigma},
+        {"quantity": "joint resolution [deg]", "value": float(np.degrees(cal.joint_resolution))},
+        {"quantity": "residual variance / model", "value": float(lsq.residual_variance)},
+        {"quantity": "LM iterations (from zero)", "value": cal.first_iterations},
+        {"quantity": "Jacobian rank", "value": f"{lsq.rank + len(cal.held)} of {len(cal.free)}"},
+        {"quantity": "condition number (scaled)", "value": float(lsq.condition_number)},
+        {"quantity": "outlier corners (> 3 sigma)", "value": len(cal.outlier_corners)},
+    ])
+    s.text("Standard deviations are sampling errors under the noise model (corner noise plus joint "
+           "quantisation), scaled by the residual variance; they say nothing about model error.")
+    s.diagnostics(cal.warnings)
+    for msg in cal.messages:
+        s.text(msg, cls="warn")
+    p = rep.section("Parameters")
+    p.table(cal.parameter_rows(truth), caption="estimate and 1-sigma uncertainty; '—' = not identifiable")
+    o = rep.section("Per-joint offsets and camera correction")
+    o.table([{k: v for k, v in r.items() if k != "offset [rad]"} for r in cal.offsets_table()])
+    doc = offsets_document(cal)["camera_correction"]
+    o.table([{"correction": k, "value": v} for k, v in doc.items() if k != "frame"],
+            caption=f"camera mounting correction in {doc['frame']}")
+    i = rep.section("Identifiability")
+    i.text(f"Jacobian rank {lsq.rank + len(cal.held)} of {len(cal.free)} free parameters; condition number of "
+           f"the column-scaled Jacobian {lsq.condition_number:.3g}.")
+    if cal.unidentifiable:
+        i.text("Not determined by these poses (no value reported): " + ", ".join(cal.unidentifiable), cls="warn")
+    i.table([{"parameter a": a, "parameter b": b, "correlation": c} for a, b, c in lsq.correlations[:8]],
+            caption="strongest correlations")
+    r = rep.section("Residuals")
+    fig, ax = new_figure(1, 2, size=(11, 3.6))
+    plot_residual_histograms(cal.residuals, ax=ax[0])
+    plot_cost(lsq.cost_history, ax=ax[1])
+    r.figure(fig, "corner residual histograms; cost per LM iterate")
+    fig, ax = new_figure(size=(9, 3.2))
+    plot_view_rms(cal.data.names, cal.data.feet, cal.view_rms, ax=ax)
+    r.figure(fig, "per-view residual RMS")
+    r.table([{"view": nm, "foot": f, "RMS [px]": float(v)} for nm, f, v in
+             zip(cal.data.names, cal.data.feet, cal.view_rms)])
+    ov = rep.section("Reprojection overlays")
+    order = np.argsort(-cal.view_rms)
+    picks = list(dict.fromkeys([int(order[0]), int(order[-1])] + list(range(cal.data.n_views))))[:n_overlays]
+    for v in picks:
+        ov.image(overlay_image(cal, v), f"{cal.data.names[v]} ({cal.data.feet[v]} board, RMS "
+                                        f"{cal.view_rms[v]:.3f} px): green detected, red reprojected, "
+                                        f"yellow residual x20")
+    for sec in extra_sections:
+        rep.sections.append(sec)
+    return rep
+
+
+def report_from_result(result: CalibrationResult, *, title: str = "NAO leg and camera calibration") -> Report:
+    """A report rebuilt from a saved ``result.json`` (tables and per-view RMS; no images)."""
+    d = result.diagnostics
+    rep = Report(title, subtitle=f"from {result.command or 'a saved result'} ({result.created})")
+    s = rep.section("Summary")
+    s.table([{"quantity": k, "value": d.get(k)} for k in
+             ("n_views", "rms_x_px", "rms_y_px", "iterations", "rank", "n_free", "condition_number")])
+    s.diagnostics(result.warnings)
+    rows = []
+    for k, v in result.estimate.items():
+        unit = result.units.get(k)
+        f = np.degrees(1.0) if unit == "rad" else 1e3
+        sd = result.std.get(k)
+        rows.append({"parameter": k, "value": None if v is None else v * f,
+                     "std": None if sd is None else sd * f, "unit": "deg" if unit == "rad" else "mm"})
+    rep.section("Parameters").table(rows)
+    views = d.get("views") or []
+    if views:
+        sec = rep.section("Residuals per view")
+        fig, ax = new_figure(size=(9, 3.2))
+        plot_view_rms([v["name"] for v in views], [v["foot"] for v in views], [v["rms_px"] for v in views], ax=ax)
+        sec.figure(fig, "per-view residual RMS")
+    corr = d.get("correlations") or []
+    if corr:
+        rep.section("Identifiability").table([{"parameter a": a, "parameter b": b, "correlation": c}
+                                              for a, b, c in corr])
+    return rep
+
+
+def write_outputs(cal: HumanoidCalibration, out_dir, *, inputs=(), command: str | None = None, truth=None,
+                  report: Report | None = None, quiet: bool = False) -> list[Path]:
+    """Write result.json, report.html, offsets.yaml and the corrected URDF into ``out_dir``."""
+    from robocal.cli import write_run
+    from robocal.io import hash_inputs
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    result = cal.to_result(inputs=hash_inputs(inputs), command=command)
+    rep = report if report is not None else build_report(cal, truth=truth)
+    paths = list(write_run(out_dir, result, rep, quiet=quiet))
+    paths.append(atomic_write_text(out_dir / "offsets.yaml",
+                                   yaml.safe_dump(offsets_document(cal), sort_keys=False, width=200)))
+    urdf = out_dir / f"{cal.model.tree.name}_calibrated.urdf"
+    cal.write_urdf(urdf)
+    paths.append(urdf)
+    if not quiet:
+        for p in paths[-2:]:
+            print(f"wrote {p}")
+    return paths

@@ -1,0 +1,112 @@
+"""Bad input: missing images, images without a board, joints out of limits, mismatched counts."""
+
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+
+from robocal.errors import FileFormatError, InconsistentDataError, InputError, NotEnoughDataError
+from robocal.rigs.humanoid.calibrate import calibrate
+from robocal.rigs.humanoid.dataset import load_dataset
+
+EXAMPLE = Path(__file__).resolve().parents[3] / "examples" / "humanoid"
+
+
+@pytest.fixture
+def example(tmp_path):
+    shutil.copytree(EXAMPLE, tmp_path / "ex")
+    return tmp_path / "ex" / "run.yaml"
+
+
+def _edit(path, fn):
+    d = yaml.safe_load(path.read_text())
+    fn(d)
+    path.write_text(yaml.safe_dump(d, sort_keys=False))
+
+
+def test_example_loads_and_detects(example):
+    model, data, info = load_dataset(example)
+    assert data.n_views == 8 and np.all(np.isfinite(data.corners))
+    assert info["joint_resolution"] == pytest.approx(np.radians(0.1))
+    assert len(info["inputs"]) == 9
+
+
+def test_missing_image_file(example):
+    (example.parent / "images" / "view003.png").unlink()
+    with pytest.raises(FileFormatError, match="view003.png"):
+        load_dataset(example)
+
+
+def test_image_without_a_board_is_dropped_with_a_message(example):
+    cv2.imwrite(str(example.parent / "images" / "view002.png"), np.full((480, 640), 128, np.uint8))
+    model, data, _ = load_dataset(example)
+    assert np.all(np.isnan(data.corners[2])) and np.all(np.isfinite(data.corners[[0, 1, 3]]))
+    assert any("view002" in m and "dropped" in m for m in data.messages)
+    cal = calibrate(model, data)
+    assert cal.data.n_views == 7 and "view002" not in cal.data.names
+    assert any(w.code == "dropped" for w in cal.warnings)
+
+
+def test_no_board_in_any_image(example):
+    for p in (example.parent / "images").glob("*.png"):
+        cv2.imwrite(str(p), np.full((480, 640), 200, np.uint8))
+    model, data, _ = load_dataset(example)
+    with pytest.raises(NotEnoughDataError, match="no view with a fully detected board"):
+        calibrate(model, data)
+
+
+def test_image_of_the_wrong_size(example):
+    cv2.imwrite(str(example.parent / "images" / "view001.png"), np.zeros((240, 320), np.uint8))
+    with pytest.raises(InputError, match="view001.*320 x 240"):
+        load_dataset(example)
+
+
+def test_unreadable_image(example):
+    (example.parent / "images" / "view001.png").write_bytes(b"not a png")
+    with pytest.raises(FileFormatError, match="cannot read image"):
+        load_dataset(example)
+
+
+def test_joint_angle_out_of_limits(example):
+    def fn(d):
+        k = d["joints"]["names"].index("LKneePitch")
+        d["joints"]["records"][1][k] = 135.0
+    _edit(example, fn)
+    with pytest.raises(InputError, match=r"records\[1\]: joint 'LKneePitch' = 135.00 deg is outside its limits"):
+        load_dataset(example)
+
+
+@pytest.mark.parametrize("field", ["images", "feet", "records"])
+def test_mismatched_counts(example, field):
+    def fn(d):
+        if field == "records":
+            d["joints"]["records"].pop()
+        else:
+            d[field].pop()
+    _edit(example, fn)
+    with pytest.raises(InconsistentDataError, match="one foot and one joint record per image"):
+        load_dataset(example)
+
+
+def test_malformed_joint_records(example):
+    _edit(example, lambda d: d["joints"]["names"].remove("RAnkleRoll"))
+    with pytest.raises(FileFormatError, match="each row must hold"):
+        load_dataset(example)
+    _edit(example, lambda d: [row.pop() for row in d["joints"]["records"]])
+    with pytest.raises(InputError, match="missing joint angles for \\['RAnkleRoll'\\]"):
+        load_dataset(example)
+
+
+def test_bad_fields(example):
+    _edit(example, lambda d: d["feet"].__setitem__(0, "middle"))
+    with pytest.raises(FileFormatError, match="feet"):
+        load_dataset(example)
+    _edit(example, lambda d: (d["feet"].__setitem__(0, "left"), d["joints"].__setitem__("unit", "grad")))
+    with pytest.raises(FileFormatError, match="unit"):
+        load_dataset(example)
+    _edit(example, lambda d: (d["joints"].__setitem__("unit", "deg"), d.__setitem__("format", "other/1")))
+    with pytest.raises(FileFormatError, match="format"):
+        load_dataset(example)
