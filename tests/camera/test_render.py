@@ -146,3 +146,37 @@ def test_render_bad_inputs():
         render_planar_target(None, T, board)
     with pytest.raises(InputError, match="texture image"):
         render_plane_texture(PLAIN, T, np.zeros((3, 3, 3)), 0.1)
+
+
+def test_plane_reaching_behind_the_camera_is_drawn_pixel_exact():
+    # A floor-like plane seen at a grazing angle that extends behind the camera
+    # (no bounding outline): every pixel's colour is its ray's plane point's colour.
+    cam = CameraModel(600, 605, 321.3, 238.7, (-0.28, 0.11, 8e-4, -6e-4, -0.02), 640, 480)
+    board = Checkerboard(30, 30, 0.1, margin=0.0)
+    T = transform_from_rotvec([1.45, 0.0, 0.0], [-1.5, 0.15, -0.5])
+    img = render_planar_target(cam, T, board, black=0, white=255, background=128)
+    rng = np.random.default_rng(3)
+    uv = rng.uniform([1, 1], [638, 478], (800, 2)).round()
+    R, t = T[:3, :3], T[:3, 3]
+
+    def plane_point(q):
+        rays = cam.rays_from_pixels(q)
+        lam = (R[:, 2] @ t) / (rays @ R[:, 2])
+        return (lam[:, None] * rays - t) @ R, lam  # target-frame points, depth along the ray
+
+    p, lam = plane_point(uv)
+    ok = lam > 0
+    refl, alpha = board.shade(p[:, 0], p[:, 1], 1e-9, 1e-9)
+    # away from edges only: the pixel's footprint on the plane (very long near the
+    # horizon) must not reach a square edge
+    foot = np.zeros(len(uv))
+    for d in ([0.6, 0], [-0.6, 0], [0, 0.6], [0, -0.6]):
+        q, lq = plane_point(uv + d)
+        foot = np.maximum(foot, np.where(lq > 0, np.abs(q - p)[:, :2].max(axis=1), np.inf))
+    fx, fy = (p[:, 0] / 0.1) % 1, (p[:, 1] / 0.1) % 1
+    clear = ok & (np.minimum(np.minimum(fx, 1 - fx), np.minimum(fy, 1 - fy)) * 0.1 > foot) & (alpha == 1)
+    assert clear.sum() > 50
+    got = img[uv[clear, 1].astype(int), uv[clear, 0].astype(int)]
+    assert np.array_equal(got, np.where(refl[clear] > 0.5, 255, 0))
+    behind = ~ok
+    assert behind.sum() > 50 and np.all(img[uv[behind, 1].astype(int), uv[behind, 0].astype(int)] == 128)
