@@ -235,3 +235,20 @@ def test_points_behind_the_camera(setup, monkeypatch):
     monkeypatch.setattr(mod, "solve_pnp", behind)
     with pytest.raises(InconsistentDataError, match="behind the camera"):
         calibrate_single(cam, scene.rectangle, scene.body_points_r, o)
+
+
+def test_camera_moved_between_images_is_flagged():
+    from robocal.geometry import matrix_from_rotvec, transform_from
+
+    rng = np.random.default_rng(11)
+    cam, scene = default_setup(3, rng)
+    obs = simulate_observations(cam, scene, rng, sigma_px=0.3)
+    ok = calibrate(cam, scene.rectangle, scene.body_points_r, obs, sigma_px=0.3)
+    assert "inconsistent_data" not in [w.code for w in ok.warnings]
+    # the camera is knocked by 6 deg before the third image
+    bumped = transform_from(matrix_from_rotvec([0.0, 0.1, 0.0]), [0.0, 0.0, 0.0]) @ scene.T_c_r
+    moved = MirrorScene(bumped, scene.T_c_m[2], scene.body_points_r, scene.rectangle)
+    obs[2] = simulate_observations(cam, moved, rng, sigma_px=0.3)[0]
+    bad = calibrate(cam, scene.rectangle, scene.body_points_r, obs, sigma_px=0.3)
+    w = [w for w in bad.warnings if w.code == "inconsistent_data"]
+    assert w and 2 in w[0].indices
