@@ -252,3 +252,28 @@ def test_camera_moved_between_images_is_flagged():
     bad = calibrate(cam, scene.rectangle, scene.body_points_r, obs, sigma_px=0.3)
     w = [w for w in bad.warnings if w.code == "inconsistent_data"]
     assert w and 2 in w[0].indices
+
+
+def test_fuzzed_observations_fail_cleanly(setup):
+    # Random marker quadrilaterals / body points: a result or a RobocalError, never anything else.
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from robocal.errors import RobocalError
+
+    cam, scene, o = _obs(setup)
+
+    @settings(max_examples=60, deadline=None)
+    @given(st.integers(0, 2**32 - 1), st.floats(0.0, 200.0), st.integers(0, 20))
+    def run(seed, jitter, n_body):
+        rng = np.random.default_rng(seed)
+        m = o.marker_uv + rng.normal(scale=jitter, size=(4, 2))
+        ids = np.sort(rng.choice(20, size=n_body, replace=False))
+        b = o.body_uv[ids] + rng.normal(scale=jitter / 10, size=(n_body, 2))
+        try:
+            r = calibrate_single(cam, scene.rectangle, scene.body_points_r, MirrorObservation(m, b, ids))
+        except RobocalError:
+            return
+        assert np.all(np.isfinite(r.T_r_c))
+
+    run()
