@@ -49,3 +49,31 @@ def test_end_to_end_from_rendered_images(model):
     assert cal.rms_xy.max() < 0.3
     joint = [abs(r["value"] - r["truth"]) for r in rows if not r["parameter"].startswith(("camera", "board"))]
     assert max(joint) < 0.3  # deg, from true offsets of ~0.5 deg
+
+
+def test_calibrated_board_poses_agree_with_opencv_pnp(model):
+    # Independent check: OpenCV's PnP on each view's detected corners vs the board pose the
+    # calibrated kinematic chain predicts; also the nominal (uncalibrated) chain, which must be worse.
+    from robocal.camera import solve_pnp
+    from robocal.rigs.humanoid.model import FEET
+
+    rng = np.random.default_rng(23)
+    data = simulate_dataset(model, rng, n_per_foot=4, render=True)
+    cal = calibrate(model, data)
+    n = len(model.joint_names)
+
+    def angle(Ta, Tb):
+        c = (np.trace(Ta[:3, :3].T @ Tb[:3, :3]) - 1) / 2
+        return np.degrees(np.arccos(np.clip(c, -1, 1)))
+
+    cal_err, nominal_err = [], []
+    for v, foot in enumerate(cal.data.feet):
+        T_pnp = solve_pnp(model.camera, model.object_points, cal.data.corners[v]).T_cam_obj
+        fi = FEET.index(foot)
+        p = cal.params
+        T_cal = model.T_opt_board(cal.data.theta[v][None] + p[:n], foot, p[n:n + 5], p[n + 5 + 3 * fi:n + 8 + 3 * fi])[0]
+        T_nom = model.T_opt_board(cal.data.theta[v][None], foot)[0]
+        cal_err.append(angle(T_pnp, T_cal))
+        nominal_err.append(angle(T_pnp, T_nom))
+    assert np.median(cal_err) < 0.25, cal_err
+    assert np.median(nominal_err) > 2 * np.median(cal_err), (nominal_err, cal_err)

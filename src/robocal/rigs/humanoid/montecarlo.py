@@ -18,7 +18,7 @@ from robocal.rigs.humanoid.calibrate import calibrate, resolve_parameters
 from robocal.rigs.humanoid.model import HumanoidModel
 from robocal.rigs.humanoid.simulate import JOINT_RESOLUTION, sample_poses, simulate_dataset
 
-__all__ = ["calibration_monte_carlo"]
+__all__ = ["calibration_monte_carlo", "repeatability"]
 
 
 def calibration_monte_carlo(model: HumanoidModel, n_trials: int, rng: np.random.Generator, *,
@@ -60,3 +60,31 @@ def calibration_monte_carlo(model: HumanoidModel, n_trials: int, rng: np.random.
         return est, std
 
     return monte_carlo(simulate, estimate, n_trials, rng, labels=labels, progress=progress)
+
+
+def repeatability(model: HumanoidModel, n_runs: int, rng: np.random.Generator, *, n_per_foot: int = 3,
+                  truth=None, noise_px: float = 0.3, render: bool = False, parameters="seed") -> list[dict]:
+    """Several calibration runs of one robot (same offsets, new poses each run), as the seed's
+    three consecutive runs: per parameter the mean, the spread over runs and the mean reported
+    std [deg or mm].
+    """
+    from robocal.rigs.humanoid.simulate import draw_truth
+
+    truth = truth if truth is not None else draw_truth(model, rng)
+    labels = resolve_parameters(model, parameters)
+    units = model.parameter_units()
+    est, std = [], []
+    for _ in range(n_runs):
+        data = simulate_dataset(model, rng, n_per_foot=n_per_foot, truth=truth, noise_px=noise_px, render=render)
+        cal = calibrate(model, data, parameters=labels)
+        est.append([np.nan if cal.value(lab) is None else cal.value(lab) for lab in labels])
+        std.append([np.nan if cal.std(lab) is None else cal.std(lab) for lab in labels])
+    est, std = np.array(est), np.array(std)
+    rows = []
+    for k, lab in enumerate(labels):
+        i = model.parameter_labels().index(lab)
+        f = np.degrees(1.0) if units[i] == "rad" else 1e3
+        rows.append({"parameter": lab, "unit": "deg" if units[i] == "rad" else "mm", "truth": truth.params[i] * f,
+                     "mean": float(np.nanmean(est[:, k]) * f), "spread (std over runs)": float(np.nanstd(est[:, k], ddof=1) * f),
+                     "mean reported std": float(np.nanmean(std[:, k]) * f)})
+    return rows
