@@ -206,6 +206,7 @@ class HumanoidCalibration:
     joint_resolution: float = 0.0
     first_iterations: int = 0
     held: list = field(default_factory=list)
+    first_cost_history: np.ndarray | None = None
 
     # -- queries -----------------------------------------------------------------------------
     @property
@@ -288,6 +289,7 @@ class HumanoidCalibration:
             "iterations": self.first_iterations,
             "iterations_reweighted_pass": lsq.iterations,
             "cost_history": lsq.cost_history,
+            "cost_history_first_pass": self.first_cost_history,
             "status": lsq.status,
             "message": lsq.message,
             "rank": lsq.rank,
@@ -417,6 +419,7 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
     res = solve(prob, method=method, jac=None if jac == "analytic" else jac, progress=progress,
                 outlier_sigma=outlier_sigma)
     first_iterations = res.iterations
+    first_history = np.asarray(res.cost_history)
     if corner_sigma is None and joint_sigma > 0:
         # Second pass with the corner noise measured where joint errors cannot reach.
         sig = corner_noise(model, used, res.params["p"].reshape(-1))
@@ -453,4 +456,4 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
                                               f"dropped: {[data.names[i] for i in dropped]}",
                                    indices=tuple(dropped)))
     return HumanoidCalibration(model, used, res, params, free + held, resid, view_rms, outliers, messages,
-                               warnings, score, sig, joint_resolution, first_iterations, held)
+                               warnings, score, sig, joint_resolution, first_iterations, held, first_history)

@@ -90,13 +90,19 @@ def plot_view_rms(names, feet, rms, ax=None):
     return ax
 
 
-def plot_cost(history, ax=None):
-    """Cost at each accepted LM iterate (log scale); returns the axes."""
+def plot_cost(history, ax=None, *, first=None):
+    """Cost at each accepted LM iterate (log scale); ``first``: the pass from zero before it.
+    Returns the axes."""
     if ax is None:
         _, ax = new_figure(size=(5.0, 3.0))
-    ax.semilogy(np.arange(len(history)), history, "o-")
+    k0 = 0
+    if first is not None and len(first):
+        ax.semilogy(np.arange(len(first)), first, "o-", label="pass 1: from zero, 0.3 px assumed")
+        k0 = len(first) - 1
+    ax.semilogy(k0 + np.arange(len(history)), history, "s-", label="pass 2: measured corner noise")
     ax.set_xlabel("LM iteration")
-    ax.set_ylabel("cost (whitened)")
+    ax.set_ylabel("cost (whitened residuals)")
+    ax.legend()
     return ax
 
 
@@ -170,7 +176,7 @@ def build_report(cal: HumanoidCalibration, *, title: str = "NAO leg and camera c
     r = rep.section("Residuals")
     fig, ax = new_figure(1, 2, size=(11, 3.6))
     plot_residual_histograms(cal.residuals, ax=ax[0])
-    plot_cost(lsq.cost_history, ax=ax[1])
+    plot_cost(lsq.cost_history, ax=ax[1], first=cal.first_cost_history)
     r.figure(fig, "corner residual histograms; cost per LM iterate")
     fig, ax = new_figure(size=(9, 3.2))
     plot_view_rms(cal.data.names, cal.data.feet, cal.view_rms, ax=ax)
