@@ -277,3 +277,19 @@ def test_fuzzed_observations_fail_cleanly(setup):
         assert np.all(np.isfinite(r.T_r_c))
 
     run()
+
+
+def test_marker_covariance_agrees_with_the_camera_pnp_covariance(setup):
+    # For one image the joint information separates into the two PnPs: the mirror
+    # translation's marginal covariance must equal robocal.camera.pnp_covariance's
+    # (OpenCV-Rodrigues Jacobian), an independent check of this rig's Jacobian.
+    from robocal.camera import pnp_covariance
+    from robocal.rigs.mirror.calibrate import predicted_covariance
+
+    cam, scene = setup
+    obs = simulate_observations(cam, scene, np.random.default_rng(0), sigma_px=0.5)
+    full = predicted_covariance(cam, scene.rectangle, scene.body_points_r, scene.T_r_c, scene.T_c_m, obs, 0.5,
+                                full=True)
+    ours = full[9:12, 9:12]
+    ref = pnp_covariance(cam, scene.rectangle.object_points(), scene.T_c_m[0], 0.5)[3:, 3:]
+    assert np.allclose(ours, ref, rtol=1e-5, atol=1e-12 * np.abs(ref).max())

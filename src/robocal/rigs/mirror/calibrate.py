@@ -554,7 +554,7 @@ def _layout(obs_list, body_points_r, rectangle):
 
 
 def predicted_covariance(camera: CameraModel, rectangle: MarkerRectangle, body_points_r, T_r_c, T_c_m,
-                         obs_list, sigma_px: float) -> np.ndarray:
+                         obs_list, sigma_px: float, *, full: bool = False) -> np.ndarray:
     """First-order covariance of ``(rot_rc [rad], t_rc [m])`` (6, 6) for K images at given poses.
 
     ``sigma_px^2 (J^T J)^-1`` of the joint problem, marginal over the mirror
@@ -562,6 +562,8 @@ def predicted_covariance(camera: CameraModel, rectangle: MarkerRectangle, body_p
     simulated truth, for the Monte Carlo comparison. Only the observation
     layout (which points are seen) is taken from ``obs_list``. For K = 1 it is
     the first-order covariance of the patent's single-image estimate.
+    With ``full=True`` the whole ``(6 + 6K, 6 + 6K)`` matrix is returned, in
+    the order ``rot_rc, t_rc, rot_cm (K x 3), t_cm (K x 3)``.
     """
     T_r_c = np.asarray(T_r_c, dtype=float)
     T_c_m = np.asarray(T_c_m, dtype=float).reshape(-1, 4, 4)
@@ -569,7 +571,7 @@ def predicted_covariance(camera: CameraModel, rectangle: MarkerRectangle, body_p
     prob, _ = _problem(camera, rectangle, layout, T_r_c, T_c_m, sigma_px)
     J = np.asarray(prob.jacobian_at(None, jac="analytic"))
     cov = np.linalg.inv(J.T @ J)  # residuals are already divided by sigma_px
-    return cov[:6, :6]
+    return cov if full else cov[:6, :6]
 
 
 @dataclass

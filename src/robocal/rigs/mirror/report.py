@@ -40,7 +40,7 @@ def result_from_calibration(cal: MirrorCalibration, *, inputs=None, image_paths=
     singles = []
     for s in cal.singles:
         singles.append({
-            "name": s.steps and s.choice and None,
+            "name": None,
             "T_r_c": s.T_r_c.tolist(),
             "T_c_m": s.T_c_m.tolist(),
             "T_c_ri": s.steps.T_c_ri.tolist(),
