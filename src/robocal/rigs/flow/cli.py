@@ -1,0 +1,267 @@
+"""``robocal flow simulate | odometry | calibrate | evaluate`` and the demo."""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from robocal.cli import DemoContext, DemoOutcome, Rig
+from robocal.cli._common import RawHelp, add_out_argument, add_seed_argument, examples_epilog, prepare_out_dir, progress, write_run
+from robocal.errors import InputError
+from robocal.io import CalibrationResult, atomic_write_text
+from robocal.report import Report
+from robocal.rigs.flow.evaluate import evaluate_trajectory
+from robocal.rigs.flow.kernel import FlowConfig
+from robocal.rigs.flow.log import load_run
+from robocal.rigs.flow.odometry import dead_reckon
+from robocal.rigs.flow.simulate import TEXTURES, max_speed, simulate_run
+from robocal.rigs.flow.workflow import (
+    _traj_section,
+    array_yaml,
+    calibration_result,
+    calibration_run,
+    default_sim,
+    evaluation_run,
+    odometry_result,
+    odometry_run,
+    quality_figure,
+    velocity_figure,
+    write_simulation,
+)
+
+__all__ = ["RIG", "demo"]
+
+DESCRIPTION = """Dead reckoning from several downward optical-flow sensors (seed 003, PX4FLOW-class):
+SAD block matching + sub-pixel refinement + gyro compensation per sensor, the rigid-body
+least squares A u = b over the array, pose integration, array calibration, ATE/RPE.
+Log format: see docs/rigs/flow.md (run.yaml + per-sensor flow.csv or raw frames.npz)."""
+
+
+def _flow_config(args) -> FlowConfig:
+    return FlowConfig(subpixel=args.subpixel, refine=args.refine, search=args.search)
+
+
+def _add_flow_args(p):
+    p.add_argument("--subpixel", default="equiangular", choices=("none", "half", "quarter", "parabolic", "equiangular"),
+                   help="sub-pixel method of the block matcher (half = PX4FLOW)")
+    p.add_argument("--refine", default="none", choices=("none", "lk"), help="frame-level Gauss-Newton refinement")
+    p.add_argument("--search", type=int, default=4, help="integer search range, +/- px")
+    p.add_argument("--no-progress", action="store_true", help="never show progress bars")
+
+
+def cmd_simulate(args) -> int:
+    if args.duration <= 0:
+        raise InputError(f"--duration must be > 0 s, got {args.duration}")
+    gaps = ()
+    if args.gap:
+        try:
+            gaps = tuple(tuple(float(v) for v in g.split(",")) for g in args.gap)
+        except ValueError:
+            raise InputError("--gap takes X,Y,RADIUS in metres, e.g. --gap 0.5,0.2,0.05") from None
+        if any(len(g) != 3 for g in gaps):
+            raise InputError("--gap takes X,Y,RADIUS in metres, e.g. --gap 0.5,0.2,0.05")
+    sim = default_sim(args.trajectory, args.duration, texture=args.texture, supersample=args.supersample, gaps=gaps,
+                      speed=args.speed)
+    sim.camera = type(sim.camera)(rate=args.rate)
+    out = prepare_out_dir(args.out, "flow-simulate")
+    vmax = max_speed(sim)
+    if args.speed * 1.3 > vmax:
+        print(f"warning: speed {args.speed} m/s approaches the sensors' ceiling {vmax:.2f} m/s "
+              "((S + 0.5) h rate / f); flow will alias")
+    run = simulate_run(sim, np.random.default_rng(args.seed))
+    paths = write_simulation(run, out, frames=not args.no_frames, flow_config=_flow_config(args),
+                             progress=lambda it, desc: progress(it, desc=desc, enabled=not args.no_progress))
+    for p in paths.values():
+        print(f"wrote {p}")
+    print(f"texture: {run.texture_note}")
+    return 0
+
+
+def cmd_odometry(args) -> int:
+    spec = load_run(args.input)
+    out = prepare_out_dir(args.out, "flow-odometry")
+    pg = lambda it, desc: progress(it, desc=desc, enabled=not args.no_progress)  # noqa: E731
+    od, flows, steps = odometry_run(spec, config=_flow_config(args), allow_missing=args.allow_missing,
+                                    robust=not args.no_robust, method=args.integration, progress=pg)
+    from robocal.rigs.flow.log import write_poses_csv
+
+    write_poses_csv(out / "trajectory.csv", od.t, od.poses, comment=f"flow odometry of {spec.path.name}")
+    errors = None
+    report = Report("robocal flow odometry", subtitle=str(spec.path))
+    if spec.reference is not None:
+        curves, errors = evaluation_run(spec, od)
+        _traj_section(report, "Trajectory", curves, errors)
+    sec = report.section("Velocity and sensor quality")
+    sec.figure(velocity_figure(od), "vx, vy, omega with 3-sigma bands from the array geometry and per-frame quality")
+    sec.figure(quality_figure(steps, spec.array.names), "per-sensor quality; 0 = frame without flow (low texture / ambiguous)")
+    sec.diagnostics(od.warnings)
+    res = odometry_result(od, spec, errors)
+    write_run(out, res, report)
+    print(f"wrote {out / 'trajectory.csv'}")
+    s = od.summary()
+    print(f"distance {s['distance_m']:.3f} m, {s['bridged_steps']} bridged steps"
+          + (f", ATE {errors['flow odometry'].ate_rmse * 1e3:.1f} mm" if errors else ""))
+    return 0
+
+
+def cmd_calibrate(args) -> int:
+    spec = load_run(args.input)
+    out = prepare_out_dir(args.out, "flow-calibrate")
+    pg = lambda it, desc: progress(it, desc=desc, enabled=not args.no_progress)  # noqa: E731
+    cal, steps = calibration_run(spec, config=_flow_config(args), window=args.window, loss=args.loss, progress=pg)
+    res = calibration_result(cal, spec)
+    report = Report("robocal flow calibrate", subtitle=str(spec.path))
+    sec = report.section("Calibrated array")
+    sec.parameters(res.estimate, res.std, res.units)
+    sec.text(f"Residual RMS {cal.residual_rms * 1e3:.3f} mm per {args.window} s window; "
+             "standard deviations are sampling error under the model (the reference is taken as exact).")
+    sec.diagnostics(cal.warnings)
+    cam = {"focal_px": spec.focal_px, "window": spec.window}
+    atomic_write_text(out / "array_calibrated.yaml", array_yaml(cal.array, cam))
+    write_run(out, res, report)
+    print(f"wrote {out / 'array_calibrated.yaml'}")
+    for k, v in res.estimate.items():
+        sd = res.std.get(k)
+        unit = res.units[k]
+        conv = np.degrees if unit == "rad" else (lambda x: x * 1e3) if unit == "m" else (lambda x: x)
+        u = {"rad": "deg", "m": "mm"}.get(unit, unit)
+        print(f"  {k:14s} {conv(v):10.4f} +/- {conv(sd) if sd is not None else float('nan'):.4f} {u}")
+    return 0
+
+
+def cmd_evaluate(args) -> int:
+    spec = load_run(args.input)
+    out = prepare_out_dir(args.out, "flow-evaluate")
+    pg = lambda it, desc: progress(it, desc=desc, enabled=not args.no_progress)  # noqa: E731
+    od, _, steps = odometry_run(spec, config=_flow_config(args), progress=pg)
+    cal_od = None
+    if args.array is not None:
+        from robocal.io import load_document
+        from robocal.rigs.flow.model import SensorArray
+
+        arr = SensorArray.from_document(load_document(args.array))
+        if arr.n != spec.array.n:
+            raise InputError(f"{args.array}: {arr.n} sensors, but {spec.path} has {spec.array.n}")
+        cal_od = dead_reckon(steps, arr)
+    curves, errors = evaluation_run(spec, od, calibrated=cal_od)
+    report = Report("robocal flow evaluate", subtitle=str(spec.path))
+    _traj_section(report, "Trajectory errors", curves, errors)
+    res = CalibrationResult(rig="flow", method="ate-rpe",
+                            estimate={f"{k} ATE": v.ate_rmse for k, v in errors.items()},
+                            units={f"{k} ATE": "m" for k in errors}, warnings=list(od.warnings),
+                            diagnostics={k: v.to_dict() for k, v in errors.items()})
+    write_run(out, res, report)
+    for k, v in errors.items():
+        r1 = v.rpe.get(1.0, {})
+        print(f"  {k:28s} ATE {v.ate_rmse * 1e3:7.1f} mm   RPE@1m {r1.get('trans_per_m', np.nan) * 100:5.2f} %  "
+              f"{np.degrees(r1.get('rot_per_m', np.nan)):5.2f} deg/m")
+    return 0
+
+
+def add_commands(parser: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="flow_command", metavar="COMMAND")
+    p = sub.add_parser("simulate", help="simulate a drive: frames, flow log, gyro, height, truth, wheel odometry",
+                       formatter_class=RawHelp, epilog=examples_epilog(
+                           "robocal flow simulate --out flow-sim",
+                           "robocal flow simulate --trajectory calibration --duration 8 --out flow-cal",
+                           "robocal flow simulate --texture brick --gap 0.5,0.2,0.05 --no-frames --out flow-brick"))
+    p.add_argument("--trajectory", default="loop", choices=("loop", "calibration", "straight"))
+    p.add_argument("--duration", type=float, default=8.0, help="s")
+    p.add_argument("--rate", type=float, default=400.0, help="frame rate, Hz")
+    p.add_argument("--speed", type=float, default=0.4, help="typical forward speed, m/s")
+    p.add_argument("--texture", default="gravel", choices=TEXTURES + ("procedural",))
+    p.add_argument("--supersample", type=int, default=2, help="sub-rays per pixel side (binning area average)")
+    p.add_argument("--gap", action="append", help="low-texture disc on the floor: X,Y,RADIUS in m (repeatable)")
+    p.add_argument("--no-frames", action="store_true", help="write only the flow log, not frames.npz")
+    add_seed_argument(p)
+    add_out_argument(p)
+    _add_flow_args(p)
+    p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("odometry", help="dead reckoning from a run (flow log or raw frames)", formatter_class=RawHelp,
+                       epilog=examples_epilog("robocal flow odometry examples/flow/run.yaml --out odo",
+                                              "robocal flow odometry flow-sim/run.yaml --refine lk --out odo"))
+    p.add_argument("input", type=Path, help="run.yaml")
+    p.add_argument("--allow-missing", action="store_true", help="treat missing sensor records as invalid frames")
+    p.add_argument("--no-robust", action="store_true", help="do not drop disagreeing sensors")
+    p.add_argument("--integration", default="exact", choices=("exact", "euler"), help="euler = seed eq. 12 literally")
+    add_out_argument(p)
+    _add_flow_args(p)
+    p.set_defaults(func=cmd_odometry)
+
+    p = sub.add_parser("calibrate", help="calibrate R, psi, phi, scale of every sensor from a run with a reference",
+                       formatter_class=RawHelp,
+                       epilog=examples_epilog("robocal flow calibrate examples/flow/calibration_run.yaml --out cal"))
+    p.add_argument("input", type=Path, help="run.yaml with a 'reference' trajectory")
+    p.add_argument("--window", type=float, default=0.1, help="window length, s")
+    p.add_argument("--loss", default="linear", choices=("linear", "soft_l1", "huber", "cauchy"))
+    add_out_argument(p)
+    _add_flow_args(p)
+    p.set_defaults(func=cmd_calibrate)
+
+    p = sub.add_parser("evaluate", help="ATE / RPE of flow (and wheel) odometry against the reference",
+                       formatter_class=RawHelp,
+                       epilog=examples_epilog("robocal flow evaluate examples/flow/run.yaml --out ev",
+                                              "robocal flow evaluate examples/flow/run.yaml --array cal/array_calibrated.yaml --out ev"))
+    p.add_argument("input", type=Path, help="run.yaml with a 'reference' trajectory")
+    p.add_argument("--array", type=Path, default=None, help="a calibrated array (YAML) to compare with the nominal one")
+    add_out_argument(p)
+    _add_flow_args(p)
+    p.set_defaults(func=cmd_evaluate)
+
+
+def demo(ctx: DemoContext) -> DemoOutcome:
+    """Calibration drive -> array calibration -> fresh drive: nominal vs calibrated vs wheels."""
+    t0 = time.perf_counter()
+    fc = FlowConfig()
+    # supersample 1 keeps the demo inside its time budget; the tests use 2
+    simA = default_sim("calibration", 6.0, supersample=1)
+    runA = simulate_run(simA, ctx.rng)
+    from robocal.rigs.flow.calibrate import calibrate_array
+    from robocal.rigs.flow.log import steps_from_frames
+
+    stA, _ = steps_from_frames(runA.frames, runA.t, runA.gyro, runA.height, simA.camera.focal_px, fc)
+    nominal = simA.array_nominal
+    cal = calibrate_array(stA, runA.t, runA.poses, nominal, window=0.1)
+    simB = default_sim("loop", 8.0, supersample=1)
+    runB = simulate_run(simB, ctx.rng)
+    stB, flowsB = steps_from_frames(runB.frames, runB.t, runB.gyro, runB.height, simB.camera.focal_px, fc)
+    od_nom = dead_reckon(stB, nominal)
+    od_cal = dead_reckon(stB, cal.array)
+    ev = {"flow odometry (nominal array)": evaluate_trajectory(od_nom.poses, runB.poses),
+          "flow odometry (calibrated)": evaluate_trajectory(od_cal.poses, runB.poses),
+          "wheel odometry (slip)": evaluate_trajectory(runB.wheel_poses, runB.poses)}
+    rep = Report("flow")
+    curves = {"true": runB.poses, "flow odometry (nominal array)": od_nom.poses,
+              "flow odometry (calibrated)": od_cal.poses, "wheel odometry (slip)": runB.wheel_poses}
+    _traj_section(rep, "Fresh drive: true vs flow vs wheel odometry", curves, ev)
+    sec = rep.section("Array calibration (calibration drive)")
+    res = CalibrationResult(rig="flow", method="windowed-lsq", estimate=cal.estimate_dict(),
+                            std={k: cal.std.get(k) for k in cal.estimate_dict()}, units=cal.units(),
+                            residual_rms=cal.residual_rms, residual_unit="m", warnings=list(cal.warnings),
+                            diagnostics={"evaluation": {k: v.to_dict() for k, v in ev.items()}})
+    sec.parameters(res.estimate, res.std, res.units)
+    true = simA.array_true
+    hs = np.asarray(simA.height_scale)
+    rows = [{"sensor": nm, "R err [mm]": (cal.array.R[i] - true.R[i]) * 1e3,
+             "psi err [deg]": np.degrees(np.angle(np.exp(1j * (cal.array.psi[i] - true.psi[i])))),
+             "phi err [deg]": np.degrees(cal.array.phi[i] - true.phi[i]), "scale err [%]": (cal.array.scale[i] * hs[i] - 1) * 100}
+            for i, nm in enumerate(true.names)]
+    sec.table(rows, digits=3, caption="calibrated minus simulated truth")
+    sec.text(f"texture: {runA.texture_note}")
+    ate_n = ev["flow odometry (nominal array)"].ate_rmse
+    ate_c = ev["flow odometry (calibrated)"].ate_rmse
+    ate_w = ev["wheel odometry (slip)"].ate_rmse
+    passed = bool(ate_c < ate_n and ate_c < ate_w)
+    dt = time.perf_counter() - t0
+    summary = {"ATE nominal": f"{ate_n * 1e3:.1f} mm", "ATE calibrated": f"{ate_c * 1e3:.1f} mm",
+               "ATE wheels": f"{ate_w * 1e3:.1f} mm", "distance": f"{ev['wheel odometry (slip)'].distance:.2f} m",
+               "time": f"{dt:.1f} s"}
+    return DemoOutcome(summary=summary, passed=passed, sections=rep.sections, result=res)
+
+
+RIG = Rig(name="flow", help="dead reckoning from several optical-flow sensors (seed 003)", description=DESCRIPTION,
+          add_commands=add_commands, demo=demo)

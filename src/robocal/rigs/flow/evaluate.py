@@ -1,0 +1,163 @@
+"""Trajectory accuracy in the field's usual terms, and the seed's Fig. 4 plot.
+
+- **ATE** (absolute trajectory error; Sturm et al., IROS 2012, TUM RGB-D
+  benchmark): align the estimate to the reference with the least-squares
+  rigid transform (Umeyama 1991, :func:`robocal.geometry.rigid_fit`) and
+  take the RMS of the position differences.
+- **RPE per distance** (relative pose error; Sturm et al. 2012, with
+  KITTI's segments of fixed path length, Geiger et al., CVPR 2012): for every
+  start ``i`` and every length ``L``, the frame ``j`` where the reference has
+  travelled ``L`` further; ``E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j)``; report the
+  RMS translation of ``E`` divided by ``L`` (m per m, shown in %) and its
+  rotation per metre (deg/m).
+
+Written from these definitions (no evo: it is GPL).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from robocal.errors import DegenerateGeometryError, InputError, NotEnoughDataError
+from robocal.geometry import rigid_fit
+
+__all__ = ["TrajectoryErrors", "align_trajectory", "ate", "rpe_per_distance", "evaluate_trajectory", "plot_trajectories"]
+
+
+def _se2(p):
+    c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
+    T = np.zeros(p.shape[:-1] + (3, 3))
+    T[..., 0, 0], T[..., 0, 1], T[..., 1, 0], T[..., 1, 1] = c, -s, s, c
+    T[..., 0, 2], T[..., 1, 2], T[..., 2, 2] = p[..., 0], p[..., 1], 1.0
+    return T
+
+
+def align_trajectory(est, ref):
+    """Rigid 2D alignment of ``est`` onto ``ref`` (Umeyama), poses ``(N, 3)``.
+
+    Falls back to aligning the first poses when the positions are collinear
+    (a straight drive), and says so.
+
+    Returns
+    -------
+    aligned : ndarray (N, 3)
+    method : str
+    """
+    est = np.asarray(est, float)
+    ref = np.asarray(ref, float)
+    pe = np.concatenate([est[:, :2], np.zeros((len(est), 1))], 1)
+    pr = np.concatenate([ref[:, :2], np.zeros((len(ref), 1))], 1)
+    try:
+        fit = rigid_fit(pe, pr)
+        R = fit.R
+        # keep the alignment planar: the z rows/cols of a planar fit are (0, 0, 1)
+        yaw = np.arctan2(R[1, 0], R[0, 0])
+        t = fit.t[:2]
+        method = "umeyama"
+        if abs(R[2, 2] - 1) > 1e-6:
+            raise DegenerateGeometryError("the fit left the plane")
+    except DegenerateGeometryError:
+        yaw = ref[0, 2] - est[0, 2]
+        c, s = np.cos(yaw), np.sin(yaw)
+        t = ref[0, :2] - np.array([[c, -s], [s, c]]) @ est[0, :2]
+        method = "first-pose (positions collinear)"
+    c, s = np.cos(yaw), np.sin(yaw)
+    xy = est[:, :2] @ np.array([[c, -s], [s, c]]).T + t
+    return np.concatenate([xy, (est[:, 2:] + yaw)], 1), method
+
+
+def ate(est, ref):
+    """Absolute trajectory error: RMS position error after rigid alignment, m; and the aligned poses."""
+    al, method = align_trajectory(est, ref)
+    err = np.linalg.norm(al[:, :2] - np.asarray(ref)[:, :2], axis=1)
+    return float(np.sqrt(np.mean(err**2))), al, err, method
+
+
+def rpe_per_distance(est, ref, lengths=(0.5, 1.0)):
+    """Relative pose error over segments of fixed reference path length.
+
+    Returns
+    -------
+    dict: length -> {"trans_rmse": m, "trans_per_m": 1, "rot_per_m": rad/m, "n": int}
+    """
+    est = np.asarray(est, float)
+    ref = np.asarray(ref, float)
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(ref[:, :2], axis=0), axis=1))])
+    Te, Tr = _se2(est), _se2(ref)
+    out = {}
+    for L in lengths:
+        j = np.searchsorted(s, s + L)
+        ok = j < len(s)
+        i = np.flatnonzero(ok)
+        if i.size == 0:
+            out[float(L)] = {"trans_rmse": np.nan, "trans_per_m": np.nan, "rot_per_m": np.nan, "n": 0}
+            continue
+        j = j[ok]
+        Qrel = np.linalg.inv(Tr[i]) @ Tr[j]
+        Prel = np.linalg.inv(Te[i]) @ Te[j]
+        E = np.linalg.inv(Qrel) @ Prel
+        te = np.linalg.norm(E[:, :2, 2], axis=1)
+        re = np.abs(np.arctan2(E[:, 1, 0], E[:, 0, 0]))
+        seg = s[j] - s[i]
+        out[float(L)] = {
+            "trans_rmse": float(np.sqrt(np.mean(te**2))),
+            "trans_per_m": float(np.sqrt(np.mean((te / seg) ** 2))),
+            "rot_per_m": float(np.sqrt(np.mean((re / seg) ** 2))),
+            "n": int(i.size),
+        }
+    return out
+
+
+@dataclass
+class TrajectoryErrors:
+    """ATE and RPE of one estimated trajectory against the reference."""
+
+    ate_rmse: float
+    final_error: float
+    heading_error_final: float
+    rpe: dict
+    aligned: np.ndarray
+    align_method: str
+    distance: float
+
+    def to_dict(self) -> dict:
+        return {"ate_rmse_m": self.ate_rmse, "final_position_error_m": self.final_error,
+                "final_heading_error_rad": self.heading_error_final, "distance_m": self.distance,
+                "rpe": {str(k): v for k, v in self.rpe.items()}, "align_method": self.align_method}
+
+
+def evaluate_trajectory(est, ref, *, lengths=(0.5, 1.0)) -> TrajectoryErrors:
+    """ATE (after alignment), RPE per distance and the raw end-point error of ``est`` vs ``ref`` (both (N, 3))."""
+    est = np.asarray(est, float)
+    ref = np.asarray(ref, float)
+    if est.shape != ref.shape or est.ndim != 2 or est.shape[1] != 3:
+        raise InputError(f"trajectories must both have shape (N, 3), got {est.shape} and {ref.shape}")
+    if len(est) < 3:
+        raise NotEnoughDataError(f"need at least 3 poses to evaluate a trajectory, got {len(est)}")
+    a, al, _, method = ate(est, ref)
+    dist = float(np.sum(np.linalg.norm(np.diff(ref[:, :2], axis=0), axis=1)))
+    fe = float(np.linalg.norm(est[-1, :2] - ref[-1, :2]))
+    he = float(np.angle(np.exp(1j * (est[-1, 2] - ref[-1, 2]))))
+    return TrajectoryErrors(a, fe, he, rpe_per_distance(est, ref, lengths), al, method, dist)
+
+
+def plot_trajectories(curves: dict, *, ax=None, title: str = "trajectories"):
+    """Plot named ``(N, 3)`` trajectories (the seed's Fig. 4); returns the axes."""
+    from robocal.report import new_figure
+
+    if ax is None:
+        _, ax = new_figure(size=(6.0, 5.0))
+    styles = {"true": dict(color="k", lw=2.0), "reference": dict(color="k", lw=2.0)}
+    for name, p in curves.items():
+        p = np.asarray(p)
+        ax.plot(p[:, 0], p[:, 1], label=name, **styles.get(name, dict(lw=1.2)))
+        ax.plot(p[-1, 0], p[-1, 1], "o", ms=4, color=ax.lines[-1].get_color())
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("X [m]")
+    ax.set_ylabel("Y [m]")
+    ax.set_title(title)
+    ax.legend(loc="best", fontsize=8)
+    ax.grid(alpha=0.3)
+    return ax

@@ -1,0 +1,317 @@
+"""Log formats of the flow rig and the step from a log to per-sensor displacements.
+
+A run is described by a YAML file (``run.yaml``)::
+
+    units: {length: mm, angle: deg}
+    camera: {focal_px: 166.67, window: 64}     # focal length in (binned) pixels
+    sensors:                                     # >= 2 sensors, in log order
+      - {name: s60,  R: 350, psi: 60,  phi: 0, scale: 1}
+      - {name: s120, R: 350, psi: 120, phi: 0}
+      - {name: s270, R: 350, psi: 270, phi: 0}
+    flow_log: flow.csv          # per-sensor flow records ... or
+    frames: frames.npz          # raw frames + gyro + height
+    reference: truth.csv        # optional: t [s], x [m], y [m], theta [rad]
+    wheel: wheel.csv            # optional: wheel-odometry poses, same columns
+
+**Per-sensor flow records** (``flow.csv``; what a PX4FLOW-class sensor
+reports per frame, cf. MAVLink OPTICAL_FLOW_RAD): one row per sensor per
+frame interval, units in the header::
+
+    t [s],dt [s],sensor,flow_u [px],flow_v [px],gyro_x [rad/s],gyro_y [rad/s],gyro_z [rad/s],height [m],quality
+
+``t`` is the end of the interval, ``sensor`` the 0-based index into
+``sensors``; ``flow_u, flow_v`` the image motion of the ground (kernel
+convention), not yet gyro-compensated; gyro rates are the interval's mean in
+the camera frame (x = u, y = v, z = optical axis, down); ``height`` the
+distance to the ground along the optical axis; ``quality`` 0..255 (0: no
+flow; the row's flow is then ignored, it may be NaN-free zeros). Every
+interval must have a row for every sensor (otherwise an error names the time
+and the sensor, unless missing rows are explicitly allowed: then that sensor
+is invalid there).
+
+**Raw frames** (``frames.npz``, SI units): ``frames`` uint8 ``(n, T, W, W)``,
+``t`` ``(T,)`` s, ``gyro`` ``(n, T-1, 3)`` rad/s, ``height`` ``(n, T-1)`` m.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from robocal.errors import FileFormatError, InputError, ShapeError
+from robocal.io import atomic_write_text, load_csv, load_document
+from robocal.rigs.flow.kernel import FlowConfig, compensate_rotation, compute_flow, metric_displacement
+from robocal.rigs.flow.model import SensorArray
+from robocal.rigs.flow.odometry import SensorSteps, flow_sigma
+
+__all__ = [
+    "FLOW_COLUMNS",
+    "RunSpec",
+    "load_run",
+    "steps_from_frames",
+    "steps_from_records",
+    "read_flow_csv",
+    "write_flow_csv",
+    "read_poses_csv",
+    "write_poses_csv",
+    "read_frames_npz",
+]
+
+FLOW_COLUMNS = ["t [s]", "dt [s]", "sensor", "flow_u [px]", "flow_v [px]", "gyro_x [rad/s]", "gyro_y [rad/s]",
+                "gyro_z [rad/s]", "height [m]", "quality"]
+
+
+@dataclass
+class FlowRecords:
+    """Per-sensor flow records, reshaped to ``(n, K)`` per field."""
+
+    t: np.ndarray        # (K+1,) frame times
+    flow: np.ndarray     # (n, K, 2) px
+    gyro: np.ndarray     # (n, K, 3) rad/s
+    height: np.ndarray   # (n, K) m
+    quality: np.ndarray  # (n, K)
+    present: np.ndarray  # (n, K) bool
+
+
+def write_flow_csv(path, t, flow, gyro, height, quality, *, comment: str = "") -> Path:
+    """Write per-sensor flow records (see module doc). Arrays as in :class:`FlowRecords`."""
+    n, K = quality.shape
+    lines = [f"# {ln}" for ln in comment.splitlines()] if comment else []
+    lines.append(",".join(FLOW_COLUMNS))
+    dt = np.diff(t)
+    for k in range(K):
+        for i in range(n):
+            fu, fv = flow[i, k]
+            q = quality[i, k]
+            if not np.isfinite(fu) or not np.isfinite(fv):
+                fu, fv, q = 0.0, 0.0, 0.0
+            g = gyro[i, k]
+            lines.append(f"{t[k + 1]:.6f},{dt[k]:.6f},{i},{fu:.4f},{fv:.4f},{g[0]:.6f},{g[1]:.6f},{g[2]:.6f},"
+                         f"{height[i, k]:.5f},{q:.0f}")
+    return atomic_write_text(Path(path), "\n".join(lines) + "\n")
+
+
+def read_flow_csv(path, n_sensors: int, *, allow_missing: bool = False) -> FlowRecords:
+    """Read per-sensor flow records; errors name the row, time and sensor at fault."""
+    tab = load_csv(path, required=["t", "dt", "sensor", "flow_u", "flow_v", "gyro_x", "gyro_y", "gyro_z", "height", "quality"])
+    src = str(path)
+    t = tab.column("t", kind="time")
+    dt = tab.column("dt", kind="time")
+    sensor = tab.column("sensor")
+    if len(t) == 0:
+        raise FileFormatError("no records", source=src)
+    if np.any(sensor != np.round(sensor)) or np.any(sensor < 0) or np.any(sensor >= n_sensors):
+        r = int(np.flatnonzero((sensor != np.round(sensor)) | (sensor < 0) | (sensor >= n_sensors))[0])
+        raise FileFormatError(f"row {r + 1}: sensor index {sensor[r]:g} is not one of 0..{n_sensors - 1}", source=src)
+    sensor = sensor.astype(int)
+    h = tab.column("height", kind="length")
+    if np.any(h <= 0):
+        r = int(np.flatnonzero(h <= 0)[0])
+        raise FileFormatError(f"row {r + 1} (t = {t[r]:.6f} s, sensor {sensor[r]}): height must be > 0 m, got {h[r]:g}", source=src)
+    if np.any(dt <= 0):
+        r = int(np.flatnonzero(dt <= 0)[0])
+        raise FileFormatError(f"row {r + 1}: dt must be > 0 s, got {dt[r]:g}", source=src)
+    # timestamps must not go back; rows of one interval share a timestamp
+    back = np.flatnonzero(np.diff(t) < 0)
+    if back.size:
+        r = int(back[0]) + 1
+        raise FileFormatError(f"timestamps must not decrease: row {r + 1} has t = {t[r]:.6f} s after t = {t[r - 1]:.6f} s", source=src)
+    times, inv = np.unique(t, return_inverse=True)
+    K = times.size
+    dup = np.zeros((n_sensors, K), int)
+    np.add.at(dup, (sensor, inv), 1)
+    if np.any(dup > 1):
+        i, k = np.argwhere(dup > 1)[0]
+        raise FileFormatError(f"sensor {i} has {dup[i, k]} records at t = {times[k]:.6f} s (expected one)", source=src)
+    present = dup == 1
+    if not allow_missing and not present.all():
+        i, k = np.argwhere(~present)[0]
+        raise FileFormatError(
+            f"sensor {i} has no record at t = {times[k]:.6f} s ({(~present).sum()} missing records in all; "
+            "every interval needs a row per sensor, or allow missing records)", source=src)
+    flow = np.full((n_sensors, K, 2), np.nan)
+    gyro = np.zeros((n_sensors, K, 3))
+    height = np.full((n_sensors, K), np.nan)
+    quality = np.zeros((n_sensors, K))
+    flow[sensor, inv, 0] = tab.column("flow_u")
+    flow[sensor, inv, 1] = tab.column("flow_v")
+    for a, nm in enumerate(("gyro_x", "gyro_y", "gyro_z")):
+        gyro[sensor, inv, a] = tab.column(nm, kind="angular_rate") if tab.units.get(nm) else tab.column(nm)
+    height[sensor, inv] = h
+    quality[sensor, inv] = tab.column("quality")
+    dts = np.zeros(K)
+    dts[inv] = dt
+    t0 = times[0] - dts[0]
+    return FlowRecords(np.concatenate([[t0], times]), flow, gyro, height, quality, present)
+
+
+def steps_from_records(rec: FlowRecords, focal_px: float, config: FlowConfig = FlowConfig(), *,
+                       sigma_px: float = 0.06) -> SensorSteps:
+    """Gyro-compensate (eqs. 3–4) and scale (eq. 5) logged flow into :class:`SensorSteps`."""
+    n, K = rec.quality.shape
+    dt = np.diff(rec.t)
+    disp = np.full((n, K, 2), np.nan)
+    valid = rec.present & (rec.quality > 0) & np.all(np.isfinite(rec.flow), axis=2)
+    for i in range(n):
+        comp = compensate_rotation(rec.flow[i], rec.gyro[i], dt, focal_px, threshold=config.gyro_threshold)
+        h = np.where(rec.present[i], rec.height[i], 1.0)
+        disp[i] = metric_displacement(comp, h, focal_px)
+    disp = np.where(valid[..., None], disp, np.nan)
+    n_used = np.maximum(rec.quality / 255.0 * config.n_blocks, 1.0)
+    sigma = flow_sigma(n_used, np.nan_to_num(rec.height, nan=1.0), focal_px, sigma_px=sigma_px, n_blocks=config.n_blocks)
+    return SensorSteps(rec.t, disp, valid, sigma, rec.quality)
+
+
+def steps_from_frames(frames, t, gyro, height, focal_px: float, config: FlowConfig = FlowConfig(), *,
+                      sigma_px: float = 0.06, progress=None):
+    """Run the flow kernel on every sensor's frames and build :class:`SensorSteps`.
+
+    Parameters
+    ----------
+    frames : array_like of uint8, shape (n, T, W, W)
+    t : array_like, shape (T,)
+    gyro : array_like, shape (n, T-1, 3)
+    height : array_like, shape (n, T-1)
+    focal_px : float
+    progress : callable, optional
+        ``progress(iterable, desc=...)`` wrapper for a progress bar.
+
+    Returns
+    -------
+    steps : SensorSteps
+    flows : list of FrameFlow
+        Per-sensor kernel output (flow in px, quality, reasons).
+    """
+    frames = np.asarray(frames)
+    if frames.ndim != 4:
+        raise ShapeError(f"frames must have shape (n_sensors, T, {config.window}, {config.window}), got {frames.shape}")
+    n, T = frames.shape[:2]
+    if frames.shape[2:] != (config.window, config.window):
+        raise ShapeError(f"frames must be {config.window}x{config.window} (the sensor window), got {frames.shape[2]}x{frames.shape[3]}")
+    t = np.asarray(t, float)
+    if t.shape != (T,):
+        raise ShapeError(f"t must have shape ({T},), got {t.shape}")
+    d = np.diff(t)
+    if np.any(~(d > 0)):
+        k = int(np.flatnonzero(~(d > 0))[0])
+        raise InputError(f"frame timestamps must increase strictly: t[{k + 1}] = {t[k + 1]:.6f} s follows t[{k}] = {t[k]:.6f} s")
+    gyro = np.asarray(gyro, float)
+    height = np.asarray(height, float)
+    if gyro.shape != (n, T - 1, 3):
+        raise ShapeError(f"gyro must have shape ({n}, {T - 1}, 3), got {gyro.shape}")
+    if height.shape != (n, T - 1):
+        raise ShapeError(f"height must have shape ({n}, {T - 1}), got {height.shape}")
+    if np.any(~np.isfinite(height)) or np.any(height <= 0):
+        i, k = np.argwhere(~(height > 0))[0]
+        raise InputError(f"height must be > 0 m: sensor {i}, interval {k} has {height[i, k]:g}")
+    disp = np.empty((n, T - 1, 2))
+    valid = np.empty((n, T - 1), bool)
+    sigma = np.empty((n, T - 1))
+    quality = np.empty((n, T - 1))
+    flows = []
+    it = range(n) if progress is None else progress(range(n), desc="flow")
+    for i in it:
+        ff = compute_flow(frames[i, :-1], frames[i, 1:], config, gyro=gyro[i], dt=d, height=height[i], focal_px=focal_px)
+        flows.append(ff)
+        disp[i] = ff.displacement
+        valid[i] = ff.valid
+        quality[i] = ff.quality
+        sigma[i] = flow_sigma(np.maximum(ff.quality / 255.0 * config.n_blocks, 1.0), height[i], focal_px,
+                              sigma_px=sigma_px, n_blocks=config.n_blocks)
+    return SensorSteps(t, disp, valid, sigma, quality), flows
+
+
+def read_frames_npz(path):
+    """Load ``frames, t, gyro, height`` from a raw-frames file (see module doc)."""
+    src = str(path)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            missing = [k for k in ("frames", "t", "gyro", "height") if k not in z.files]
+            if missing:
+                raise FileFormatError(f"missing array(s) {', '.join(missing)} (have: {', '.join(z.files)})", source=src)
+            data = {k: z[k] for k in ("frames", "t", "gyro", "height")}
+    except FileNotFoundError:
+        raise FileFormatError("file not found", source=src) from None
+    except (OSError, ValueError) as exc:
+        raise FileFormatError(f"cannot read as .npz ({exc})", source=src) from None
+    if data["frames"].dtype != np.uint8:
+        raise FileFormatError(f"frames must be uint8 grey levels, got {data['frames'].dtype}", source=src)
+    return data
+
+
+def write_poses_csv(path, t, poses, *, comment: str = "") -> Path:
+    lines = [f"# {ln}" for ln in comment.splitlines()] if comment else []
+    lines.append("t [s],x [m],y [m],theta [rad]")
+    lines += [f"{a:.6f},{p[0]:.6f},{p[1]:.6f},{p[2]:.7f}" for a, p in zip(t, poses)]
+    return atomic_write_text(Path(path), "\n".join(lines) + "\n")
+
+
+def read_poses_csv(path):
+    """``t (N,)``, poses ``(N, 3)`` from a ``t, x, y, theta`` CSV (units in the header)."""
+    tab = load_csv(path, required=["t", "x", "y", "theta"])
+    t = tab.column("t", kind="time")
+    if np.any(np.diff(t) <= 0):
+        r = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 1
+        raise FileFormatError(f"timestamps must increase strictly: row {r + 1} has t = {t[r]:.6f} s after {t[r - 1]:.6f} s", source=str(path))
+    return t, np.stack([tab.column("x", kind="length"), tab.column("y", kind="length"), tab.column("theta", kind="angle")], 1)
+
+
+@dataclass
+class RunSpec:
+    """A parsed ``run.yaml``."""
+
+    path: Path
+    array: SensorArray
+    focal_px: float
+    window: int
+    flow_log: Path | None
+    frames: Path | None
+    reference: Path | None
+    wheel: Path | None
+    rate: float | None
+
+    def inputs(self) -> list:
+        return [p for p in (self.path, self.flow_log, self.frames, self.reference, self.wheel) if p is not None]
+
+
+def load_run(path) -> RunSpec:
+    """Parse and check a run description (see module doc)."""
+    doc = load_document(path)
+    base = Path(path).parent
+    array = SensorArray.from_document(doc)
+    cam = doc.sub("camera")
+    focal = cam.float("focal_px", positive=True)
+    window = cam.int("window", default=64, minimum=8)
+    rate = cam.float("rate", kind="frequency", default=None) if "rate" in cam else None
+
+    def opt(key):
+        if key not in doc:
+            return None
+        p = Path(doc.str(key))
+        p = p if p.is_absolute() else base / p
+        if not p.is_file():
+            raise FileFormatError(f"field '{key}': file {p} not found", source=str(path))
+        return p
+
+    flow_log, frames = opt("flow_log"), opt("frames")
+    if flow_log is None and frames is None:
+        raise FileFormatError("needs 'flow_log' (per-sensor flow records) or 'frames' (raw frames)", source=str(path))
+    return RunSpec(Path(path), array, focal, window, flow_log, frames, opt("reference"), opt("wheel"), rate)
+
+
+def load_steps(spec: RunSpec, config: FlowConfig | None = None, *, allow_missing: bool = False, progress=None,
+               prefer: str = "frames"):
+    """Per-sensor displacements of a run (from raw frames when present, else the flow log)."""
+    config = config or FlowConfig(window=spec.window)
+    use_frames = spec.frames is not None and (prefer == "frames" or spec.flow_log is None)
+    if use_frames:
+        d = read_frames_npz(spec.frames)
+        if d["frames"].ndim != 4 or d["frames"].shape[0] != spec.array.n:
+            raise ShapeError(f"{spec.frames}: frames must have shape ({spec.array.n}, T, W, W) for the "
+                             f"{spec.array.n} sensors of {spec.path.name}, got {d['frames'].shape}")
+        steps, flows = steps_from_frames(d["frames"], d["t"], d["gyro"], d["height"], spec.focal_px, config, progress=progress)
+        return steps, flows
+    rec = read_flow_csv(spec.flow_log, spec.array.n, allow_missing=allow_missing)
+    return steps_from_records(rec, spec.focal_px, config), None

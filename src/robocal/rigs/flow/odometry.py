@@ -1,0 +1,267 @@
+"""Robot motion from several flow sensors: the seed's A u = b, robustly (seed 003 eqs. 6–12).
+
+For each frame interval ``k`` every valid sensor ``i`` gives its metric ground
+displacement ``dS_i`` (sensor frame, :mod:`robocal.rigs.flow.kernel`). In the
+robot frame at the middle of the interval it is
+
+    b_i = scale_i R(phi_i + dtheta/2) dS_i
+        = [[1, 0, -R_i sin psi_i], [0, 1, R_i cos psi_i]] u = A_i u,
+
+``u = (dx, dy, dtheta)`` the body twist of the step (the seed's eq. 9 with
+``theta = 0``: solving in the robot frame and then rotating by the heading
+gives the same ``u`` as the seed's world-frame form). The half-step rotation
+``dtheta/2`` accounts for the sensor turning during the interval (one
+fixed-point pass: ``A`` does not depend on it). Two or more sensors make it
+(over)determined; it is solved by weighted least squares with weights from
+each sensor's per-frame quality, a sensor that disagrees with the others
+beyond its noise (chi-square test) is dropped, and the twist covariance is
+``(A^T W A)^-1``. Poses follow by exact SE(2) integration (eq. 12 is its
+first-order form, available as ``method="euler"``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from robocal.diagnostics import Diagnostic
+from robocal.errors import InputError, NotEnoughDataError
+from robocal.rigs.flow.model import SensorArray, integrate_twists, rot2
+
+__all__ = ["SensorSteps", "Odometry", "fuse_steps", "dead_reckon", "flow_sigma"]
+
+
+@dataclass
+class SensorSteps:
+    """Per-interval displacements of every sensor, the fusion's input.
+
+    Attributes
+    ----------
+    t : ndarray, shape (K+1,)
+        Frame times, s (strictly increasing).
+    disp : ndarray, shape (n, K, 2)
+        Metric displacement in each sensor's frame, m (NaN where not valid).
+    valid : ndarray of bool, shape (n, K)
+    sigma : ndarray, shape (n, K)
+        Standard deviation of each displacement component, m.
+    quality : ndarray, shape (n, K)
+        0..255.
+    """
+
+    t: np.ndarray
+    disp: np.ndarray
+    valid: np.ndarray
+    sigma: np.ndarray
+    quality: np.ndarray
+
+    def __post_init__(self):
+        t = np.asarray(self.t, float)
+        if t.ndim != 1 or t.size < 2:
+            raise InputError(f"t must be a 1-D array of at least 2 frame times, got shape {t.shape}")
+        d = np.diff(t)
+        if np.any(~(d > 0)):
+            k = int(np.flatnonzero(~(d > 0))[0])
+            raise InputError(f"timestamps must increase strictly: t[{k + 1}] = {t[k + 1]:.6f} s follows t[{k}] = {t[k]:.6f} s")
+        n, K = self.valid.shape
+        if self.disp.shape != (n, K, 2) or K != t.size - 1:
+            raise InputError(f"disp must have shape (n, {t.size - 1}, 2), got {self.disp.shape}")
+        self.t = t
+
+    @property
+    def dt(self) -> np.ndarray:
+        return np.diff(self.t)
+
+
+def flow_sigma(n_used, height, focal_px, *, sigma_px: float = 0.06, n_blocks: int = 25):
+    """Displacement standard deviation (m) of a frame's flow from its block count.
+
+    ``sigma_px`` is the per-frame flow error with all blocks in use (measured
+    on real-photo frames: about 0.06 px for the equiangular fit, see
+    docs/rigs/flow.md); fewer blocks average less: ``sigma_px sqrt(n_blocks /
+    n_used)``. Converted to metres by ``h / f`` (eq. 5).
+    """
+    n = np.maximum(np.asarray(n_used, float), 1.0)
+    return sigma_px * np.sqrt(n_blocks / n) * np.asarray(height, float) / float(focal_px)
+
+
+@dataclass
+class Odometry:
+    """Dead-reckoning result.
+
+    Attributes
+    ----------
+    t : ndarray, shape (K+1,)
+    poses : ndarray, shape (K+1, 3)
+        ``(X, Y, theta)`` in the world frame (the first pose is ``pose0``).
+    twists : ndarray, shape (K, 3)
+        Body twist of each step ``(dx, dy, dtheta)``.
+    twist_cov : ndarray, shape (K, 3, 3)
+        Covariance of each twist (NaN for bridged steps).
+    velocity : ndarray, shape (K, 3)
+        ``(vx, vy, omega)`` in the robot frame, m/s, m/s, rad/s.
+    velocity_std : ndarray, shape (K, 3)
+    used : ndarray of bool, shape (n, K)
+        Which sensors entered each step.
+    rejected : ndarray of bool, shape (n, K)
+        Valid sensors dropped as outliers.
+    bridged : ndarray of bool, shape (K,)
+        Steps with fewer than 2 usable sensors (the previous twist was held).
+    chi2 : ndarray, shape (K,)
+        Normalised residual sum of squares of each step (NaN without redundancy).
+    warnings : list of Diagnostic
+    """
+
+    t: np.ndarray
+    poses: np.ndarray
+    twists: np.ndarray
+    twist_cov: np.ndarray
+    velocity: np.ndarray
+    velocity_std: np.ndarray
+    used: np.ndarray
+    rejected: np.ndarray
+    bridged: np.ndarray
+    chi2: np.ndarray
+    warnings: list = field(default_factory=list)
+
+    def summary(self) -> dict:
+        return {
+            "steps": int(len(self.twists)),
+            "bridged_steps": int(self.bridged.sum()),
+            "sensor_rejections": self.rejected.sum(axis=1).tolist(),
+            "distance_m": float(np.sum(np.linalg.norm(np.diff(self.poses[:, :2], axis=0), axis=1))),
+        }
+
+
+def _solve_weighted(A, b, w):
+    """Batched weighted least squares. A (n,2,3) common, b (K,n,2), w (K,n) -> u (K,3), N^-1 (K,3,3), rss (K,)."""
+    Aw = A[None, :, :, :] * w[:, :, None, None]               # (K, n, 2, 3)
+    N = np.einsum("knij,nil->kjl", Aw, A)
+    rhs = np.einsum("knij,kni->kj", Aw, b)
+    det = np.linalg.det(N)
+    ok = np.abs(det) > 1e-18
+    Ninv = np.full_like(N, np.nan)
+    Ninv[ok] = np.linalg.inv(N[ok])
+    u = np.einsum("kij,kj->ki", Ninv, rhs)
+    r = b - np.einsum("nij,kj->kni", A, u)
+    rss = np.sum(w * np.sum(r**2, axis=2), axis=1)
+    return u, Ninv, rss, r
+
+
+def fuse_steps(steps: SensorSteps, array: SensorArray, *, robust: bool = True, outlier_p: float = 1e-3,
+               half_step: bool = True):
+    """Solve the seed's ``A u = b`` for every step (weighted, outlier-robust).
+
+    Parameters
+    ----------
+    steps : SensorSteps
+    array : SensorArray
+        Sensor placement (at least 2 sensors).
+    robust : bool
+        Drop, one at a time, the sensor with the largest normalised residual
+        while the step's chi-square exceeds its ``1 - outlier_p`` quantile
+        and at least 3 sensors remain (2 sensors leave 1 redundant equation:
+        a disagreement can be seen but not blamed).
+    half_step : bool
+        Rotate each displacement by half the step's rotation (see module doc).
+
+    Returns
+    -------
+    twists (K, 3), cov (K, 3, 3), used (n, K), rejected (n, K), bridged (K,), chi2 (K,)
+    """
+    n, K = steps.valid.shape
+    if n != array.n:
+        raise InputError(f"the log has {n} sensors but the array describes {array.n}")
+    A = array.design_matrix().reshape(array.n, 2, 3)
+    valid = steps.valid & np.all(np.isfinite(steps.disp), axis=2) & (steps.sigma > 0)
+    d = np.where(valid[..., None], steps.disp, 0.0) * array.scale[:, None, None]
+    sig = np.where(valid, steps.sigma * array.scale[:, None], 1.0)
+    w0 = np.where(valid, 1.0 / sig**2, 0.0).T                 # (K, n)
+    used = valid.T.copy()                                      # (K, n)
+
+    def build_b(dtheta):
+        ang = array.phi[None, :] + (0.5 * dtheta[:, None] if half_step else 0.0)
+        return np.einsum("knij,knj->kni", rot2(ang), np.transpose(d, (1, 0, 2)))
+
+    enough = used.sum(axis=1) >= 2
+    dth = np.zeros(K)
+    for _ in range(2):
+        b = build_b(dth)
+        u, Ninv, rss, r = _solve_weighted(A, b, np.where(used, w0, 0.0))
+        dth = np.where(enough, np.nan_to_num(u[:, 2]), 0.0)
+    rejected = np.zeros_like(used)
+    if robust:
+        for _ in range(max(0, n - 2)):
+            m = used.sum(axis=1)
+            dof = 2 * m - 3
+            redundant = m >= 3
+            thr = np.where(redundant, stats.chi2.ppf(1 - outlier_p, np.maximum(dof, 1)), np.inf)
+            bad = redundant & (rss > thr)
+            if not np.any(bad):
+                break
+            score = np.where(used, w0 * np.sum(r**2, axis=2), -np.inf)
+            worst = np.argmax(score, axis=1)
+            idx = np.flatnonzero(bad)
+            used[idx, worst[idx]] = False
+            rejected[idx, worst[idx]] = True
+            b = build_b(dth)
+            u, Ninv, rss, r = _solve_weighted(A, b, np.where(used, w0, 0.0))
+            # refresh the half-step rotation with the cleaned twist
+            dth = np.where(used.sum(axis=1) >= 2, np.nan_to_num(u[:, 2]), 0.0)
+            b = build_b(dth)
+            u, Ninv, rss, r = _solve_weighted(A, b, np.where(used, w0, 0.0))
+    m = used.sum(axis=1)
+    bridged = m < 2
+    chi2 = np.where(m >= 2, rss, np.nan)
+    chi2 = np.where(2 * m - 3 > 0, chi2, np.nan)
+    # steps without two sensors hold the last good twist (constant-velocity bridge)
+    if np.any(bridged):
+        good = np.flatnonzero(~bridged)
+        if good.size == 0:
+            raise NotEnoughDataError("no interval has two valid sensors: the log cannot give a trajectory")
+        fill = np.maximum.accumulate(np.where(~bridged, np.arange(K), -1))
+        fill = np.where(fill < 0, good[0], fill)
+        u = u[fill]
+        Ninv = np.where(bridged[:, None, None], np.nan, Ninv)
+    return u, Ninv, used.T, rejected.T, bridged, chi2
+
+
+def dead_reckon(steps: SensorSteps, array: SensorArray, *, pose0=(0.0, 0.0, 0.0), method: str = "exact",
+                robust: bool = True) -> Odometry:
+    """Trajectory of the robot from its flow sensors (seed 003 eqs. 9–12).
+
+    Parameters
+    ----------
+    steps : SensorSteps
+    array : SensorArray
+    pose0 : (X, Y, theta)
+    method : {"exact", "euler"}
+        Pose integration (see :func:`robocal.rigs.flow.model.integrate_twists`).
+    robust : bool
+        Outlier-robust fusion (see :func:`fuse_steps`).
+    """
+    if method not in ("exact", "euler"):
+        raise InputError(f"method must be 'exact' or 'euler', got {method!r}")
+    u, cov, used, rejected, bridged, chi2 = fuse_steps(steps, array, robust=robust)
+    poses = integrate_twists(u, pose0, method=method)
+    dt = steps.dt
+    vel = u / dt[:, None]
+    vstd = np.sqrt(np.abs(np.diagonal(cov, axis1=1, axis2=2))) / dt[:, None]
+    warnings = []
+    if bridged.any():
+        idx = np.flatnonzero(bridged)
+        warnings.append(Diagnostic("low_quality", f"{idx.size} of {len(u)} intervals had fewer than 2 valid sensors; "
+                                   "the previous velocity was held", indices=tuple(int(i) for i in idx[:200])))
+    for i in range(array.n):
+        inval = ~steps.valid[i]
+        if inval.mean() > 0.05:
+            warnings.append(Diagnostic("low_quality", f"sensor {array.names[i]}: {inval.sum()} of {len(inval)} frames "
+                                       "without a valid flow (low texture or ambiguous match)", params=(array.names[i],)))
+        if rejected[i].sum() > 0:
+            idx = np.flatnonzero(rejected[i])
+            warnings.append(Diagnostic("outliers", f"sensor {array.names[i]} disagreed with the others in {idx.size} "
+                                       "intervals and was left out there", params=(array.names[i],),
+                                       indices=tuple(int(k) for k in idx[:200])))
+    return Odometry(t=steps.t, poses=poses, twists=u, twist_cov=cov, velocity=vel, velocity_std=vstd, used=used,
+                    rejected=rejected, bridged=bridged, chi2=chi2, warnings=warnings)

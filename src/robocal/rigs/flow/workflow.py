@@ -1,0 +1,210 @@
+"""End-to-end workflows behind the CLI: simulate -> files, odometry, calibration, evaluation.
+
+Each returns plain result objects (and a :class:`~robocal.io.CalibrationResult`
+plus report sections) so everything the CLI does can be done from Python.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from robocal.diagnostics import Diagnostic
+from robocal.io import CalibrationResult, atomic_write_text, hash_inputs
+from robocal.report import Report, new_figure
+from robocal.rigs.flow.calibrate import calibrate_array, interpolate_poses
+from robocal.rigs.flow.evaluate import evaluate_trajectory, plot_trajectories
+from robocal.rigs.flow.kernel import FlowConfig, compute_flow, speed_limit
+from robocal.rigs.flow.log import RunSpec, load_steps, read_poses_csv, write_flow_csv, write_poses_csv
+from robocal.rigs.flow.model import SensorArray, seed_array
+from robocal.rigs.flow.odometry import Odometry, dead_reckon
+from robocal.rigs.flow.simulate import SimConfig, SimRun, simulate_run
+
+__all__ = ["write_simulation", "odometry_run", "calibration_run", "evaluation_run", "array_yaml", "mounted_array"]
+
+
+def mounted_array() -> SensorArray:
+    """The seed's rig as built: the drawing's 350 mm / 60, 120, 270 deg with mounting errors."""
+    return seed_array().copy(R=np.array([0.356, 0.344, 0.353]), psi=np.radians([61.2, 118.4, 271.0]),
+                             phi=np.radians([2.0, -2.5, 3.0]))
+
+
+def array_yaml(array: SensorArray, camera: dict, extra: dict | None = None) -> str:
+    """A ``run.yaml`` text for ``array`` (lengths in mm, angles in deg)."""
+    d = {"units": {"length": "mm", "angle": "deg"}, "camera": camera,
+         "sensors": [{"name": nm, "R": round(float(r) * 1e3, 4), "psi": round(float(np.degrees(p)), 5),
+                      "phi": round(float(np.degrees(f)), 5), "scale": round(float(s), 6)}
+                     for nm, r, p, f, s in zip(array.names, array.R, array.psi, array.phi, array.scale)]}
+    d.update(extra or {})
+    return yaml.safe_dump(d, sort_keys=False)
+
+
+def write_simulation(run: SimRun, out_dir, *, frames: bool = True, flow_config: FlowConfig = FlowConfig(),
+                     progress=None) -> dict:
+    """Write a simulated run as user files: run.yaml, flow.csv, [frames.npz], truth.csv, wheel.csv.
+
+    ``flow.csv`` holds what the sensors themselves would report (the kernel's
+    raw flow, gyro, height, quality); ``run.yaml`` lists the *nominal* array,
+    as a user would start from the drawings.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    cfg = run.config
+    n, K = run.height.shape
+    flow = np.empty((n, K, 2))
+    quality = np.empty((n, K))
+    it = range(n) if progress is None else progress(range(n), desc="flow")
+    for i in it:
+        ff = compute_flow(run.frames[i, :-1], run.frames[i, 1:], flow_config)
+        flow[i] = ff.flow_px
+        quality[i] = ff.quality
+    note = (f"simulated by robocal flow: texture {run.texture_note}; {cfg.trajectory} drive {cfg.duration} s at "
+            f"{cfg.camera.rate} Hz; height {cfg.height} m")
+    paths = {"flow_log": write_flow_csv(out / "flow.csv", run.t, flow, run.gyro, run.height, quality, comment=note)}
+    if frames:
+        buf = out / "frames.npz"
+        np.savez_compressed(buf, frames=run.frames, t=run.t, gyro=run.gyro, height=run.height)
+        paths["frames"] = buf
+    paths["reference"] = write_poses_csv(out / "truth.csv", run.t, run.poses, comment="true robot poses (simulation)")
+    paths["wheel"] = write_poses_csv(out / "wheel.csv", run.t, run.wheel_poses, comment="wheel odometry with slip")
+    cam = {"focal_px": round(cfg.camera.focal_px, 4), "window": cfg.camera.window, "rate": {"value": cfg.camera.rate, "unit": "Hz"}}
+    extra = {k: Path(v).name for k, v in paths.items()}
+    paths["run"] = atomic_write_text(out / "run.yaml", array_yaml(cfg.array_nominal, cam, extra))
+    truth = array_yaml(cfg.array_true, cam)
+    hs = np.ones(n) if cfg.height_scale is None else np.asarray(cfg.height_scale)
+    truth += yaml.safe_dump({"true_scale": [round(float(1 / h), 6) for h in hs],
+                             "note": "the simulator's true sensor placement; 'true_scale' = 1 / height-scale error"})
+    paths["array_true"] = atomic_write_text(out / "array_true.yaml", truth)
+    return paths
+
+
+def odometry_run(spec: RunSpec, *, config: FlowConfig | None = None, array: SensorArray | None = None,
+                 allow_missing: bool = False, robust: bool = True, method: str = "exact", progress=None):
+    """Dead reckoning of a logged run; returns (Odometry, flows or None, steps)."""
+    config = config or FlowConfig(window=spec.window)
+    steps, flows = load_steps(spec, config, allow_missing=allow_missing, progress=progress)
+    od = dead_reckon(steps, array or spec.array, robust=robust, method=method)
+    if flows is not None:
+        for i, ff in enumerate(flows):
+            lim = config.search + 0.5
+            fast = np.abs(ff.flow_px[np.isfinite(ff.flow_px[:, 0])]).max(initial=0.0)
+            if fast > lim - 0.75:
+                od.warnings.append(Diagnostic("degenerate_geometry",
+                                              f"sensor {spec.array.names[i]}: flow reached {fast:.2f} px per frame, near the "
+                                              f"+/-{config.search} px search range (speed ceiling (S + 0.5) h rate / f); "
+                                              "faster motion aliases", params=(spec.array.names[i],)))
+    return od, flows, steps
+
+
+def _traj_section(report: Report, title: str, curves: dict, errors: dict) -> None:
+    sec = report.section(title)
+    fig, ax = new_figure(size=(6.0, 5.0))
+    plot_trajectories(curves, ax=ax, title="true / flow odometry / wheel odometry (cf. seed Fig. 4)")
+    sec.figure(fig, "Trajectories in the world frame; dots mark the end.")
+    rows = []
+    for name, ev in errors.items():
+        r1 = ev.rpe.get(1.0, {})
+        rows.append({"trajectory": name, "ATE [mm]": ev.ate_rmse * 1e3, "final error [mm]": ev.final_error * 1e3,
+                     "final heading [deg]": np.degrees(ev.heading_error_final),
+                     "RPE@1m [%]": r1.get("trans_per_m", np.nan) * 100, "RPE rot [deg/m]": np.degrees(r1.get("rot_per_m", np.nan))})
+    sec.table(rows, digits=4, caption="ATE after rigid alignment (Umeyama); RPE over 1 m of travelled path.")
+
+
+def evaluation_run(spec: RunSpec, od: Odometry, *, calibrated: Odometry | None = None):
+    """Errors of flow odometry (and wheel odometry, when logged) against the run's reference."""
+    if spec.reference is None:
+        from robocal.errors import InputError
+
+        raise InputError(f"{spec.path}: evaluation needs a 'reference' trajectory file")
+    t_ref, p_ref = read_poses_csv(spec.reference)
+    ref = interpolate_poses(t_ref, p_ref, od.t)
+    curves = {"true": ref, "flow odometry": od.poses}
+    errors = {"flow odometry": evaluate_trajectory(od.poses, ref)}
+    if calibrated is not None:
+        curves["flow odometry (calibrated)"] = calibrated.poses
+        errors["flow odometry (calibrated)"] = evaluate_trajectory(calibrated.poses, ref)
+    if spec.wheel is not None:
+        t_w, p_w = read_poses_csv(spec.wheel)
+        wheel = interpolate_poses(t_w, p_w, od.t)
+        curves["wheel odometry"] = wheel
+        errors["wheel odometry"] = evaluate_trajectory(wheel, ref)
+    return curves, errors
+
+
+def calibration_run(spec: RunSpec, *, config: FlowConfig | None = None, window: float = 0.1, loss: str = "linear",
+                    progress=None):
+    """Array calibration from a logged run with a reference trajectory."""
+    from robocal.errors import InputError
+
+    if spec.reference is None:
+        raise InputError(f"{spec.path}: calibration needs a 'reference' trajectory file (t, x, y, theta)")
+    config = config or FlowConfig(window=spec.window)
+    nominal = spec.array.copy(scale=np.ones(spec.array.n))
+    steps, flows = load_steps(spec, config, progress=progress)
+    t_ref, p_ref = read_poses_csv(spec.reference)
+    cal = calibrate_array(steps, t_ref, p_ref, nominal, window=window, loss=loss)
+    return cal, steps
+
+
+def calibration_result(cal, spec: RunSpec, *, method: str = "windowed-lsq") -> CalibrationResult:
+    return CalibrationResult(
+        rig="flow", method=method, estimate=cal.estimate_dict(),
+        std={k: cal.std.get(k) for k in cal.estimate_dict()}, units=cal.units(),
+        residual_rms=cal.residual_rms, residual_unit="m", warnings=list(cal.warnings),
+        inputs=hash_inputs(spec.inputs()),
+        diagnostics={"windows_per_sensor": cal.n_windows.tolist(), "iterations": cal.lsq.iterations,
+                     "condition_number": cal.lsq.condition_number, "cost_history": cal.lsq.cost_history},
+    )
+
+
+def odometry_result(od: Odometry, spec: RunSpec, errors: dict | None = None) -> CalibrationResult:
+    est = {"final_pose": od.poses[-1], "distance": od.summary()["distance_m"],
+           "mean_speed": float(np.mean(np.linalg.norm(od.velocity[:, :2], axis=1)))}
+    units = {"final_pose": "m, m, rad", "distance": "m", "mean_speed": "m/s"}
+    diag = {"summary": od.summary(), "velocity_std_median": np.nanmedian(od.velocity_std, axis=0)}
+    if errors:
+        diag["evaluation"] = {k: v.to_dict() for k, v in errors.items()}
+        fo = errors.get("flow odometry")
+        if fo is not None:
+            est["ate_rmse"] = fo.ate_rmse
+            units["ate_rmse"] = "m"
+    return CalibrationResult(rig="flow", method="multi-sensor-lsq", estimate=est, units=units,
+                             std={"final_pose": None}, warnings=list(od.warnings),
+                             inputs=hash_inputs(spec.inputs()), diagnostics=diag)
+
+
+def velocity_figure(od: Odometry):
+    fig, axs = new_figure(3, 1, size=(6.4, 5.5), sharex=True)
+    tm = 0.5 * (od.t[1:] + od.t[:-1])
+    for a, lab in enumerate(("vx [m/s]", "vy [m/s]", "omega [rad/s]")):
+        axs[a].plot(tm, od.velocity[:, a], lw=0.6)
+        s = od.velocity_std[:, a]
+        axs[a].fill_between(tm, od.velocity[:, a] - 3 * s, od.velocity[:, a] + 3 * s, alpha=0.3, lw=0)
+        axs[a].set_ylabel(lab)
+    axs[-1].set_xlabel("t [s]")
+    fig.suptitle("robot velocity from the array, +/-3 sigma band from the geometry")
+    return fig
+
+
+def quality_figure(steps, names):
+    fig, ax = new_figure(size=(6.4, 3.0))
+    tm = steps.t[1:]
+    for i, nm in enumerate(names):
+        ax.plot(tm, steps.quality[i], lw=0.7, label=nm)
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("quality (0..255)")
+    ax.legend(fontsize=8)
+    return fig
+
+
+def speed_ceiling(config: FlowConfig, height: float, rate: float, focal_px: float) -> float:
+    return speed_limit(config, height, rate, focal_px)
+
+
+def default_sim(trajectory: str = "loop", duration: float = 8.0, **kw) -> SimConfig:
+    """The seed's rig with mounting errors and per-sensor height-scale errors (a sonar is never exact)."""
+    base = dict(array_true=mounted_array(), height_scale=(0.99, 1.02, 1.04), trajectory=trajectory, duration=duration)
+    base.update(kw)
+    return SimConfig(**base)
