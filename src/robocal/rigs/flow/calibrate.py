@@ -5,7 +5,7 @@ The seed's "next step" (§4): estimate each sensor's ``R_i``, ``psi_i``,
 seconds. Over window ``[k0, k1)`` sensor ``i``'s displacements, chained in
 the sensor frame of the window's start with the reference headings,
 
-    M_i = sum_k R(theta_k + dtheta_k/2 - theta_k0) dS_ik
+    M_i = sum_k R(theta_{k+1} - theta_k0) dS_ik
 
 must equal the sensor point's displacement in the robot frame at ``k0``,
 rotated into the sensor frame:
@@ -74,10 +74,10 @@ def window_observations(steps: SensorSteps, poses, window: float):
     if J < 4:
         raise NotEnoughDataError(f"the drive gives {J} windows of {window} s; calibration needs at least 4 (a longer drive)")
     th = poses[:, 2]
-    dth_step = np.diff(th)
     ks = np.arange(J * m).reshape(J, m)
     k0 = ks[:, 0]
-    rel = th[ks] + 0.5 * dth_step[ks] - th[k0][:, None]           # (J, m)
+    # a frame's displacement is measured in the sensor frame at the end of its interval
+    rel = th[ks + 1] - th[k0][:, None]                              # (J, m)
     d = steps.disp[:, ks, :]                                        # (n, J, m, 2)
     ok = steps.valid[:, ks] & np.all(np.isfinite(d), axis=3)
     M = np.einsum("jmab,njmb->nja", rot2(rel), np.where(ok[..., None], d, 0.0))

@@ -155,8 +155,8 @@ def cmd_evaluate(args) -> int:
                             diagnostics={k: v.to_dict() for k, v in errors.items()})
     write_run(out, res, report)
     for k, v in errors.items():
-        r1 = v.rpe.get(1.0, {})
-        print(f"  {k:28s} ATE {v.ate_rmse * 1e3:7.1f} mm   RPE@1m {r1.get('trans_per_m', np.nan) * 100:5.2f} %  "
+        r1 = v.rpe.get(0.5, {})
+        print(f"  {k:28s} ATE {v.ate_rmse * 1e3:7.1f} mm   RPE@0.5m {r1.get('trans_per_m', np.nan) * 100:5.2f} %  "
               f"{np.degrees(r1.get('rot_per_m', np.nan)):5.2f} deg/m")
     return 0
 
@@ -182,7 +182,7 @@ def add_commands(parser: argparse.ArgumentParser) -> None:
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser("odometry", help="dead reckoning from a run (flow log or raw frames)", formatter_class=RawHelp,
-                       epilog=examples_epilog("robocal flow odometry examples/flow/run.yaml --out odo",
+                       epilog=examples_epilog("robocal flow odometry examples/flow/loop/run.yaml --out odo",
                                               "robocal flow odometry flow-sim/run.yaml --refine lk --out odo"))
     p.add_argument("input", type=Path, help="run.yaml")
     p.add_argument("--allow-missing", action="store_true", help="treat missing sensor records as invalid frames")
@@ -194,7 +194,7 @@ def add_commands(parser: argparse.ArgumentParser) -> None:
 
     p = sub.add_parser("calibrate", help="calibrate R, psi, phi, scale of every sensor from a run with a reference",
                        formatter_class=RawHelp,
-                       epilog=examples_epilog("robocal flow calibrate examples/flow/calibration_run.yaml --out cal"))
+                       epilog=examples_epilog("robocal flow calibrate examples/flow/calibration/run.yaml --out cal"))
     p.add_argument("input", type=Path, help="run.yaml with a 'reference' trajectory")
     p.add_argument("--window", type=float, default=0.1, help="window length, s")
     p.add_argument("--loss", default="linear", choices=("linear", "soft_l1", "huber", "cauchy"))
@@ -204,8 +204,8 @@ def add_commands(parser: argparse.ArgumentParser) -> None:
 
     p = sub.add_parser("evaluate", help="ATE / RPE of flow (and wheel) odometry against the reference",
                        formatter_class=RawHelp,
-                       epilog=examples_epilog("robocal flow evaluate examples/flow/run.yaml --out ev",
-                                              "robocal flow evaluate examples/flow/run.yaml --array cal/array_calibrated.yaml --out ev"))
+                       epilog=examples_epilog("robocal flow evaluate examples/flow/loop/run.yaml --out ev",
+                                              "robocal flow evaluate examples/flow/loop/run.yaml --array cal/array_calibrated.yaml --out ev"))
     p.add_argument("input", type=Path, help="run.yaml with a 'reference' trajectory")
     p.add_argument("--array", type=Path, default=None, help="a calibrated array (YAML) to compare with the nominal one")
     add_out_argument(p)

@@ -128,7 +128,7 @@ class TrajectoryErrors:
                 "rpe": {str(k): v for k, v in self.rpe.items()}, "align_method": self.align_method}
 
 
-def evaluate_trajectory(est, ref, *, lengths=(0.5, 1.0)) -> TrajectoryErrors:
+def evaluate_trajectory(est, ref, *, lengths=(0.25, 0.5, 1.0)) -> TrajectoryErrors:
     """ATE (after alignment), RPE per distance and the raw end-point error of ``est`` vs ``ref`` (both (N, 3))."""
     est = np.asarray(est, float)
     ref = np.asarray(ref, float)

@@ -459,8 +459,8 @@ def _refine_blocks(prev, curr, pidx, cidx, sads, ys, xs, block, search, feat_thr
             flow_b[k, b, 1] = fy
 
 
-@njit(cache=True, nogil=True, fastmath=True)
-def _lk_refine(prev, curr, ys, xs, block, used, flow, iters, max_step, out):  # pragma: no cover - compiled
+@njit(cache=True, nogil=True)  # no fastmath: it would drop the NaN test below
+def _lk_refine(prev, curr, ys, xs, block, search, used, flow, iters, max_step, out):  # pragma: no cover - compiled
     """Frame-level inverse-compositional Gauss–Newton refinement of a pure translation.
 
     Over the pixels of the used blocks, minimise ``sum (C(x + f) - P(x))^2``
@@ -476,7 +476,7 @@ def _lk_refine(prev, curr, ys, xs, block, used, flow, iters, max_step, out):  # 
         fy0 = flow[k, 1]
         out[k, 0] = fx0
         out[k, 1] = fy0
-        if not (fx0 == fx0 and fy0 == fy0):
+        if np.isnan(fx0) or np.isnan(fy0):
             continue
         P = prev[k]
         C = curr[k]
@@ -530,7 +530,8 @@ def _lk_refine(prev, curr, ys, xs, block, used, flow, iters, max_step, out):  # 
             dy = (hxx * sy - hxy * sx) / det
             fx -= dx
             fy -= dy
-            if abs(fx - fx0) > max_step or abs(fy - fy0) > max_step:
+            # the frame margin of search + 1 px bounds where C may be sampled
+            if abs(fx - fx0) > max_step or abs(fy - fy0) > max_step or abs(fx) >= search + 0.99 or abs(fy) >= search + 0.99:
                 ok = False
                 break
             if abs(dx) < 1e-3 and abs(dy) < 1e-3:
@@ -677,8 +678,8 @@ class FrameFlow:
     flow_comp_px : ndarray, shape (N, 2)
         Flow with the rotation-induced part removed (eqs. 3–4), px.
     displacement : ndarray, shape (N, 2) or None
-        Sensor displacement over the ground in the sensor frame S, m (eq. 5);
-        None without heights.
+        Sensor displacement over the ground in the sensor frame S at the end
+        of the interval, m (eq. 5); None without heights.
     quality : ndarray, shape (N,)
         ``used / n_blocks * 255`` (PX4FLOW's accepted/25*255; with
         ``aggregate="trimmed"`` only the blocks that agree with the median
@@ -893,7 +894,7 @@ def compute_flow(prev, curr, config: FlowConfig = FlowConfig(), *, gyro=None, dt
         refined = np.empty_like(flow)
         _lk_refine(np.ascontiguousarray(_check_frames(prev, "prev", config)),
                    np.ascontiguousarray(_check_frames(curr, "curr", config)),
-                   np.repeat(o1, config.grid), np.tile(o1, config.grid), config.block, used,
+                   np.repeat(o1, config.grid), np.tile(o1, config.grid), config.block, config.search, used,
                    np.ascontiguousarray(flow), int(config.refine_iterations), 1.0, refined)
         flow = refined
     spread = np.where(valid, spread, np.nan)

@@ -1,8 +1,9 @@
 """Robot motion from several flow sensors: the seed's A u = b, robustly (seed 003 eqs. 6–12).
 
 For each frame interval ``k`` every valid sensor ``i`` gives its metric ground
-displacement ``dS_i`` (sensor frame, :mod:`robocal.rigs.flow.kernel`). In the
-robot frame at the middle of the interval it is
+displacement ``dS_i`` in its own frame at the *end* of the interval (block
+matching follows the ground point under the lens at the start into the new
+frame). In the robot frame at the middle of the interval it is
 
     b_i = scale_i R(phi_i + dtheta/2) dS_i
         = [[1, 0, -R_i sin psi_i], [0, 1, R_i cos psi_i]] u = A_i u,
@@ -10,8 +11,9 @@ robot frame at the middle of the interval it is
 ``u = (dx, dy, dtheta)`` the body twist of the step (the seed's eq. 9 with
 ``theta = 0``: solving in the robot frame and then rotating by the heading
 gives the same ``u`` as the seed's world-frame form). The half-step rotation
-``dtheta/2`` accounts for the sensor turning during the interval (one
-fixed-point pass: ``A`` does not depend on it). Two or more sensors make it
+``dtheta/2`` (and the chord-to-arc factor ``sinc(dtheta/2)``) account for the
+sensor turning during the interval, found by fixed-point passes (``A`` does
+not depend on them); with them the twists integrate exactly. Two or more sensors make it
 (over)determined; it is solved by weighted least squares with weights from
 each sensor's per-frame quality, a sensor that disagrees with the others
 beyond its noise (chi-square test) is dropped, and the twist covariance is
@@ -182,11 +184,17 @@ def fuse_steps(steps: SensorSteps, array: SensorArray, *, robust: bool = True, o
 
     def build_b(dtheta):
         ang = array.phi[None, :] + (0.5 * dtheta[:, None] if half_step else 0.0)
-        return np.einsum("knij,knj->kni", rot2(ang), np.transpose(d, (1, 0, 2)))
+        b = np.einsum("knij,knj->kni", rot2(ang), np.transpose(d, (1, 0, 2)))
+        if half_step:
+            # a constant twist moves a point along an arc: its chord, seen from the middle of
+            # the step, is the twist shortened by sinc(dtheta/2)
+            h = 0.5 * dtheta
+            b = b / np.where(np.abs(h) > 1e-8, np.sin(h) / np.where(h == 0, 1.0, h), 1.0)[:, None, None]
+        return b
 
     enough = used.sum(axis=1) >= 2
     dth = np.zeros(K)
-    for _ in range(2):
+    for _ in range(3):
         b = build_b(dth)
         u, Ninv, rss, r = _solve_weighted(A, b, np.where(used, w0, 0.0))
         dth = np.where(enough, np.nan_to_num(u[:, 2]), 0.0)

@@ -72,9 +72,11 @@ def load_texture(name: str = "gravel", *, rng: np.random.Generator | None = None
     f = np.sqrt(fx**2 + fy**2)
     img = np.fft.irfft2(spec / np.maximum(f, 1 / 256) * np.exp(-((f / 0.25) ** 2)), s=(512, 512))
     img = (img - img.mean()) / img.std() * 38.0 + 128.0
-    note = "procedural texture (band-limited noise): scikit-image is not installed, real photographs unavailable"
-    if name != "procedural":
-        note = f"requested photograph '{name}' unavailable; " + note
+    if name == "procedural":
+        note = "procedural texture (band-limited noise), as requested: not a photograph"
+    else:
+        note = (f"photograph '{name}' unavailable (scikit-image is not installed): procedural texture "
+                "(band-limited noise) instead, not a photograph")
     return np.clip(img, 0, 255).astype(np.float32), note
 
 

@@ -1,0 +1,112 @@
+"""Array calibration (R, psi, phi, scale per sensor) from a drive with a reference trajectory."""
+
+import numpy as np
+import pytest
+
+from robocal.errors import InputError, NotEnoughDataError
+from robocal.rigs.flow.calibrate import calibrate_array, interpolate_poses
+from robocal.rigs.flow.evaluate import evaluate_trajectory
+from robocal.rigs.flow.log import steps_from_frames
+from robocal.rigs.flow.model import SensorArray, seed_array
+from robocal.rigs.flow.odometry import SensorSteps, dead_reckon
+from robocal.rigs.flow.simulate import make_trajectory, simulate_run
+from robocal.rigs.flow.workflow import default_sim, mounted_array
+from robocal.rigs.flow.model import integrate_twists, rot2
+
+TRUE = seed_array().copy(R=np.array([0.356, 0.344, 0.353]), psi=np.radians([61.2, 118.4, 271.0]),
+                         phi=np.radians([2.0, -2.5, 3.0]), scale=np.array([1.01, 0.98, 0.96]))
+
+
+def _calibration_drive(seed=0, duration=6.0):
+    t, v, w = make_trajectory("calibration", duration, 400.0, rng=np.random.default_rng(seed))
+    return t, integrate_twists(np.stack([v / 400, 0 * v, w / 400], 1))
+
+
+def _disp(array: SensorArray, poses):
+    out = np.empty((array.n, len(poses) - 1, 2))
+    for i in range(array.n):
+        r = np.array([array.R[i] * np.cos(array.psi[i]), array.R[i] * np.sin(array.psi[i])])
+        p = poses[:, :2] + np.einsum("kab,b->ka", rot2(poses[:, 2]), r)
+        out[i] = np.einsum("kba,kb->ka", rot2(poses[1:, 2] + array.phi[i]), np.diff(p, axis=0)) / array.scale[i]
+    return out
+
+
+def _steps(t, d, sigma=1e-5):
+    n, K, _ = d.shape
+    return SensorSteps(t, d, np.ones((n, K), bool), np.full((n, K), sigma), np.full((n, K), 255.0))
+
+
+def _vec(a: SensorArray):
+    return np.concatenate([a.R, a.psi, a.phi, a.scale])
+
+
+def test_exact_data_give_exact_parameters():
+    t, poses = _calibration_drive()
+    cal = calibrate_array(_steps(t, _disp(TRUE, poses)), t, poses, seed_array())
+    d = _vec(cal.array) - _vec(TRUE)
+    d[3:9] = np.angle(np.exp(1j * d[3:9]))
+    assert np.abs(d).max() < 1e-9
+    assert cal.residual_rms < 1e-12
+
+
+def test_reported_std_matches_monte_carlo():
+    t, poses = _calibration_drive(duration=4.0)
+    exact = _disp(TRUE, poses)
+    rng = np.random.default_rng(3)
+    sig = 2e-5
+    est, stds = [], []
+    for _ in range(25):
+        cal = calibrate_array(_steps(t, exact + rng.normal(0, sig, exact.shape)), t, poses, seed_array())
+        est.append(_vec(cal.array))
+        stds.append([cal.std[f"{nm}.{p}"] for p in ("R", "psi", "phi", "scale") for nm in cal.array.names])
+    est = np.array(est)
+    err = est - _vec(TRUE)
+    err[:, 3:9] = np.angle(np.exp(1j * err[:, 3:9]))
+    ratio = err.std(axis=0) / np.mean(stds, axis=0)
+    # 25 trials: the sample std is within about +/-30 % of the truth
+    assert np.all((ratio > 0.6) & (ratio < 1.5)), ratio
+    assert np.all(np.abs(err.mean(axis=0)) < 3 * np.mean(stds, axis=0) / np.sqrt(25) + 1e-12)
+
+
+def test_straight_drive_cannot_determine_positions():
+    t = np.arange(801) / 400.0
+    poses = integrate_twists(np.tile([0.001, 0.0, 0.0], (800, 1)))
+    cal = calibrate_array(_steps(t, _disp(TRUE, poses)), t, poses, seed_array())
+    assert any(w.code == "rank_deficient" for w in cal.warnings)
+    assert cal.std["s60.R"] is None
+
+
+def test_calibrated_array_beats_nominal_on_a_fresh_rendered_run():
+    rng = np.random.default_rng(7)
+    sim_a = default_sim("calibration", 4.0, supersample=1)
+    run_a = simulate_run(sim_a, rng)
+    st_a, _ = steps_from_frames(run_a.frames, run_a.t, run_a.gyro, run_a.height, sim_a.camera.focal_px)
+    cal = calibrate_array(st_a, run_a.t, run_a.poses, sim_a.array_nominal)
+    true = mounted_array()
+    hs = np.asarray(sim_a.height_scale)
+    # effective parameters close to the mounting (they also absorb the flow kernel's own bias)
+    assert np.abs(cal.array.R - true.R).max() < 0.015
+    assert np.degrees(np.abs(cal.array.phi - true.phi)).max() < 1.0
+    assert np.abs(cal.array.scale * hs - 1).max() < 0.025
+    sim_b = default_sim("loop", 5.0, supersample=1)
+    run_b = simulate_run(sim_b, rng)
+    st_b, _ = steps_from_frames(run_b.frames, run_b.t, run_b.gyro, run_b.height, sim_b.camera.focal_px)
+    ate_nom = evaluate_trajectory(dead_reckon(st_b, sim_b.array_nominal).poses, run_b.poses).ate_rmse
+    ate_cal = evaluate_trajectory(dead_reckon(st_b, cal.array).poses, run_b.poses).ate_rmse
+    ate_wheel = evaluate_trajectory(run_b.wheel_poses, run_b.poses).ate_rmse
+    print(ate_nom, ate_cal, ate_wheel)
+    assert ate_cal < 0.7 * ate_nom
+    assert ate_cal < ate_wheel
+
+
+def test_bad_reference():
+    t, poses = _calibration_drive(duration=1.0)
+    st = _steps(t, _disp(TRUE, poses))
+    with pytest.raises(InputError, match="reference covers"):
+        calibrate_array(st, t[:100], poses[:100], seed_array())
+    t2 = t.copy()
+    t2[10] = t2[9]
+    with pytest.raises(InputError, match="increase strictly"):
+        interpolate_poses(t2, poses, t)
+    with pytest.raises(NotEnoughDataError, match="windows"):
+        calibrate_array(_steps(t[:41], _disp(TRUE, poses[:41])), t[:41], poses[:41], seed_array())

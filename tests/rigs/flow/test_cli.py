@@ -1,0 +1,124 @@
+"""CLI: every example runs; simulate -> odometry/calibrate/evaluate; bad inputs give one-line errors."""
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from robocal.cli.main import main
+
+EX = Path(__file__).resolve().parents[3] / "examples" / "flow"
+
+
+def _run(argv, capsys):
+    code = main(argv)
+    cap = capsys.readouterr()
+    return code, cap.out, cap.err
+
+
+def test_examples_run(tmp_path, capsys):
+    code, out, _ = _run(["flow", "odometry", str(EX / "loop" / "run.yaml"), "--out", str(tmp_path / "odo"), "--no-progress"], capsys)
+    assert code == 0 and "ATE" in out
+    res = json.loads((tmp_path / "odo" / "result.json").read_text())
+    assert res["rig"] == "flow" and res["estimate"]["ate_rmse"] < 0.02
+    assert (tmp_path / "odo" / "report.html").stat().st_size > 10_000
+    code, out, _ = _run(["flow", "calibrate", str(EX / "calibration" / "run.yaml"), "--out", str(tmp_path / "cal"), "--no-progress"], capsys)
+    assert code == 0
+    cal = json.loads((tmp_path / "cal" / "result.json").read_text())
+    assert cal["units"]["s60.R"] == "m" and cal["std"]["s60.R"] > 0
+    assert abs(cal["estimate"]["s60.R"] - 0.356) < 0.01
+    code, out, _ = _run(["flow", "evaluate", str(EX / "loop" / "run.yaml"), "--array", str(tmp_path / "cal" / "array_calibrated.yaml"),
+                         "--out", str(tmp_path / "ev"), "--no-progress"], capsys)
+    assert code == 0
+    ev = json.loads((tmp_path / "ev" / "result.json").read_text())["estimate"]
+    assert ev["flow odometry (calibrated) ATE"] < ev["flow odometry ATE"]
+
+
+def test_simulate_frames_then_odometry(tmp_path, capsys):
+    out = tmp_path / "sim"
+    code, text, _ = _run(["flow", "simulate", "--duration", "0.6", "--supersample", "1", "--texture", "grass",
+                          "--out", str(out), "--no-progress"], capsys)
+    assert code == 0 and "scikit-image photograph 'grass'" in text
+    with np.load(out / "frames.npz") as z:
+        assert z["frames"].shape == (3, 241, 64, 64) and z["frames"].dtype == np.uint8
+    code, text, _ = _run(["flow", "odometry", str(out / "run.yaml"), "--refine", "lk", "--out", str(tmp_path / "o"), "--no-progress"], capsys)
+    assert code == 0
+
+
+def _copy_loop(tmp_path):
+    d = tmp_path / "run"
+    shutil.copytree(EX / "loop", d)
+    return d
+
+
+def _edit_csv(path, fn):
+    lines = path.read_text().splitlines()
+    head = [i for i, ln in enumerate(lines) if ln.startswith("t [s]")][0]
+    body = [ln.split(",") for ln in lines[head + 1:]]
+    body = fn(body)
+    path.write_text("\n".join(lines[:head + 1] + [",".join(r) for r in body]) + "\n")
+
+
+@pytest.mark.parametrize("case, edit, message", [
+    ("non-monotonic", lambda b: b[:30] + b[33:36] + b[30:33] + b[36:], "must not decrease"),
+    ("missing sensor", lambda b: b[:10] + b[11:], "sensor 1 has no record at t = 0.010000"),
+    ("zero height", lambda b: b[:5] + [b[5][:8] + ["0.0"] + b[5][9:]] + b[6:], "height must be > 0"),
+    ("negative height", lambda b: b[:7] + [b[7][:8] + ["-0.1"] + b[7][9:]] + b[8:], "height must be > 0"),
+    ("bad sensor index", lambda b: b[:4] + [b[4][:2] + ["7"] + b[4][3:]] + b[5:], "sensor index 7"),
+])
+def test_bad_flow_logs(tmp_path, capsys, case, edit, message):
+    d = _copy_loop(tmp_path)
+    _edit_csv(d / "flow.csv", edit)
+    code, _, err = _run(["flow", "odometry", str(d / "run.yaml"), "--out", str(tmp_path / "o"), "--no-progress"], capsys)
+    assert code == 2
+    assert message in err and err.count("\n") == 1 and "flow.csv" in err
+
+
+def test_missing_records_can_be_allowed(tmp_path, capsys):
+    d = _copy_loop(tmp_path)
+    _edit_csv(d / "flow.csv", lambda b: b[:10] + b[11:])
+    code, _, _ = _run(["flow", "odometry", str(d / "run.yaml"), "--allow-missing", "--out", str(tmp_path / "o"), "--no-progress"], capsys)
+    assert code == 0
+
+
+def test_single_sensor_is_a_clear_error(tmp_path, capsys):
+    d = _copy_loop(tmp_path)
+    text = (d / "run.yaml").read_text()
+    cut = text.index("- name: s120")
+    end = text.index("flow_log:")
+    (d / "run.yaml").write_text(text[:cut] + text[end:])
+    # keep only sensor 0's rows: the array has one sensor
+    code, _, err = _run(["flow", "odometry", str(d / "run.yaml"), "--out", str(tmp_path / "o"), "--no-progress"], capsys)
+    assert code == 2 and "at least 2" in err and "3 unknowns" in err
+
+
+def test_wrong_frame_size(tmp_path, capsys):
+    d = _copy_loop(tmp_path)
+    rng = np.random.default_rng(0)
+    np.savez(d / "frames.npz", frames=rng.integers(0, 255, (3, 5, 32, 32), dtype=np.uint8), t=np.arange(5) / 400.0,
+             gyro=np.zeros((3, 4, 3)), height=np.full((3, 4), 0.1))
+    text = (d / "run.yaml").read_text().replace("flow_log: flow.csv", "frames: frames.npz")
+    (d / "run.yaml").write_text(text)
+    code, _, err = _run(["flow", "odometry", str(d / "run.yaml"), "--out", str(tmp_path / "o"), "--no-progress"], capsys)
+    assert code == 2 and "64x64" in err and "32x32" in err
+
+
+def test_non_monotonic_frame_times(tmp_path, capsys):
+    d = _copy_loop(tmp_path)
+    rng = np.random.default_rng(0)
+    t = np.arange(6) / 400.0
+    t[3] = t[1]
+    np.savez(d / "frames.npz", frames=rng.integers(0, 255, (3, 6, 64, 64), dtype=np.uint8), t=t,
+             gyro=np.zeros((3, 5, 3)), height=np.full((3, 5), 0.1))
+    (d / "run.yaml").write_text((d / "run.yaml").read_text().replace("flow_log: flow.csv", "frames: frames.npz"))
+    code, _, err = _run(["flow", "odometry", str(d / "run.yaml"), "--out", str(tmp_path / "o"), "--no-progress"], capsys)
+    assert code == 2 and "increase strictly" in err
+
+
+def test_help_lists_examples(capsys):
+    with pytest.raises(SystemExit):
+        main(["flow", "odometry", "--help"])
+    out = capsys.readouterr().out
+    assert "examples/flow/loop/run.yaml" in out
