@@ -68,9 +68,13 @@ def test_generic_block_path_matches_unrolled_8x8(gravel_pairs):
     ct = np.ascontiguousarray(curr[:20].transpose(1, 2, 0))
     a = np.empty((25, 81, 20), np.uint16)
     b = np.empty((25, 81, 20), np.uint32)
-    K._sad8_batch(pt, ct, ys, xs, 4, a)
-    K._sad_batch(pt, ct, ys, xs, 8, 4, b)
-    assert np.array_equal(a, b)
+    ka = np.empty((25, 20), np.int32)
+    kb = np.empty((25, 20), np.int32)
+    K._sad8_batch(pt, ct, ys, xs, 4, a, ka)
+    K._sad_batch(pt, ct, ys, xs, 8, 4, b, kb)
+    assert np.array_equal(a, b) and np.array_equal(ka, kb)
+    # the packed argmin: best SAD and the first offset in scan order that reaches it
+    assert np.array_equal(ka >> 10, a.min(axis=1)) and np.array_equal(ka & 1023, a.argmin(axis=1))
     # brute-force SAD (eq. 1) of one block at one offset
     k, blk, dy, dx = 3, 7, -2, 3
     y0, x0 = ys[blk], xs[blk]

@@ -49,6 +49,7 @@ __all__ = [
     "match_sequence",
     "BlockMatches",
     "compute_flow",
+    "compute_flow_sequence",
     "rotational_flow",
     "compensate_rotation",
     "metric_displacement",
@@ -152,6 +153,9 @@ class FlowConfig:
         if self.min_blocks > self.grid**2:
             raise InputError(f"FlowConfig.min_blocks ({self.min_blocks}) exceeds the number of blocks ({self.grid**2})")
         ys = block_origins(self)
+        if self.search > 15 or self.block > 90:
+            # the compiled argmin packs (SAD << 10 | offset) into 32 bits
+            raise InputError(f"FlowConfig: search must be <= 15 px and block <= 90 px, got {self.search} and {self.block}")
         if ys.size == 0 or ys.max() + self.block + self.search + 1 > self.window:
             raise InputError(
                 f"FlowConfig: a {self.grid}x{self.grid} grid of {self.block}px blocks with a +/-{self.search} px "
@@ -193,15 +197,18 @@ def block_origins(config: FlowConfig) -> np.ndarray:
 
 
 @njit(cache=True, fastmath=True, nogil=True)
-def _sad8_batch(prev_t, curr_t, ys, xs, search, out):  # pragma: no cover - compiled
+def _sad8_batch(prev_t, curr_t, ys, xs, search, out, keys):  # pragma: no cover - compiled
     """SAD (eq. 1) of every 8x8 block at every integer offset, for N pairs at once.
 
     prev_t, curr_t : uint8 (H, W, N) — pairs innermost (SIMD lanes).
     out : uint16 (n_blocks, (2 search + 1)^2, N). 8x8x255 = 16320 fits uint16.
+    keys : int32 (n_blocks, N) — ``min over offsets of (SAD << 10 | offset)``: the
+    best offset and its SAD in one vectorisable min (ties keep the first offset in
+    scan order, as the firmware's strict '<').
     Three horizontal offsets share each load of the reference block (10
     loads of ``curr`` serve 24 differences instead of 8).
     """
-    n = prev_t.shape[2]
+    n = out.shape[2]
     nb = ys.shape[0]
     side = 2 * search + 1
     n3 = side // 3
@@ -211,6 +218,9 @@ def _sad8_batch(prev_t, curr_t, ys, xs, search, out):  # pragma: no cover - comp
     for b in range(nb):
         y0 = ys[b]
         x0 = xs[b]
+        kb = keys[b]
+        for k in range(n):
+            kb[k] = 0x7FFFFFFF
         for dy in range(-search, search + 1):
             orow = (dy + search) * side
             for j in range(n3):
@@ -241,6 +251,8 @@ def _sad8_batch(prev_t, curr_t, ys, xs, search, out):  # pragma: no cover - comp
                     out[b, o, k] = a0[k]
                     out[b, o + 1, k] = a1[k]
                     out[b, o + 2, k] = a2[k]
+                    m = min((np.int32(a0[k]) << 10) | o, (np.int32(a1[k]) << 10) | (o + 1))
+                    kb[k] = min(kb[k], min(m, (np.int32(a2[k]) << 10) | (o + 2)))
             for dx in range(-search + 3 * n3, search + 1):  # the remainder when 3 does not divide 2S+1
                 a0[:] = 0
                 for r in range(8):
@@ -256,17 +268,21 @@ def _sad8_batch(prev_t, curr_t, ys, xs, search, out):  # pragma: no cover - comp
                 o = orow + dx + search
                 for k in range(n):
                     out[b, o, k] = a0[k]
+                    kb[k] = min(kb[k], (np.int32(a0[k]) << 10) | o)
 
 
 @njit(cache=True, fastmath=True, nogil=True)
-def _sad_batch(prev_t, curr_t, ys, xs, block, search, out):  # pragma: no cover - compiled
+def _sad_batch(prev_t, curr_t, ys, xs, block, search, out, keys):  # pragma: no cover - compiled
     """Generic-block-size version of :func:`_sad8_batch` (uint32 sums)."""
-    n = prev_t.shape[2]
+    n = out.shape[2]
     nb = ys.shape[0]
     acc = np.empty(n, np.uint32)
     for b in range(nb):
         y0 = ys[b]
         x0 = xs[b]
+        kb = keys[b]
+        for k in range(n):
+            kb[k] = 0x7FFFFFFF
         o = 0
         for dy in range(-search, search + 1):
             for dx in range(-search, search + 1):
@@ -283,6 +299,7 @@ def _sad_batch(prev_t, curr_t, ys, xs, block, search, out):  # pragma: no cover 
                             acc[k] += np.uint32(max(p, q) - min(p, q))
                 for k in range(n):
                     out[b, o, k] = acc[k]
+                    kb[k] = min(kb[k], (np.int32(acc[k]) << 10) | o)
                 o += 1
 
 
@@ -335,46 +352,44 @@ def _refine_step(prev, curr, y0, x0, block, bx, by, best, step_q, scale):  # pra
 
 
 @njit(cache=True, fastmath=True, nogil=True)
-def _select_lanes(prev_t, sads, ys, xs, block, search, best, bo, second, gate):  # pragma: no cover
-    """Per block and pair (lanes innermost, SIMD): best integer offset, its SAD,
-    the best SAD outside its 3x3 neighbourhood, and the texture gate value
-    (PX4FLOW compute_diff: row and column differences of the block's centre)."""
-    n = prev_t.shape[2]
+def _select_lanes(prev_t, sads, keys, ys, xs, block, search, best, bo, second, gate, neigh, big):  # pragma: no cover
+    """Per block and pair (lanes innermost): decode the best offset and its SAD from
+    ``keys``, keep its 4 axis neighbours (for the sub-pixel fit), find the best SAD
+    outside its 3x3 neighbourhood, and the texture gate (PX4FLOW compute_diff: row
+    and column differences of the block's centre).
+
+    The 3x3 neighbourhood is masked in ``sads`` (overwritten with ``big``) so that
+    the second minimum is one plain vectorised min over the offsets.
+    """
+    n = best.shape[1]
     nb = ys.shape[0]
     side = 2 * search + 1
     q0 = block // 4
     qn = block // 2
-    big = np.int32(1 << 30)
-    oy = np.empty(n, np.int32)
-    ox = np.empty(n, np.int32)
+    sec = np.empty(n, sads.dtype)
     for b in range(nb):
+        kb = keys[b]
         for k in range(n):
-            best[b, k] = big
-            bo[b, k] = 0
-            oy[k] = 0
-            ox[k] = 0
-        o = 0
-        for dy in range(side):
-            for dx in range(side):
-                for k in range(n):
-                    v = np.int32(sads[b, o, k])
-                    # ties keep the first in scan order (the firmware's strict '<')
-                    if v < best[b, k]:
-                        best[b, k] = v
-                        bo[b, k] = o
-                        oy[k] = dy
-                        ox[k] = dx
-                o += 1
+            o = kb[k] & 1023
+            bo[b, k] = o
+            best[b, k] = kb[k] >> 10
+            oy = o // side
+            ox = o - oy * side
+            neigh[b, k, 0] = sads[b, o - 1, k] if ox > 0 else big
+            neigh[b, k, 1] = sads[b, o + 1, k] if ox < side - 1 else big
+            neigh[b, k, 2] = sads[b, o - side, k] if oy > 0 else big
+            neigh[b, k, 3] = sads[b, o + side, k] if oy < side - 1 else big
+            for dy in range(max(oy - 1, 0), min(oy + 2, side)):
+                for dx in range(max(ox - 1, 0), min(ox + 2, side)):
+                    sads[b, dy * side + dx, k] = big
         for k in range(n):
-            second[b, k] = big
-        o = 0
-        for dy in range(side):
-            for dx in range(side):
-                for k in range(n):
-                    v = np.int32(sads[b, o, k])
-                    if (abs(oy[k] - dy) > 1 or abs(ox[k] - dx) > 1) and v < second[b, k]:
-                        second[b, k] = v
-                o += 1
+            sec[k] = big
+        for o in range(side * side):
+            so = sads[b, o]
+            for k in range(n):
+                sec[k] = min(sec[k], so[k])
+        for k in range(n):
+            second[b, k] = sec[k]
         for k in range(n):
             gate[b, k] = 0
         y0 = ys[b] + q0
@@ -399,7 +414,7 @@ def _interp3(sm, s0, sp, mode):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _refine_blocks(prev, curr, pidx, cidx, sads, ys, xs, block, search, feat_thr, sad_thr, min_distinct, mode,
+def _refine_blocks(prev, curr, pidx, cidx, neigh, ys, xs, block, search, feat_thr, sad_thr, min_distinct, mode,
                    best, bo, second, gate, flow_b, status_b, sadmin_b, distinct_b):  # pragma: no cover
     """Per pair and block: accept/reject, then sub-pixel refinement of accepted blocks.
 
@@ -452,9 +467,9 @@ def _refine_blocks(prev, curr, pidx, cidx, sads, ys, xs, block, search, feat_thr
                 # a parabola (mode 3) or a symmetric V (mode 4, "equiangular": the shape of a
                 # SAD surface near its minimum) through the SAD values along each axis
                 if abs(bdx) < search:
-                    fx += _interp3(float(sads[b, o - 1, k]), float(bv), float(sads[b, o + 1, k]), mode)
+                    fx += _interp3(float(neigh[b, k, 0]), float(bv), float(neigh[b, k, 1]), mode)
                 if abs(bdy) < search:
-                    fy += _interp3(float(sads[b, o - side, k]), float(bv), float(sads[b, o + side, k]), mode)
+                    fy += _interp3(float(neigh[b, k, 2]), float(bv), float(neigh[b, k, 3]), mode)
             flow_b[k, b, 0] = fx
             flow_b[k, b, 1] = fy
 
@@ -627,9 +642,10 @@ def match_sequence(frames, config: FlowConfig = FlowConfig()) -> BlockMatches:
 
 def _match_indexed(prev, curr, pidx, cidx, config: FlowConfig) -> BlockMatches:
     # pidx, cidx are consecutive index ranges (np.arange)
-    prev = np.ascontiguousarray(prev)
-    curr = np.ascontiguousarray(curr)
     n = pidx.shape[0]
+    sequence = prev is curr and n > 0 and cidx[0] == pidx[0] + 1
+    prev = np.ascontiguousarray(prev)
+    curr = prev if sequence else np.ascontiguousarray(curr)
     o1 = block_origins(config)
     ys = np.repeat(o1, config.grid)
     xs = np.tile(o1, config.grid)
@@ -644,22 +660,31 @@ def _match_indexed(prev, curr, pidx, cidx, config: FlowConfig) -> BlockMatches:
     for s in range(0, n, _BATCH):
         e = min(n, s + _BATCH)
         m = e - s
-        # pixel-major layout, pairs innermost (OpenCV's transpose is the fastest byte transpose at hand)
-        pt = cv2.transpose(prev[pidx[s]:pidx[s] + m].reshape(m, w * w)).reshape(w, w, m)
-        ct = cv2.transpose(curr[cidx[s]:cidx[s] + m].reshape(m, w * w)).reshape(w, w, m)
+        # pixel-major layout, pairs innermost (OpenCV's transpose is the fastest byte transpose at hand);
+        # consecutive frames of one sequence are transposed once and read at lane k and k + 1
+        if sequence:
+            both = cv2.transpose(prev[pidx[s]:pidx[s] + m + 1].reshape(m + 1, w * w)).reshape(w, w, m + 1)
+            pt = np.ascontiguousarray(both[:, :, :m])   # strided copies: much cheaper than a transpose
+            ct = np.ascontiguousarray(both[:, :, 1:])
+        else:
+            pt = cv2.transpose(prev[pidx[s]:pidx[s] + m].reshape(m, w * w)).reshape(w, w, m)
+            ct = cv2.transpose(curr[cidx[s]:cidx[s] + m].reshape(m, w * w)).reshape(w, w, m)
+        keys = np.empty((nb, m), np.int32)
         if config.block == 8:
             sads = np.empty((nb, side * side, m), np.uint16)
-            _sad8_batch(pt, ct, ys, xs, config.search, sads)
+            _sad8_batch(pt, ct, ys, xs, config.search, sads, keys)
         else:
             sads = np.empty((nb, side * side, m), np.uint32)
-            _sad_batch(pt, ct, ys, xs, config.block, config.search, sads)
+            _sad_batch(pt, ct, ys, xs, config.block, config.search, sads, keys)
         best = np.empty((nb, m), np.int32)
         bo = np.empty((nb, m), np.int32)
         second = np.empty((nb, m), np.int32)
         gate = np.empty((nb, m), np.int32)
-        _select_lanes(pt, sads, ys, xs, config.block, config.search, best, bo, second, gate)
+        neigh = np.empty((nb, m, 4), np.int64)
+        _select_lanes(pt, sads, keys, ys, xs, config.block, config.search, best, bo, second, gate, neigh,
+                      sads.dtype.type(np.iinfo(sads.dtype).max))
         _refine_blocks(
-            prev, curr, pidx[s:e], cidx[s:e], sads, ys, xs, config.block, config.search,
+            prev, curr, pidx[s:e], cidx[s:e], neigh, ys, xs, config.block, config.search,
             float(config.feature_threshold), float(config.sad_limit), float(config.min_distinctness), mode,
             best, bo, second, gate, flow[s:e], status[s:e], sad_min[s:e], distinct[s:e],
         )
@@ -727,29 +752,91 @@ class FrameFlow:
                 "mean_quality": float(np.mean(self.quality)) if len(self) else math.nan}
 
 
-def _aggregate(bm: BlockMatches, config: FlowConfig):
-    acc = bm.status == 0
-    n_acc = acc.sum(axis=1)
-    fl = bm.flow
-    with np.errstate(invalid="ignore", divide="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN frames are handled below
-        med = np.nanmedian(fl, axis=1) if fl.shape[0] else np.zeros((0, 2))
-        dist = np.linalg.norm(fl - med[:, None, :], axis=2)
-        near = acc & (dist <= config.trim_px)
-        agreement = np.where(n_acc > 0, near.sum(axis=1) / np.maximum(n_acc, 1), 0.0)
-        if config.aggregate == "mean":
-            used = acc
-            flow = np.nanmean(np.where(used[..., None], fl, np.nan), axis=1)
-        elif config.aggregate == "median":
-            used = acc
-            flow = med
+@njit(cache=True, nogil=True)
+def _aggregate_frames(flow, status, cen, mode, trim, used, out_flow, agreement, spread, centroid):  # pragma: no cover
+    """Per frame: median of the accepted blocks, the blocks within ``trim`` of it, the frame's
+    flow (mode 0 mean, 1 median, 2 trimmed mean), scatter and centroid of the used blocks."""
+    n, nb = status.shape
+    xs = np.empty(nb)
+    ys = np.empty(nb)
+    for k in range(n):
+        m = 0
+        for b in range(nb):
+            if status[k, b] == 0:
+                xs[m] = flow[k, b, 0]
+                ys[m] = flow[k, b, 1]
+                m += 1
+        for b in range(nb):
+            used[k, b] = False
+        if m == 0:
+            out_flow[k, 0] = np.nan
+            out_flow[k, 1] = np.nan
+            agreement[k] = 0.0
+            spread[k] = np.nan
+            centroid[k, 0] = 0.0
+            centroid[k, 1] = 0.0
+            continue
+        mx = np.median(xs[:m])
+        my = np.median(ys[:m])
+        near = 0
+        for b in range(nb):
+            if status[k, b] == 0:
+                d2 = (flow[k, b, 0] - mx) ** 2 + (flow[k, b, 1] - my) ** 2
+                if d2 <= trim * trim:
+                    near += 1
+                    if mode == 2:
+                        used[k, b] = True
+                if mode != 2:
+                    used[k, b] = True
+        agreement[k] = near / m
+        sx = 0.0
+        sy = 0.0
+        cx = 0.0
+        cy = 0.0
+        cnt = 0
+        for b in range(nb):
+            if used[k, b]:
+                sx += flow[k, b, 0]
+                sy += flow[k, b, 1]
+                cx += cen[b, 0]
+                cy += cen[b, 1]
+                cnt += 1
+        if cnt == 0:
+            out_flow[k, 0] = np.nan
+            out_flow[k, 1] = np.nan
+            spread[k] = np.nan
+            centroid[k, 0] = 0.0
+            centroid[k, 1] = 0.0
+            continue
+        if mode == 1:
+            fx = mx
+            fy = my
         else:
-            used = near
-            flow = np.nanmean(np.where(used[..., None], fl, np.nan), axis=1)
-        spread = np.sqrt(np.nanmean(np.where(used, np.sum((fl - flow[:, None, :]) ** 2, axis=2), np.nan), axis=1))
-        cen = bm.centres - (config.window - 1) / 2.0
-        cnt = np.maximum(used.sum(axis=1), 1)
-        centroid = (used.astype(float) @ cen) / cnt[:, None]
+            fx = sx / cnt
+            fy = sy / cnt
+        out_flow[k, 0] = fx
+        out_flow[k, 1] = fy
+        centroid[k, 0] = cx / cnt
+        centroid[k, 1] = cy / cnt
+        ss = 0.0
+        for b in range(nb):
+            if used[k, b]:
+                ss += (flow[k, b, 0] - fx) ** 2 + (flow[k, b, 1] - fy) ** 2
+        spread[k] = math.sqrt(ss / cnt)
+
+
+def _aggregate(bm: BlockMatches, config: FlowConfig):
+    n, nb = bm.status.shape
+    n_acc = (bm.status == 0).sum(axis=1)
+    used = np.empty((n, nb), np.bool_)
+    flow = np.empty((n, 2))
+    agreement = np.empty(n)
+    spread = np.empty(n)
+    centroid = np.empty((n, 2))
+    cen = bm.centres - (config.window - 1) / 2.0
+    mode = {"mean": 0, "median": 1, "trimmed": 2}[config.aggregate]
+    _aggregate_frames(bm.flow, bm.status, np.ascontiguousarray(cen), mode, float(config.trim_px), used, flow,
+                      agreement, spread, centroid)
     return n_acc, used, flow, agreement, spread, centroid
 
 
@@ -882,6 +969,24 @@ def compute_flow(prev, curr, config: FlowConfig = FlowConfig(), *, gyro=None, dt
         flow, quality 0 and a ``reason`` — never a silent average.
     """
     bm = match_blocks(prev, curr, config)
+    prev = _check_frames(prev, "prev", config)
+    curr = _check_frames(curr, "curr", config)
+    return _frame_flow(bm, prev, curr, config, gyro, dt, height, focal_px)
+
+
+def compute_flow_sequence(frames, config: FlowConfig = FlowConfig(), *, gyro=None, dt=None, height=None,
+                          focal_px: float | None = None) -> FrameFlow:
+    """:func:`compute_flow` of every consecutive pair of one sensor's frames ``(T, W, W)``.
+
+    Each frame enters the kernel's layout once (not twice as with separate
+    ``prev``/``curr`` arrays). Arguments as :func:`compute_flow`, for the T-1 intervals.
+    """
+    bm = match_sequence(frames, config)
+    frames = np.ascontiguousarray(_check_frames(frames, "frames", config))
+    return _frame_flow(bm, frames[:-1], frames[1:], config, gyro, dt, height, focal_px)
+
+
+def _frame_flow(bm, prev, curr, config, gyro, dt, height, focal_px) -> FrameFlow:
     n = bm.flow.shape[0]
     n_acc, used, flow, agreement, spread, centroid = _aggregate(bm, config)
     n_used = used.sum(axis=1)
@@ -892,8 +997,7 @@ def compute_flow(prev, curr, config: FlowConfig = FlowConfig(), *, gyro=None, dt
     if config.refine == "lk" and n:
         o1 = block_origins(config)
         refined = np.empty_like(flow)
-        _lk_refine(np.ascontiguousarray(_check_frames(prev, "prev", config)),
-                   np.ascontiguousarray(_check_frames(curr, "curr", config)),
+        _lk_refine(np.ascontiguousarray(prev), np.ascontiguousarray(curr),
                    np.repeat(o1, config.grid), np.tile(o1, config.grid), config.block, config.search, used,
                    np.ascontiguousarray(flow), int(config.refine_iterations), 1.0, refined)
         flow = refined
@@ -902,17 +1006,10 @@ def compute_flow(prev, curr, config: FlowConfig = FlowConfig(), *, gyro=None, dt
     n_tex = (bm.status == 1).sum(axis=1)
     n_sad = (bm.status == 2).sum(axis=1)
     n_amb = (bm.status == 3).sum(axis=1)
-    reason = []
-    for k in range(n):
-        if valid[k]:
-            reason.append("")
-        elif n_tex[k] >= max(n_amb[k], n_sad[k]):
-            reason.append("low texture")
-        elif n_amb[k] >= n_sad[k] or n_acc[k] >= config.min_blocks:
-            # accepted blocks that disagree (too few agree, or they scatter) are ambiguous too
-            reason.append("ambiguous")
-        else:
-            reason.append("poor match")
+    # accepted blocks that disagree (too few agree, or they scatter) are ambiguous too
+    reason = np.select(
+        [valid, (n_tex >= np.maximum(n_amb, n_sad)), (n_amb >= n_sad) | (n_acc >= config.min_blocks)],
+        ["", "low texture", "ambiguous"], "poor match").tolist()
     if (gyro is not None or height is not None) and focal_px is None:
         raise InputError("focal_px is needed to compensate rotation or convert to metres")
     comp = flow.copy()

@@ -42,7 +42,7 @@ import numpy as np
 
 from robocal.errors import FileFormatError, InputError, ShapeError
 from robocal.io import atomic_write_text, load_csv, load_document
-from robocal.rigs.flow.kernel import FlowConfig, compensate_rotation, compute_flow, metric_displacement
+from robocal.rigs.flow.kernel import FlowConfig, compensate_rotation, compute_flow_sequence, metric_displacement
 from robocal.rigs.flow.model import SensorArray
 from robocal.rigs.flow.odometry import SensorSteps, flow_sigma
 
@@ -213,7 +213,7 @@ def steps_from_frames(frames, t, gyro, height, focal_px: float, config: FlowConf
     flows = []
     it = range(n) if progress is None else progress(range(n), desc="flow")
     for i in it:
-        ff = compute_flow(frames[i, :-1], frames[i, 1:], config, gyro=gyro[i], dt=d, height=height[i], focal_px=focal_px)
+        ff = compute_flow_sequence(frames[i], config, gyro=gyro[i], dt=d, height=height[i], focal_px=focal_px)
         flows.append(ff)
         disp[i] = ff.displacement
         valid[i] = ff.valid

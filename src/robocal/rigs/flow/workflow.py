@@ -16,7 +16,7 @@ from robocal.io import CalibrationResult, atomic_write_text, hash_inputs
 from robocal.report import Report, new_figure
 from robocal.rigs.flow.calibrate import calibrate_array, interpolate_poses
 from robocal.rigs.flow.evaluate import evaluate_trajectory, plot_trajectories
-from robocal.rigs.flow.kernel import FlowConfig, compute_flow, speed_limit
+from robocal.rigs.flow.kernel import FlowConfig, compute_flow_sequence, speed_limit
 from robocal.rigs.flow.log import RunSpec, load_steps, read_poses_csv, write_flow_csv, write_poses_csv
 from robocal.rigs.flow.model import SensorArray, seed_array
 from robocal.rigs.flow.odometry import Odometry, dead_reckon
@@ -57,7 +57,7 @@ def write_simulation(run: SimRun, out_dir, *, frames: bool = True, flow_config: 
     quality = np.empty((n, K))
     it = range(n) if progress is None else progress(range(n), desc="flow")
     for i in it:
-        ff = compute_flow(run.frames[i, :-1], run.frames[i, 1:], flow_config)
+        ff = compute_flow_sequence(run.frames[i], flow_config)
         flow[i] = ff.flow_px
         quality[i] = ff.quality
     note = (f"simulated by robocal flow: texture {run.texture_note}; {cfg.trajectory} drive {cfg.duration} s at "

@@ -1,0 +1,124 @@
+"""Benchmark of the flow rig: frame pairs per second of the SAD kernel on 64x64 frames
+(one core) side by side with OpenCV's pyramidal Lucas-Kanade on the same frames, and the
+log-processing rate relative to real time for 3 sensors at 400 Hz.
+
+    python bench/bench_flow.py            # prints a Markdown table
+
+Times are CPU seconds of this process (``time.process_time``, best of several
+repeats): the machine is shared, and wall time would measure the neighbours.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+
+import time  # noqa: E402
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+
+from robocal.rigs.flow import kernel as K  # noqa: E402
+from robocal.rigs.flow.kernel import FlowConfig, compute_flow, match_blocks  # noqa: E402
+from robocal.rigs.flow.log import steps_from_frames  # noqa: E402
+from robocal.rigs.flow.odometry import dead_reckon  # noqa: E402
+from robocal.rigs.flow.simulate import load_texture, shifted_pairs, simulate_run  # noqa: E402
+from robocal.rigs.flow.workflow import default_sim  # noqa: E402
+
+cv2.setNumThreads(1)
+
+
+def best_rate(fn, n_items, *, repeats=5, min_time=0.3):
+    """Items per CPU second, best of ``repeats`` (each at least ``min_time``)."""
+    fn()  # warm-up (numba compile / cache load)
+    best = 0.0
+    for _ in range(repeats):
+        k = 0
+        t0 = time.process_time()
+        while True:
+            fn()
+            k += 1
+            dt = time.process_time() - t0
+            if dt >= min_time:
+                break
+        best = max(best, k * n_items / dt)
+    return best
+
+
+def numpy_sad(prev, curr, config: FlowConfig):
+    """Plain NumPy reference: a Python loop over the 81 shifts, vectorised over pairs and blocks."""
+    o = K.block_origins(config)
+    S, B = config.search, config.block
+    p = prev.astype(np.int16)
+    c = curr.astype(np.int16)
+    best = np.full((len(prev), len(o), len(o)), 1 << 30)
+    ref = np.stack([np.stack([p[:, y:y + B, x:x + B] for x in o], 1) for y in o], 1)
+    for dy in range(-S, S + 1):
+        for dx in range(-S, S + 1):
+            cand = np.stack([np.stack([c[:, y + dy:y + dy + B, x + dx:x + dx + B] for x in o], 1) for y in o], 1)
+            best = np.minimum(best, np.abs(ref - cand).sum(axis=(3, 4)))
+    return best
+
+
+def lk_flow(prev, curr, pts):
+    for a, b in zip(prev, curr):
+        cv2.calcOpticalFlowPyrLK(a, b, pts, None, winSize=(15, 15), maxLevel=1)
+
+
+def main():
+    tex, note = load_texture("gravel")
+    prev, curr, _ = shifted_pairs(tex, 512, np.random.default_rng(0), binning=2)
+    prev = np.concatenate([prev] * 4)
+    curr = np.concatenate([curr] * 4)
+    n = len(prev)
+    cfg = FlowConfig()
+    o1 = K.block_origins(cfg)
+    ys, xs = np.repeat(o1, 5), np.tile(o1, 5)
+    pt = np.ascontiguousarray(prev[:256].transpose(1, 2, 0))
+    ct = np.ascontiguousarray(curr[:256].transpose(1, 2, 0))
+    sads = np.empty((25, 81, 256), np.uint16)
+    keys = np.empty((25, 256), np.int32)
+    rows = []
+    r_sad = best_rate(lambda: K._sad8_batch(pt, ct, ys, xs, 4, sads, keys), 256)
+    rows.append(("SAD kernel alone (eq. 1 + argmin; 25 blocks 8x8, +/-4 px, batches of 256)", r_sad))
+    for sp in ("none", "half", "quarter", "parabolic", "equiangular"):
+        c = FlowConfig(subpixel=sp)
+        rows.append((f"match_blocks, subpixel={sp}", best_rate(lambda c=c: match_blocks(prev, curr, c), n, repeats=3)))
+    rows.append(("compute_flow (default: equiangular, trimmed mean, quality)", best_rate(lambda: compute_flow(prev, curr), n, repeats=3)))
+    rows.append(("compute_flow, refine=lk", best_rate(lambda: compute_flow(prev, curr, FlowConfig(refine="lk")), n, repeats=3)))
+    small = slice(0, 64)
+    rows.append(("plain NumPy, loop over the 81 shifts", best_rate(lambda: numpy_sad(prev[small], curr[small], cfg), 64, repeats=2)))
+    pts = np.stack(np.meshgrid(np.arange(12, 52, 8), np.arange(12, 52, 8)), -1).reshape(-1, 1, 2).astype(np.float32)
+    r_lk = best_rate(lambda: lk_flow(prev[:256], curr[:256], pts), 256, repeats=3)
+    rows.append(("cv2.calcOpticalFlowPyrLK (25 points, 15x15, 1 level)", r_lk))
+    r_pc = best_rate(lambda: [cv2.phaseCorrelate(a.astype(np.float64), b.astype(np.float64)) for a, b in zip(prev[:256], curr[:256])], 256, repeats=3)
+    rows.append(("cv2.phaseCorrelate", r_pc))
+
+    # log processing vs real time: 3 sensors at 400 Hz (rendering excluded)
+    sim = default_sim("loop", 5.0, supersample=1)
+    run = simulate_run(sim, np.random.default_rng(1))
+
+    def process():
+        st, _ = steps_from_frames(run.frames, run.t, run.gyro, run.height, sim.camera.focal_px)
+        dead_reckon(st, sim.array_nominal)
+
+    process()
+    t0 = time.process_time()
+    reps = 3
+    for _ in range(reps):
+        process()
+    per_run = (time.process_time() - t0) / reps
+    realtime = sim.duration / per_run
+
+    print(f"texture: {note}; {n} pairs of 64x64 frames; CPU time of one process, best of repeats\n")
+    print("| method | frame pairs / s | vs cv2 LK |")
+    print("|---|---:|---:|")
+    for name, r in rows:
+        print(f"| {name} | {r:,.0f} | {r / r_lk:.1f}x |")
+    print(f"\nlog processing (frames -> flow -> fusion -> trajectory), 3 sensors x 400 Hz x {sim.duration:.0f} s: "
+          f"{per_run:.3f} s CPU = {realtime:.0f}x real time ({3 * 400 * realtime:,.0f} pairs/s end to end)")
+
+
+if __name__ == "__main__":
+    main()
