@@ -138,13 +138,25 @@ class Odometry:
 
 def _solve_weighted(A, b, w):
     """Batched weighted least squares. A (n,2,3) common, b (K,n,2), w (K,n) -> u (K,3), N^-1 (K,3,3), rss (K,)."""
-    Aw = A[None, :, :, :] * w[:, :, None, None]               # (K, n, 2, 3)
-    N = np.einsum("knij,nil->kjl", Aw, A)
-    rhs = np.einsum("knij,kni->kj", Aw, b)
-    det = np.linalg.det(N)
-    ok = np.abs(det) > 1e-18
-    Ninv = np.full_like(N, np.nan)
-    Ninv[ok] = np.linalg.inv(N[ok])
+    AtA = np.einsum("nij,nil->njl", A, A)                      # (n, 3, 3), once
+    N = np.einsum("kn,njl->kjl", w, AtA)
+    rhs = np.einsum("kn,nij,kni->kj", w, A, b, optimize=True)
+    # an explicit 3x3 inverse (adjugate): one vectorised pass, singular steps -> NaN
+    c00 = N[:, 1, 1] * N[:, 2, 2] - N[:, 1, 2] * N[:, 2, 1]
+    c01 = N[:, 0, 2] * N[:, 2, 1] - N[:, 0, 1] * N[:, 2, 2]
+    c02 = N[:, 0, 1] * N[:, 1, 2] - N[:, 0, 2] * N[:, 1, 1]
+    c10 = N[:, 1, 2] * N[:, 2, 0] - N[:, 1, 0] * N[:, 2, 2]
+    c11 = N[:, 0, 0] * N[:, 2, 2] - N[:, 0, 2] * N[:, 2, 0]
+    c12 = N[:, 0, 2] * N[:, 1, 0] - N[:, 0, 0] * N[:, 1, 2]
+    c20 = N[:, 1, 0] * N[:, 2, 1] - N[:, 1, 1] * N[:, 2, 0]
+    c21 = N[:, 0, 1] * N[:, 2, 0] - N[:, 0, 0] * N[:, 2, 1]
+    c22 = N[:, 0, 0] * N[:, 1, 1] - N[:, 0, 1] * N[:, 1, 0]
+    det = N[:, 0, 0] * c00 + N[:, 0, 1] * c10 + N[:, 0, 2] * c20
+    scale = np.abs(N).max(axis=(1, 2)) ** 3
+    ok = np.abs(det) > 1e-12 * np.maximum(scale, 1e-300)
+    inv_det = np.where(ok, 1.0 / np.where(ok, det, 1.0), np.nan)
+    Ninv = np.stack([np.stack([c00, c01, c02], -1), np.stack([c10, c11, c12], -1), np.stack([c20, c21, c22], -1)], -2)
+    Ninv = Ninv * inv_det[:, None, None]
     u = np.einsum("kij,kj->ki", Ninv, rhs)
     r = b - np.einsum("nij,kj->kni", A, u)
     rss = np.sum(w * np.sum(r**2, axis=2), axis=1)
