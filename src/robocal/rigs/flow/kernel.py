@@ -453,17 +453,7 @@ def _refine_blocks(prev, curr, pidx, cidx, neigh, ys, xs, block, search, feat_th
             status_b[k, b] = 0
             fx = float(bdx)
             fy = float(bdy)
-            if mode == 1 or mode == 2:
-                scale = 4
-                qx = bdx * scale
-                qy = bdy * scale
-                fv = float(bv)
-                qx, qy, fv = _refine_step(P, C, y0, x0, block, qx, qy, fv, 2, scale)
-                if mode == 2:
-                    qx, qy, fv = _refine_step(P, C, y0, x0, block, qx, qy, fv, 1, scale)
-                fx = qx / scale
-                fy = qy / scale
-            elif mode >= 3:
+            if mode >= 3:
                 # a parabola (mode 3) or a symmetric V (mode 4, "equiangular": the shape of a
                 # SAD surface near its minimum) through the SAD values along each axis
                 if abs(bdx) < search:
@@ -472,6 +462,31 @@ def _refine_blocks(prev, curr, pidx, cidx, neigh, ys, xs, block, search, feat_th
                     fy += _interp3(float(neigh[b, k, 2]), float(bv), float(neigh[b, k, 3]), mode)
             flow_b[k, b, 0] = fx
             flow_b[k, b, 1] = fy
+
+
+@njit(cache=True, nogil=True)
+def _refine_bilinear(prev, curr, pidx, cidx, ys, xs, block, mode, status_b, flow_b):  # pragma: no cover
+    """Half-pixel (mode 1, PX4FLOW) or half-then-quarter-pixel (mode 2) refinement of the
+    accepted blocks with bilinear interpolation (eq. 2), starting from their integer offsets."""
+    n = pidx.shape[0]
+    nb = ys.shape[0]
+    scale = 4
+    for k in range(n):
+        P = prev[pidx[k]]
+        C = curr[cidx[k]]
+        for b in range(nb):
+            if status_b[k, b] != 0:
+                continue
+            y0 = ys[b]
+            x0 = xs[b]
+            qx = int(flow_b[k, b, 0]) * scale
+            qy = int(flow_b[k, b, 1]) * scale
+            fv = _sad_frac(P, C, y0, x0, block, qy // scale, qx // scale, 0, 0, scale)
+            qx, qy, fv = _refine_step(P, C, y0, x0, block, qx, qy, fv, 2, scale)
+            if mode == 2:
+                qx, qy, fv = _refine_step(P, C, y0, x0, block, qx, qy, fv, 1, scale)
+            flow_b[k, b, 0] = qx / scale
+            flow_b[k, b, 1] = qy / scale
 
 
 @njit(cache=True, nogil=True)  # no fastmath: it would drop the NaN test below
@@ -577,6 +592,8 @@ class BlockMatches:
         ``(second best outside the 3x3 neighbourhood - best) / best``.
     centres : ndarray, shape (n_blocks, 2)
         Block centres ``(u, v)``, px.
+    texture : ndarray, shape (N, n_blocks)
+        The texture-gate value of each block (grey levels).
     """
 
     flow: np.ndarray
@@ -584,6 +601,7 @@ class BlockMatches:
     sad_min: np.ndarray
     distinctness: np.ndarray
     centres: np.ndarray
+    texture: np.ndarray
 
 
 def _check_frames(frames, name: str, config: FlowConfig) -> np.ndarray:
@@ -656,6 +674,7 @@ def _match_indexed(prev, curr, pidx, cidx, config: FlowConfig) -> BlockMatches:
     status = np.empty((n, nb), np.int8)
     sad_min = np.empty((n, nb))
     distinct = np.empty((n, nb))
+    texture = np.empty((n, nb))
     mode = SUBPIXEL_MODES.index(config.subpixel)
     for s in range(0, n, _BATCH):
         e = min(n, s + _BATCH)
@@ -688,8 +707,11 @@ def _match_indexed(prev, curr, pidx, cidx, config: FlowConfig) -> BlockMatches:
             float(config.feature_threshold), float(config.sad_limit), float(config.min_distinctness), mode,
             best, bo, second, gate, flow[s:e], status[s:e], sad_min[s:e], distinct[s:e],
         )
+        if mode in (1, 2):
+            _refine_bilinear(prev, curr, pidx[s:e], cidx[s:e], ys, xs, config.block, mode, status[s:e], flow[s:e])
+        texture[s:e] = gate.T
     centres = np.stack([xs, ys], axis=1) + (config.block - 1) / 2.0
-    return BlockMatches(flow, status, sad_min, distinct, centres.astype(float))
+    return BlockMatches(flow, status, sad_min, distinct, centres.astype(float), texture)
 
 
 @dataclass
@@ -753,6 +775,20 @@ class FrameFlow:
 
 
 @njit(cache=True, nogil=True)
+def _small_median(a, m):  # pragma: no cover - compiled
+    """Median of ``a[:m]`` (m <= a few dozen) by insertion sort, in place (cheap to compile)."""
+    for i in range(1, m):
+        v = a[i]
+        j = i - 1
+        while j >= 0 and a[j] > v:
+            a[j + 1] = a[j]
+            j -= 1
+        a[j + 1] = v
+    h = m // 2
+    return a[h] if m % 2 == 1 else 0.5 * (a[h - 1] + a[h])
+
+
+@njit(cache=True, nogil=True)
 def _aggregate_frames(flow, status, cen, mode, trim, used, out_flow, agreement, spread, centroid):  # pragma: no cover
     """Per frame: median of the accepted blocks, the blocks within ``trim`` of it, the frame's
     flow (mode 0 mean, 1 median, 2 trimmed mean), scatter and centroid of the used blocks."""
@@ -776,8 +812,8 @@ def _aggregate_frames(flow, status, cen, mode, trim, used, out_flow, agreement, 
             centroid[k, 0] = 0.0
             centroid[k, 1] = 0.0
             continue
-        mx = np.median(xs[:m])
-        my = np.median(ys[:m])
+        mx = _small_median(xs, m)
+        my = _small_median(ys, m)
         near = 0
         for b in range(nb):
             if status[k, b] == 0:
@@ -1003,9 +1039,12 @@ def _frame_flow(bm, prev, curr, config, gyro, dt, height, focal_px) -> FrameFlow
         flow = refined
     spread = np.where(valid, spread, np.nan)
     quality = np.where(valid, n_used / config.n_blocks * 255.0, 0.0)
-    n_tex = (bm.status == 1).sum(axis=1)
+    # an ambiguous block with little more texture than sensor noise gives at the gate
+    # (noise alone passes PX4FLOW's threshold of 30) is a texture problem, not aliasing
+    faint = (bm.status == 3) & (bm.texture < 3.0 * config.feature_threshold)
+    n_tex = (bm.status == 1).sum(axis=1) + faint.sum(axis=1)
     n_sad = (bm.status == 2).sum(axis=1)
-    n_amb = (bm.status == 3).sum(axis=1)
+    n_amb = (bm.status == 3).sum(axis=1) - faint.sum(axis=1)
     # accepted blocks that disagree (too few agree, or they scatter) are ambiguous too
     reason = np.select(
         [valid, (n_tex >= np.maximum(n_amb, n_sad)), (n_amb >= n_sad) | (n_acc >= config.min_blocks)],

@@ -26,7 +26,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats
+from scipy.special import chdtri
 
 from robocal.diagnostics import Diagnostic
 from robocal.errors import InputError, NotEnoughDataError
@@ -216,7 +216,7 @@ def fuse_steps(steps: SensorSteps, array: SensorArray, *, robust: bool = True, o
             m = used.sum(axis=1)
             dof = 2 * m - 3
             redundant = m >= 3
-            thr = np.where(redundant, stats.chi2.ppf(1 - outlier_p, np.maximum(dof, 1)), np.inf)
+            thr = np.where(redundant, chdtri(np.maximum(dof, 1), outlier_p), np.inf)
             bad = redundant & (rss > thr)
             if not np.any(bad):
                 break
