@@ -148,3 +148,24 @@ def test_bad_inputs():
 def test_relative_twists_inverts_integration():
     t, poses, _ = _drive(K=60)
     assert np.allclose(integrate_twists(relative_twists(poses)), poses)
+
+
+from hypothesis import given, settings, strategies as st  # noqa: E402
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.floats(-0.01, 0.01), st.floats(-0.01, 0.01), st.floats(-0.5, 0.5)), min_size=1, max_size=20))
+def test_property_twists_roundtrip(tw):
+    tw = np.array(tw)
+    assert np.allclose(se2_log(se2_exp(tw)), tw, atol=1e-12)
+    poses = integrate_twists(tw, (0.3, -0.2, 2.9))
+    assert np.allclose(relative_twists(poses), tw, atol=1e-10)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.floats(0.05, 1.0), st.floats(-np.pi, np.pi), st.floats(-0.3, 0.3), st.floats(0.8, 1.2))
+def test_property_exact_fusion_for_any_placement(R, psi, phi, scale):
+    t, poses, _ = _drive(K=60)
+    arr = SensorArray([R, 0.35, 0.2], [psi, 2.0, -2.0], [phi, 0.1, -0.2], [scale, 1.0, 1.1], None)
+    od = dead_reckon(_steps(t, _exact_disp(arr, poses)), arr)
+    assert np.abs(od.poses - poses).max() < 1e-9
