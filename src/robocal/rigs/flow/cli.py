@@ -37,7 +37,13 @@ __all__ = ["RIG", "demo"]
 DESCRIPTION = """Dead reckoning from several downward optical-flow sensors (seed 003, PX4FLOW-class):
 SAD block matching + sub-pixel refinement + gyro compensation per sensor, the rigid-body
 least squares A u = b over the array, pose integration, array calibration, ATE/RPE.
-Log format: see docs/rigs/flow.md (run.yaml + per-sensor flow.csv or raw frames.npz)."""
+Log format: see docs/rigs/flow.md (run.yaml + per-sensor flow.csv or raw frames.npz).
+
+examples:
+  robocal flow simulate --out flow-sim
+  robocal flow odometry examples/flow/loop/run.yaml --out odo
+  robocal flow calibrate examples/flow/calibration/run.yaml --out cal
+  robocal flow evaluate examples/flow/loop/run.yaml --array cal/array_calibrated.yaml --out ev"""
 
 
 def _flow_config(args) -> FlowConfig:
