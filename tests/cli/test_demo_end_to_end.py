@@ -41,5 +41,9 @@ def test_bad_rig_input_is_one_line_exit_2(tmp_path):
         proc = _run(rig.name, "calibrate", str(missing), "--out", str(tmp_path / "o"), cwd=tmp_path)
         if "invalid choice" in proc.stderr:  # a rig without a calibrate command
             continue
+        if "arguments are required" in proc.stderr:  # e.g. handeye takes two pose files
+            proc = _run(rig.name, "calibrate", str(missing), str(missing), "--out", str(tmp_path / "o"),
+                        cwd=tmp_path)
         assert proc.returncode == 2, (rig.name, proc.stdout, proc.stderr)
         assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr, (rig.name, proc.stderr)
+        assert "nope.yaml" in proc.stderr, (rig.name, proc.stderr)  # the message names the file

@@ -89,3 +89,15 @@ def test_parser_lists_installed_rigs():
     parser = build_parser()
     text = parser.format_help()
     assert "demo" in text
+
+
+def test_usage_error_in_a_rig_subcommand_is_one_line_exit_2(capsys, monkeypatch):
+    import robocal.cli.main as m
+
+    monkeypatch.setattr(m, "discover_rigs", lambda: [_toy_rig()])
+    with pytest.raises(SystemExit) as e:
+        main(["toy", "calibrate"])  # missing INPUT: argparse's error, through the sub-parsers
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert err.startswith("robocal toy calibrate: error:") and "input" in err and "--help" in err

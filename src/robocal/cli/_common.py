@@ -23,7 +23,20 @@ __all__ = [
     "progress",
     "examples_epilog",
     "RawHelp",
+    "OneLineErrorParser",
 ]
+
+
+class OneLineErrorParser(argparse.ArgumentParser):
+    """Argument parser whose usage errors are one stderr line and exit status 2.
+
+    argparse's default prints the whole usage block first; the CLI contract
+    (one line naming the problem, status 2) holds for usage mistakes too.
+    Sub-parsers inherit the class, so every rig's commands behave the same.
+    """
+
+    def error(self, message: str):  # noqa: D102 - argparse hook
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
 
 
 class RawHelp(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):

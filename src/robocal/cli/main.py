@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 import robocal
-from robocal.cli._common import RawHelp, examples_epilog, prepare_out_dir
+from robocal.cli._common import OneLineErrorParser, RawHelp, examples_epilog, prepare_out_dir
 from robocal.cli._rig import DemoContext, discover_rigs
 from robocal.errors import RobocalError
 from robocal.io import write_result
@@ -28,7 +28,7 @@ EXIT_USER_ERROR = 2
 
 def build_parser(rigs=None) -> argparse.ArgumentParser:
     rigs = discover_rigs() if rigs is None else rigs
-    parser = argparse.ArgumentParser(
+    parser = OneLineErrorParser(
         prog="robocal",
         description=(
             "Robot geometric calibration and sensor dead reckoning.\n"
