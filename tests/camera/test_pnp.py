@@ -33,6 +33,16 @@ def test_solve_pnp_exact_general_and_planar(cam):
         assert np.allclose(sol.rvec, [0.35, -0.25, 0.1]) and np.allclose(sol.tvec, T_TRUE[:3, 3])
 
 
+def test_solve_pnp_accepts_strided_views(cam):
+    # column slices and reversed views are not C-contiguous; OpenCV rejects them unless copied
+    p = np.asfortranarray(BOARD.object_points())
+    uv = np.hstack([cam.project_points(p, T_TRUE), np.zeros((len(p), 1))])[:, :2]
+    assert not uv.flags.c_contiguous and not p.flags.c_contiguous
+    for solver in (solve_pnp, lambda c, a, b: solve_pnp_planar(c, a, b).best):
+        sol = solver(cam, p, uv)
+        assert np.max(np.abs(sol.T_cam_obj - T_TRUE)) < 1e-9
+
+
 def test_solve_pnp_with_noise_is_close(cam):
     rng = np.random.default_rng(11)
     p = BOARD.object_points()

@@ -95,3 +95,15 @@ def test_analyze_jacobian_wide_and_sparse():
     assert np.all(np.isnan(ident.std))
     ident_s = analyze_jacobian(sp.csr_array(np.eye(3)[:, [0, 1, 1]]))
     assert ident_s.unidentifiable == ("p[1]", "p[2]")
+
+
+def test_tall_jacobian_path_matches_the_textbook_formulas():
+    # many rows, few parameters: the QR shortcut must give (J^T J)^-1 and find a null direction
+    rng = np.random.default_rng(4)
+    J = rng.normal(size=(5000, 6)) * [1.0, 10.0, 0.1, 1.0, 1.0, 1.0]
+    ident = analyze_jacobian(J, residual_variance=2.5)
+    np.testing.assert_allclose(ident.cov, 2.5 * np.linalg.inv(J.T @ J), rtol=1e-9)
+    assert ident.rank == 6 and not ident.unidentifiable
+    J[:, 5] = J[:, 3] - 2.0 * J[:, 4]
+    ident = analyze_jacobian(J)
+    assert ident.rank == 5 and set(ident.unidentifiable) == {"p[3]", "p[4]", "p[5]"}

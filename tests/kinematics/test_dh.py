@@ -95,6 +95,7 @@ def test_link_transforms_match_elementary_products(convention):
             qi, j = q[j], j + 1
         A = _elementary_product(lk, convention, qi)
         assert np.abs(frames[i + 1] - frames[i] @ A).max() < 1e-14
+        assert np.abs(chain.link_transform(i, qi) - A).max() < 1e-14
     assert np.abs(chain.fk(q) - frames[-1] @ chain.T_tool).max() < 1e-14
 
 
@@ -252,3 +253,16 @@ def test_to_tree_has_the_same_kinematics(convention):
     for i in range(chain.n_links + 1):
         assert np.abs(poses[f"link{i}"] - frames[:, i]).max() < 1e-13
     assert np.abs(tree.jacobian(q, "base", "tool") - chain.jacobian(q)).max() < 1e-13
+
+
+def test_link_transform_is_vectorised_and_checks_its_index():
+    chain = seed000_chain(0.3, 0.1)
+    q = np.linspace(-1.0, 1.0, 6).reshape(2, 3)
+    A = chain.link_transform(1, q)
+    assert A.shape == (2, 3, 4, 4)
+    assert np.abs(A[1, 2] - chain.link_transform(1, q[1, 2])).max() == 0.0
+    for bad in (3, 1.0, "0"):
+        with pytest.raises(InputError, match="link index"):
+            chain.link_transform(bad, 0.0)
+    with pytest.raises(NonFiniteError):
+        chain.link_transform(0, np.nan)

@@ -89,6 +89,17 @@ def test_mimic_joint_follows_its_leader(nao):
     shifted = nao.with_offsets({"LHipYawPitch": 0.05})
     assert np.abs(shifted.fk(qd)["r_sole"] - nao.fk({**qd, "LHipYawPitch": qd["LHipYawPitch"] + 0.05})["r_sole"]
                   ).max() < 1e-15
+    # with_mimic(None) frees the follower; with_mimic(f, l) ties it again
+    untied = nao.with_mimic("RHipYawPitch", None)
+    assert "RHipYawPitch" in untied.joint_names and untied.joint("RHipYawPitch").mimic is None
+    assert np.abs(untied.fk({**qd, "RHipYawPitch": qd["LHipYawPitch"]})["r_sole"] - mimicked).max() < 1e-15
+    retied = untied.with_mimic("RHipYawPitch", "LHipYawPitch")
+    assert retied.joint_names == nao.joint_names
+    assert np.abs(retied.fk(qd)["r_sole"] - mimicked).max() < 1e-15
+    with pytest.raises(InputError, match="independent movable joint"):
+        untied.with_mimic("RHipYawPitch", "RHipYawPitch")
+    with pytest.raises(InputError, match="unknown joint"):
+        untied.with_mimic("RHipYawPitch", "nope")
     # multiplier and offset
     tree = KinematicTree([Joint("a", "base", "l1"), Joint("b", "base", "l2", mimic=Mimic("a", -2.0, 0.3))])
     assert np.abs(tree.fk([0.4])["l2"][:3, :3] - tree.fk([-0.5])["l1"][:3, :3]).max() < 1e-15

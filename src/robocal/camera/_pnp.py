@@ -123,7 +123,8 @@ def _check_inputs(camera, p_obj, uv, min_count: int):
         raise InputError(f"p_obj and uv must have the same number of points, got {p.shape[0]} and {q.shape[0]}")
     if p.shape[0] < min_count:
         raise NotEnoughDataError(f"PnP needs at least {min_count} points, got {p.shape[0]}")
-    return p, q
+    # OpenCV rejects strided views (e.g. uv[:, ::-1] or a column slice)
+    return np.ascontiguousarray(p), np.ascontiguousarray(q)
 
 
 def reprojection_residuals(camera: CameraModel, p_obj, uv, T_cam_obj) -> np.ndarray:

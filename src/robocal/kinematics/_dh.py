@@ -343,6 +343,25 @@ class DHChain:
                 j += 1
             yield _dh_matrices(lk.alpha, lk.a, theta, d, self._convention)
 
+    def link_transform(self, index: int, q=0.0) -> np.ndarray:
+        """``A_(index+1)``: the transform of link ``index`` (0-based), shape (..., 4, 4).
+
+        ``q`` is that link's own joint value (rad or m; ignored for a fixed
+        link), broadcast over leading dimensions; negative ``index`` counts
+        from the tool end. Row ``index`` of the table in this chain's
+        convention (seed 000 eq. 5 for the modified one).
+        """
+        if not isinstance(index, (int, np.integer)) or not -self.n_links <= index < self.n_links:
+            raise InputError(f"link index must be an integer in [-{self.n_links}, {self.n_links}), got {index!r}")
+        lk = self._links[index]
+        q = np.asarray(check_array(q, "q"), dtype=float)
+        theta, d = lk.theta, lk.d
+        if lk.joint == "revolute":
+            theta = theta + q
+        elif lk.joint == "prismatic":
+            d = d + q
+        return _dh_matrices(lk.alpha, lk.a, theta, d, self._convention)
+
     def fk_all(self, q) -> np.ndarray:
         """All link frames ``T_world_i``, i = 0..n_links, shape (..., n_links + 1, 4, 4).
 

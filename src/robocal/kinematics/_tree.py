@@ -36,7 +36,7 @@ from robocal.kinematics._common import (
     transform_from_xyz_rpy,
     xyz_rpy_from_transform,
 )
-from robocal.kinematics._joint import Joint
+from robocal.kinematics._joint import Joint, Mimic
 from robocal.validation import check_array
 
 __all__ = ["KinematicTree"]
@@ -161,6 +161,28 @@ class KinematicTree:
     def _check_link(self, link: str):
         if link not in self._parent_joint and link != self._root:
             raise InputError(f"unknown link {link!r}; links: {list(self._links)}")
+
+    def with_mimic(self, follower: str, leader: str | None, *, multiplier: float = 1.0,
+                   offset: float = 0.0) -> "KinematicTree":
+        """A copy where joint ``follower`` mimics ``leader`` (URDF ``<mimic>``).
+
+        ``q[follower] = multiplier * q[leader] + offset``: one motor drives both,
+        so the follower loses its own actuated entry and calibration offset
+        (NAO's two HipYawPitch joints). ``leader=None`` makes it independent
+        again, with zero offset.
+        """
+        j = self.joint(follower)
+        if not j.movable:
+            raise InputError(f"joint {follower!r} is fixed and cannot mimic another joint")
+        if leader is None:
+            new = replace(j, mimic=None, offset=0.0)
+        else:
+            lead = self.joint(leader)
+            if leader == follower or not lead.movable or lead.mimic is not None:
+                raise InputError(f"joint {follower!r} can mimic only another independent movable joint, "
+                                 f"got {leader!r}")
+            new = replace(j, mimic=Mimic(leader, multiplier, offset), offset=0.0)
+        return self._derived([new if jj.name == follower else jj for jj in self.joints])
 
     def _derived(self, joints) -> "KinematicTree":
         tree = KinematicTree(joints, root=self._root, name=self.name)

@@ -40,7 +40,7 @@ import numpy as np
 
 from robocal.camera import CameraModel, Checkerboard
 from robocal.errors import InputError, ShapeError
-from robocal.kinematics import KinematicTree, Mimic
+from robocal.kinematics import KinematicTree
 from robocal.validation import check_array
 
 __all__ = [
@@ -233,8 +233,7 @@ class HumanoidModel:
         if tie:
             tree = tie_joints(self.tree, "RHipYawPitch", "LHipYawPitch")
         else:
-            tree = self.tree._derived([replace(j, mimic=None) if j.name == "RHipYawPitch" else j
-                                       for j in self.tree.joints])
+            tree = self.tree.with_mimic("RHipYawPitch", None)
         mounts = {}
         for foot, m in self.mounts.items():
             legs = _leg_joints(tree.chain(tree.root, m.sole_link))
@@ -463,10 +462,7 @@ def _leg_joints(chain) -> tuple:
 
 def tie_joints(tree: KinematicTree, follower: str, leader: str) -> KinematicTree:
     """A copy of ``tree`` where joint ``follower`` mimics ``leader`` (one motor, one offset)."""
-    tree.joint(follower)
-    tree.joint(leader)
-    return tree._derived([replace(j, mimic=Mimic(leader), offset=0.0) if j.name == follower else j
-                          for j in tree.joints])
+    return tree.with_mimic(follower, leader)
 
 
 def default_model(*, tie_hip_yaw_pitch: bool = False) -> HumanoidModel:

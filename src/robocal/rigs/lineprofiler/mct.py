@@ -80,15 +80,7 @@ class MCTResult:
 
 def _link(chain: DHChain, index: int, q_value: float) -> np.ndarray:
     """Transform ``A_i`` of link ``index`` (0-based) at joint value ``q_value``."""
-    from robocal.kinematics._dh import _dh_matrices  # closed form of one D-H row
-
-    lk = chain.links[index]
-    theta, d = lk.theta, lk.d
-    if lk.joint == "revolute":
-        theta = theta + q_value
-    elif lk.joint == "prismatic":
-        d = d + q_value
-    return _dh_matrices(lk.alpha, lk.a, theta, d, chain.convention)
+    return chain.link_transform(index, q_value)
 
 
 def frame2_in_tracker(arc_T, q2_arc, line_T, q3_line, h0: float, h1: float, chain: DHChain):
