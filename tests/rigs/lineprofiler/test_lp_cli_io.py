@@ -87,3 +87,39 @@ def test_rigs_registered_and_demo(tmp_path):
     out = RIG.demo(DemoContext(tmp_path, np.random.default_rng(2026), progress=False))
     assert out.passed, out.summary
     assert "undetermined" in out.summary
+
+
+def test_calibrate_mct_example(tmp_path, capsys):
+    assert main(["lineprofiler", "calibrate", str(EX / "mct_input.yaml"), "--out", str(tmp_path)]) == 0
+    res = json.loads((tmp_path / "result.json").read_text())
+    assert res["method"] == "mct" and not res["diagnostics"]["undetermined"]
+    t = np.array(res["estimate"]["T_E_L.translation"])
+    st = np.array(res["std"]["T_E_L.translation"])
+    assert np.all((st > 5e-6) & (st < 3e-4))
+    assert np.all(np.abs(t - [0.035, 0.06, 0.12]) < 4 * st)  # simulated truth in the file's comment
+    assert "+/-" in capsys.readouterr().out
+    assert main(["lineprofiler", "report", str(tmp_path / "result.json"), "--out", str(tmp_path / "r")]) == 0
+
+
+def _mct_copy(tmp_path):
+    for f in EX.glob("mct_*"):
+        (tmp_path / f.name).write_bytes(f.read_bytes())
+    return tmp_path / "mct_input.yaml"
+
+
+@pytest.mark.parametrize("file, edit, message", [
+    ("mct_block.csv", lambda s: s.replace("\n2, ", "\n3, ", 1), "must be 0, 1 or 2"),
+    ("mct_block.csv", lambda s: "\n".join(ln for ln in s.splitlines() if not ln.startswith("1, ") or
+                                          ln.endswith("0")) + "\n", "face 1 has"),
+    ("mct_arc.csv", lambda s: s.replace("q1 [mm], q2 [deg], q3 [mm]", "a [mm], b [deg], c [mm]"), "joint columns"),
+    ("mct_input.yaml", lambda s: s.replace("sigma: 0.02", "sigma: -0.02"), "heights.sigma"),
+    ("mct_input.yaml", lambda s: s.replace("block_size: [60.000", "block_size: [0"), "block_size"),
+    ("mct_input.yaml", lambda s: s.replace("method: mct", "method: tracker"), "method"),
+])
+def test_mct_input_errors_are_one_line(tmp_path, capsys, file, edit, message):
+    yaml_path = _mct_copy(tmp_path)
+    f = tmp_path / file
+    f.write_text(edit(f.read_text()))
+    assert main(["lineprofiler", "calibrate", str(yaml_path), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err, err

@@ -9,7 +9,7 @@ from robocal.kinematics import DHChain
 from robocal.rigs.lineprofiler.compare import axis_angle_translation, repeatability_errors, run_comparison
 from robocal.rigs.lineprofiler.fpdp import fpdp_calibrate
 from robocal.rigs.lineprofiler.handeye import transform_error
-from robocal.rigs.lineprofiler.mct import mct_calibrate
+from robocal.rigs.lineprofiler.mct import _x_delta, block_frame_from_planes, mct_calibrate
 from robocal.rigs.lineprofiler.model import Block, ProfilerModel, Sphere, default_rig
 from robocal.rigs.lineprofiler.refine import refine_sphere
 from robocal.rigs.lineprofiler.simulate import simulate_fpdp, simulate_mct
@@ -96,14 +96,47 @@ def test_refine_jacobian_matches_finite_differences():
     assert prob.check_jacobian().max_rel_error < 1e-5
 
 
-@pytest.mark.parametrize("noise", [False, True])
-def test_mct_recovers_X(noise):
-    d, tr = simulate_mct(RIG, np.random.default_rng(3), noise=noise)
+def test_mct_is_exact_on_noise_free_data():
+    # the block-scan fit relabels points until the labels settle: a single
+    # relabelling left edge points on the wrong face (85 urad, 25 um of bias)
+    d, tr = simulate_mct(RIG, np.random.default_rng(3), noise=False)
+    r = mct_calibrate(d, RIG.chain)
+    rot, t = transform_error(r.X, RIG.X)
+    assert rot < 1e-9 and t < 1e-9 and r.scan_rms < 1e-9
+
+
+def test_mct_recovers_X_within_its_standard_deviations():
+    d, tr = simulate_mct(RIG, np.random.default_rng(3))
     r = mct_calibrate(d, RIG.chain)
     rot, t = transform_error(r.X, RIG.X)
     assert rot < 1.5e-3 and t < 3e-4  # 0.09 deg, 0.3 mm: the seed quotes 0.07 deg, 0.25 mm spread
     assert transform_error(r.T_T_L, tr.T_T_L)[1] < 2e-4
     assert not [w for w in r.warnings if w.code == "inconsistent_data"]
+    assert np.all(np.abs(_x_delta(r.X, RIG.X)) < 4 * r.X_std)
+    assert abs(r.tracker_sigma / RIG.tracker.sigma - 1) < 0.3  # pooled from ~80 residual degrees of freedom
+
+
+def test_mct_covariance_matches_monte_carlo():
+    """Normalised estimation error squared: mean over trials of e^T C^-1 e is 6 for a
+    consistent 6-dof covariance; 24 trials give it a standard error of 0.118 x 6."""
+    rng = np.random.default_rng(7)
+    nees, err, std = [], [], []
+    for _ in range(24):
+        d, _ = simulate_mct(RIG, rng, n_scan=15)
+        r = mct_calibrate(d, RIG.chain)
+        e = _x_delta(r.X, RIG.X)
+        nees.append(e @ np.linalg.solve(r.X_cov, e))
+        err.append(e)
+        std.append(r.X_std)
+    assert 0.65 < np.mean(nees) / 6 < 1.35
+    ratio = np.sqrt(np.mean(np.square(err), 0) / np.mean(np.square(std), 0))
+    assert np.all((ratio > 0.55) & (ratio < 1.45)), ratio  # per component, 3 sigma for 24 trials
+
+
+def test_block_faces_must_be_right_handed():
+    d, _ = simulate_mct(RIG, np.random.default_rng(3), noise=False)
+    with pytest.raises(InputError, match="left-handed"):
+        block_frame_from_planes([d.block_faces_T[1], d.block_faces_T[0], d.block_faces_T[2]])
 
 
 def test_mct_bad_input():

@@ -8,6 +8,24 @@ Input (YAML, units stated)::
     profiles: fpdp_profiles.csv # see robocal.rigs.lineprofiler.io
     robot_poses: poses.csv      # optional: T_W_E with timestamps, when profiles carry 't' instead of q
     sign: auto                  # or +1 / -1: side of the laser plane the sphere centre is on
+
+``method: mct`` selects the multi-coordinate-transformation method (seed 004
+§3, needs a laser tracker and a standard block; see
+``examples/lineprofiler/mct_input.yaml``)::
+
+    method: mct
+    units: {length: mm, angle: deg}
+    arm: p1r2p3                  # the last two joints must be R2 then P3
+    tracker:
+      arc: mct_arc.csv           # ball centres while R2 turns (q1..qn and x, y, z in the tracker frame)
+      line: mct_line.csv         # ball centres while P3 slides
+      block_faces: mct_block.csv # face (0, 1, 2), x, y, z: points probed on the block's corner faces
+      sigma: 0.01                # optional, per axis; default: pooled from the arc, line and face fits
+    heights: {h0: 40.0, h1: 85.0, sigma: 0.02}  # ball centre / frame 2's origin above P3's top face
+    block_size: [50, 50, 50]
+    scan: mct_scan.csv           # profiles of the block corner during a P3 stroke (profile, x, z, q1..qn)
+
+The block scan's reference pose is its first profile's joint values.
 """
 
 from __future__ import annotations
@@ -22,11 +40,19 @@ from robocal.io import CalibrationResult, hash_inputs, load_document
 from robocal.kinematics import DHChain
 from robocal.report import Report, new_figure
 from robocal.rigs.lineprofiler.fpdp import FPDPResult, fpdp_calibrate
-from robocal.rigs.lineprofiler.io import interpolate_poses, load_poses, load_profiles_csv
+from robocal.rigs.lineprofiler.io import (
+    interpolate_poses,
+    load_block_faces_csv,
+    load_poses,
+    load_profiles_csv,
+    load_tracker_csv,
+)
+from robocal.rigs.lineprofiler.mct import MCTResult, mct_calibrate
 from robocal.rigs.lineprofiler.model import p1r2p3_chain
 from robocal.rigs.lineprofiler.refine import RefineResult, refine_sphere
 
-__all__ = ["PoseTable", "load_arm", "calibrate_file", "calibrate_sphere", "result_from", "report_from"]
+__all__ = ["PoseTable", "load_arm", "calibrate_file", "calibrate_sphere", "load_mct_file", "result_from",
+           "report_from"]
 
 
 class PoseTable:
@@ -84,10 +110,55 @@ def calibrate_sphere(q, profiles, chain, sphere_radius: float, *, sign="auto") -
     return SphereCalibration(f, g, np.asarray(q), list(profiles))
 
 
-def calibrate_file(path) -> tuple[SphereCalibration, dict]:
-    """Run :func:`calibrate_sphere` on an input YAML; returns the calibration and the input hashes."""
+@dataclass
+class MCTCalibration:
+    mct: MCTResult
+    data: object
+    chain: DHChain
+
+
+def load_mct_file(doc, chain: DHChain):
+    """The :class:`~.simulate.MCTData` of a ``method: mct`` input document, its files and the sigmas."""
+    from robocal.rigs.lineprofiler.simulate import MCTData
+
+    tr = doc.sub("tracker")
+    arc_path, line_path, faces_path = tr.path("arc"), tr.path("line"), tr.path("block_faces")
+    q_arc, arc_T = load_tracker_csv(arc_path, dof=chain.dof)
+    q_line, line_T = load_tracker_csv(line_path, dof=chain.dof)
+    faces = load_block_faces_csv(faces_path)
+    heights = doc.sub("heights")
+    h0 = heights.float("h0", kind="length")
+    h1 = heights.float("h1", kind="length")
+    h_sigma = heights.float("sigma", kind="length", default=0.02e-3)
+    t_sigma = tr.float("sigma", kind="length", default=None)
+    for name, v in (("heights.sigma", h_sigma), ("tracker.sigma", t_sigma)):
+        if v is not None and v < 0:
+            raise FileFormatError(f"field '{name}' must be >= 0, got {v:g} m", source=doc.source)
+    size = doc.array("block_size", kind="length", shape=(3,))
+    if np.any(size <= 0):
+        raise FileFormatError(f"field 'block_size' must hold 3 positive edge lengths, got {size.tolist()} m",
+                              source=doc.source)
+    scan_path = doc.path("scan")
+    profiles, q_scan, _ = load_profiles_csv(scan_path, dof=chain.dof)
+    if q_scan is None:
+        raise FileFormatError("the block scan needs the joint columns q1..qn of every profile", source=str(scan_path))
+    if len(profiles) < 3:
+        raise FileFormatError(f"the block scan has {len(profiles)} profiles; a P3 stroke of at least 3 (20 or more "
+                              "recommended) is needed", source=str(scan_path))
+    data = MCTData(q_arc, arc_T, q_line, line_T, h0, h1, q_scan[0].copy(), faces, tuple(size), q_scan[:, -1],
+                   profiles)
+    return data, [arc_path, line_path, faces_path, scan_path], t_sigma, h_sigma
+
+
+def calibrate_file(path) -> tuple[SphereCalibration | MCTCalibration, dict]:
+    """Calibrate from an input YAML (FPDP + refinement, or ``method: mct``); returns it and the input hashes."""
     doc = load_document(path)
     chain = load_arm(doc)
+    method = doc.str("method", default="fpdp", choices=("fpdp", "mct"))
+    if method == "mct":
+        data, files, t_sigma, h_sigma = load_mct_file(doc, chain)
+        res = mct_calibrate(data, chain, tracker_sigma=t_sigma, height_sigma=h_sigma)
+        return MCTCalibration(res, data, chain), hash_inputs([path, *files])
     R = doc.float("sphere_radius", kind="length", positive=True)
     prof_path = doc.path("profiles")
     profiles, q, t = load_profiles_csv(prof_path, dof=chain.dof)
@@ -108,7 +179,9 @@ def calibrate_file(path) -> tuple[SphereCalibration, dict]:
     return calibrate_sphere(q, profiles, chain, R, sign=sign), hash_inputs(files)
 
 
-def result_from(cal: SphereCalibration, inputs=None) -> CalibrationResult:
+def result_from(cal: SphereCalibration | MCTCalibration, inputs=None) -> CalibrationResult:
+    if isinstance(cal, MCTCalibration):
+        return _mct_result(cal, inputs)
     f, g = cal.fpdp, cal.refined
     und = set(g.undetermined)
     t = [None if f"X.t{c}" in und else float(g.X[i, 3]) for i, c in enumerate("xyz")]
@@ -129,7 +202,86 @@ def result_from(cal: SphereCalibration, inputs=None) -> CalibrationResult:
                      "noise_sigma_m": g.sigma, "signs": f.signs.tolist()})
 
 
-def report_from(result: CalibrationResult, cal: SphereCalibration | None = None, *, extra_sections=()) -> Report:
+def _finite_or_none(v):
+    return [float(x) if np.isfinite(x) else None for x in np.asarray(v, float).ravel()]
+
+
+def _mct_result(cal: MCTCalibration, inputs=None) -> CalibrationResult:
+    r = cal.mct
+    std = {"T_E_L.rotvec": _finite_or_none(r.X_std[:3]), "T_E_L.translation": _finite_or_none(r.X_std[3:])}
+    undetermined = [lab for lab, v in zip(("X.rx", "X.ry", "X.rz", "X.tx", "X.ty", "X.tz"), r.X_std)
+                    if not np.isfinite(v)]
+    terms = {k: {"T_E_L.rotvec": _finite_or_none(v[:3]), "T_E_L.translation": _finite_or_none(v[3:])}
+             for k, v in r.cov_terms.items()}
+    return CalibrationResult(
+        rig="lineprofiler", method="mct", estimate={"T_E_L.rotation": r.X[:3, :3].tolist(),
+                                                    "T_E_L.translation": r.X[:3, 3].tolist(),
+                                                    "T_T_L": r.T_T_L.tolist(), "T_T_E": r.T_T_E.tolist(),
+                                                    "T_T_B": r.T_T_B.tolist(), "T_L_B": r.T_L_B.tolist(),
+                                                    "P3_direction_L": r.u_L.tolist()},
+        std=std, units={"T_E_L.rotation": "1", "T_E_L.translation": "m", "T_E_L.rotvec": "rad", "T_T_L": "m",
+                        "T_T_E": "m", "T_T_B": "m", "T_L_B": "m", "P3_direction_L": "1"},
+        residual_rms=r.scan_rms, residual_unit="m", warnings=list(r.warnings), inputs=inputs or {},
+        diagnostics={"frames": "T_E_L: laser frame L -> end-effector frame E (hand-eye X); T: laser tracker; "
+                               "B: block corner; all at the scan's reference pose",
+                     "undetermined": undetermined,
+                     "covariance": {"labels": ["X.rx", "X.ry", "X.rz", "X.tx", "X.ty", "X.tz"],
+                                    "rotation": "rotation vector of R_perturbed R^T (rad)",
+                                    "matrix": [_finite_or_none(row) for row in r.X_cov],
+                                    "std_by_source": terms},
+                     "tracker_sigma_m": r.tracker_sigma, "height_sigma_m": r.height_sigma,
+                     "fit_rms_m": {"arc": r.arc_rms, "line": r.line_rms, "block_faces": r.block_rms,
+                                   "block_scan": r.scan_rms},
+                     "n_scan_points": r.n_scan_points})
+
+
+def _mct_report(result: CalibrationResult, cal: MCTCalibration | None, extra_sections) -> Report:
+    rep = Report("lineprofiler: hand-eye calibration of a line laser", subtitle="MCT (seed 004 §3)")
+    s = rep.section("Estimate")
+    und = result.diagnostics.get("undetermined", [])
+    s.status(not und, "every component has a standard deviation" if not und else
+             f"no standard deviation for {', '.join(und)}")
+    s.parameters({k: result.estimate[k] for k in ("T_E_L.rotation", "T_E_L.translation")}, result.std,
+                 result.units)
+    rs = result.std.get("T_E_L.rotvec") or [None] * 3
+    s.table([{"axis of E": ax, "std [mrad]": None if v is None else 1e3 * v, "std [deg]": None if v is None
+              else np.rad2deg(v)} for ax, v in zip("xyz", rs)], digits=3,
+            caption="rotation uncertainty: small rotation about the E axes (rotation vector of R_perturbed R^T)")
+    s.diagnostics(result.warnings)
+    d = result.diagnostics
+    rows = [{"fit": k, "RMS [um]": 1e6 * v} for k, v in d.get("fit_rms_m", {}).items()]
+    s = rep.section("Fits")
+    s.table(rows, digits=3)
+    terms = d.get("covariance", {}).get("std_by_source", {})
+    if terms:
+        labels = ("rx [mrad]", "ry [mrad]", "rz [mrad]", "tx [mm]", "ty [mm]", "tz [mm]")
+        srows = []
+        for src, v in terms.items():
+            vals = list(v["T_E_L.rotvec"]) + list(v["T_E_L.translation"])
+            srows.append({"source": src, **{lab: (None if x is None else 1e3 * x) for lab, x in zip(labels, vals)}})
+        s.table(srows, digits=3, caption=f"standard deviation of X by source (tracker sigma "
+                f"{1e6 * (d.get('tracker_sigma_m') or 0):.1f} um, heights sigma "
+                f"{1e6 * (d.get('height_sigma_m') or 0):.1f} um)")
+    if cal is not None and cal.mct.scan_residuals is not None:
+        fig, ax = new_figure(1, 2, size=(10, 3.4))
+        ax[0].hist(cal.mct.scan_residuals * 1e6, bins=60)
+        ax[0].set_xlabel("block scan: point-to-face residual [um]")
+        arc = np.asarray(cal.data.arc_T)
+        ax[1].plot(np.rad2deg(np.asarray(cal.data.q_arc)[:, -2]),
+                   1e6 * (np.linalg.norm(arc - cal.mct.O_A, axis=1)
+                          - np.mean(np.linalg.norm(arc - cal.mct.O_A, axis=1))), "o")
+        ax[1].set_xlabel("R2 [deg]")
+        ax[1].set_ylabel("arc radius deviation [um]")
+        rep.section("Residuals").figure(fig, "block-scan fit residuals (all points) and tracker arc")
+    for sec in extra_sections:
+        rep.extend([sec])
+    return rep
+
+
+def report_from(result: CalibrationResult, cal: SphereCalibration | MCTCalibration | None = None, *,
+                extra_sections=()) -> Report:
+    if result.method == "mct":
+        return _mct_report(result, cal, extra_sections)
     rep = Report("lineprofiler: hand-eye calibration of a line laser", subtitle=result.method)
     s = rep.section("Estimate")
     und = result.diagnostics.get("undetermined", [])

@@ -54,8 +54,32 @@ def _simulate(args) -> int:
                             Tc[:, :3, 3] + rng.normal(size=(n, 3)) * 0.2e-3)
     write_poses_csv(out / "gripper_poses.csv", Tg, np.arange(len(Tg)) * 0.1)
     write_poses_csv(out / "target_poses.csv", Tc, np.arange(len(Tc)) * 0.1)
-    print(f"wrote {out}/fpdp_input.yaml, fpdp_profiles.csv, gripper_poses.csv, target_poses.csv")
+    _write_mct(out, rig, rng, args)
+    print(f"wrote {out}/fpdp_input.yaml, fpdp_profiles.csv, gripper_poses.csv, target_poses.csv, "
+          "mct_input.yaml, mct_arc.csv, mct_line.csv, mct_block.csv, mct_scan.csv")
     return 0
+
+
+def _write_mct(out: Path, rig, rng, args) -> None:
+    """The MCT procedure's files (tracker arc, line, block faces; block scan) and their input YAML."""
+    from robocal.rigs.lineprofiler.io import write_block_faces_csv, write_profiles_csv, write_tracker_csv
+    from robocal.rigs.lineprofiler.simulate import simulate_mct
+
+    m, tr = simulate_mct(rig, rng, n_scan=args.scan_profiles, noise=not args.noise_free)
+    write_tracker_csv(out / "mct_arc.csv", m.q_arc, m.arc_T, angle_joints=(1,))
+    write_tracker_csv(out / "mct_line.csv", m.q_line, m.line_T, angle_joints=(1,))
+    write_block_faces_csv(out / "mct_block.csv", m.block_faces_T)
+    q_scan = np.tile(m.q_scan0, (len(m.scan_q3), 1))
+    q_scan[:, -1] = m.scan_q3
+    write_profiles_csv(out / "mct_scan.csv", m.scan_profiles, q_scan, angle_joints=(1,))
+    atomic_write_text(out / "mct_input.yaml", (
+        "# robocal lineprofiler calibrate input, MCT method (simulated, seed %d)\nmethod: mct\n"
+        "units: {length: mm, angle: deg}\narm: p1r2p3\n"
+        "tracker:\n  arc: mct_arc.csv\n  line: mct_line.csv\n  block_faces: mct_block.csv\n"
+        "  # sigma: %.4f  # per-axis tracker noise; default: pooled from the arc, line and face fits\nheights: {h0: %.4f, h1: %.4f, sigma: 0.02}\nblock_size: [%.3f, %.3f, %.3f]\n"
+        "scan: mct_scan.csv\n# truth: T_E_L translation [m] = %s\n")
+        % (args.seed, 1e3 * rig.tracker.sigma, 1e3 * m.h0, 1e3 * m.h1, *(1e3 * np.asarray(m.block_size)),
+           np.round(tr.X[:3, 3], 6).tolist()))
 
 
 def _calibrate(args) -> int:
@@ -66,7 +90,10 @@ def _calibrate(args) -> int:
     out = prepare_out_dir(args.out, "lineprofiler-calibrate")
     write_run(out, result, report_from(result, cal))
     t = result.estimate["T_E_L.translation"]
-    print("T_E_L translation [mm]: " + ", ".join("undetermined" if v is None else f"{1e3 * v:.3f}" for v in t))
+    st = result.std.get("T_E_L.translation") or [None] * 3
+    print(f"T_E_L translation [mm] ({result.method}): " + ", ".join(
+        "undetermined" if v is None else f"{1e3 * v:.3f}" + ("" if s is None else f" +/- {1e3 * s:.3f}")
+        for v, s in zip(t, st)))
     return 0
 
 
@@ -116,17 +143,21 @@ def _compare(args) -> int:
 
 def _add_lineprofiler(parser) -> None:
     sub = parser.add_subparsers(dest="subcommand", metavar="COMMAND")
-    p = sub.add_parser("simulate", help="write simulated FPDP input files (and hand-eye pose lists)",
+    p = sub.add_parser("simulate", help="write simulated FPDP and MCT input files (and hand-eye pose lists)",
                        formatter_class=RawHelp,
                        epilog=examples_epilog("robocal lineprofiler simulate --out sim --seed 1"))
     add_out_argument(p)
     add_seed_argument(p)
     p.add_argument("--poses", type=int, default=16, help="number of arm poses")
     p.add_argument("--noise-free", action="store_true", help="no measurement noise")
+    p.add_argument("--scan-profiles", type=int, default=31, help="profiles in the MCT block scan")
     p.set_defaults(func=_simulate)
-    p = sub.add_parser("calibrate", help="FPDP + geometric refinement from an input YAML", formatter_class=RawHelp,
-                       epilog=examples_epilog(f"robocal lineprofiler calibrate {EXAMPLES}/fpdp_input.yaml --out out"))
-    p.add_argument("input", type=Path, help="input YAML (sphere radius, arm, profiles CSV)")
+    p = sub.add_parser("calibrate", help="FPDP + geometric refinement, or MCT, from an input YAML",
+                       formatter_class=RawHelp,
+                       epilog=examples_epilog(f"robocal lineprofiler calibrate {EXAMPLES}/fpdp_input.yaml --out out",
+                                              f"robocal lineprofiler calibrate {EXAMPLES}/mct_input.yaml --out mct"))
+    p.add_argument("input", type=Path, help="input YAML: sphere radius, arm, profiles CSV (FPDP); or 'method: mct' "
+                                            "with tracker, heights, block and scan files (see docs/rigs/lineprofiler.md)")
     add_out_argument(p)
     p.set_defaults(func=_calibrate)
     p = sub.add_parser("report", help="re-render report.html from a result.json", formatter_class=RawHelp,
@@ -168,9 +199,11 @@ def _demo(ctx) -> DemoOutcome:
 
 RIG = Rig(name="lineprofiler", help="hand-eye calibration of an arm-mounted line laser (seed 004: FPDP, MCT)",
           description="Line-laser profiler hand-eye calibration: FPDP (sphere, linear), geometric refinement on all "
-                      "profile points, MCT re-run in simulation.\n\n" + examples_epilog(
+                      "profile points, MCT (laser tracker and standard block), FPDP vs MCT re-run in "
+                      "simulation.\n\n" + examples_epilog(
                           "robocal lineprofiler simulate --out sim",
                           f"robocal lineprofiler calibrate {EXAMPLES}/fpdp_input.yaml --out out",
+                          f"robocal lineprofiler calibrate {EXAMPLES}/mct_input.yaml --out mct",
                           "robocal lineprofiler report out/result.json --out out",
                           "robocal lineprofiler compare --out cmp"),
           add_commands=_add_lineprofiler, demo=_demo)

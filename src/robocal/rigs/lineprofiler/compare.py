@@ -82,7 +82,7 @@ def run_comparison(rig: LineProfilerRig, rng: np.random.Generator, *, n_runs: in
         g = refine_sphere(d.q, d.profiles, rig.chain, d.sphere_radius, f.X, f.Q,
                           hold=[k for k in f.undetermined if k.startswith("X.")])
         m, _ = simulate_mct(rig, rng, true_chain=true_chain)
-        mr = mct_calibrate(m, rig.chain)
+        mr = mct_calibrate(m, rig.chain, covariance=False)  # repeatability study: spread, not std
         X["FPDP"].append(f.X)
         X["FPDP+refine"].append(g.X)
         X["MCT"].append(mr.X)

@@ -14,6 +14,17 @@ Pose lists: CSV ``t [s], x [m], y [m], z [m], qx, qy, qz, qw`` or YAML
 (quaternions **scalar-last**, ``T_parent_child``; ``R: 3x3`` accepted in YAML
 instead of ``q``). Non-unit quaternions, non-orthonormal matrices, NaN and
 mismatched counts are errors naming file and row.
+
+MCT tracker files (seed 004 §3): ball centres measured by the laser tracker
+while one joint moves, one row per reading, with the arm's joint values::
+
+    q1 [mm], q2 [deg], q3 [mm], x [mm], y [mm], z [mm]    # tracker frame T
+
+and the points probed on the standard block's three corner faces::
+
+    face, x [mm], y [mm], z [mm]    # face 0: x_B = 0, 1: y_B = 0, 2: z_B = 0
+
+(faces listed so that x_B, y_B, z_B form a right-handed frame).
 """
 
 from __future__ import annotations
@@ -28,7 +39,32 @@ from robocal.geometry import transform_from
 from robocal.io import atomic_write_text, load_csv, load_document, to_si, unit_kind
 from robocal.validation import check_rotation_matrix
 
-__all__ = ["load_profiles_csv", "write_profiles_csv", "load_poses", "write_poses_csv", "interpolate_poses"]
+__all__ = ["load_profiles_csv", "write_profiles_csv", "load_poses", "write_poses_csv", "interpolate_poses",
+           "load_tracker_csv", "write_tracker_csv", "load_block_faces_csv", "write_block_faces_csv"]
+
+
+def _joint_columns(tab, dof: int | None, src: str):
+    """``q1 .. qn`` columns in SI (m or rad by their header unit), or None when the file has none."""
+    qcols = sorted([c for c in tab.columns if c.startswith("q") and c[1:].isdigit()], key=lambda c: int(c[1:]))
+    if dof is not None and qcols and len(qcols) != dof:
+        raise FileFormatError(f"the arm has {dof} joints but the file has joint columns {qcols}", source=src)
+    if not qcols:
+        return None
+    cols = []
+    for c in qcols:
+        unit = tab.units.get(c)
+        if unit is None:
+            raise FileFormatError(f"column '{c}' needs a unit, e.g. '{c} [mm]' or '{c} [deg]'", source=src)
+        cols.append(to_si(tab.columns[c], unit, unit_kind(unit), name=f"column '{c}'"))
+    return np.column_stack(cols)
+
+
+def _joint_header(dof: int, angle_joints) -> list[str]:
+    return [f"q{j + 1} [{'deg' if j in angle_joints else 'mm'}]" for j in range(dof)]
+
+
+def _joint_text(q, angle_joints) -> list[str]:
+    return [f"{np.rad2deg(v) if j in angle_joints else 1e3 * v:.6f}" for j, v in enumerate(q)]
 
 
 def load_profiles_csv(path, *, dof: int | None = None):
@@ -40,18 +76,7 @@ def load_profiles_csv(path, *, dof: int | None = None):
     idx = tab.column("profile")
     if np.any(idx != np.round(idx)) or np.any(idx < 0):
         raise FileFormatError("column 'profile' must hold non-negative integers", source=src)
-    qcols = sorted([c for c in tab.columns if c.startswith("q") and c[1:].isdigit()], key=lambda c: int(c[1:]))
-    if dof is not None and qcols and len(qcols) != dof:
-        raise FileFormatError(f"the arm has {dof} joints but the file has joint columns {qcols}", source=src)
-    q = None
-    if qcols:
-        cols = []
-        for c in qcols:
-            unit = tab.units.get(c)
-            if unit is None:
-                raise FileFormatError(f"column '{c}' needs a unit, e.g. '{c} [mm]' or '{c} [deg]'", source=src)
-            cols.append(to_si(tab.columns[c], unit, unit_kind(unit), name=f"column '{c}'"))
-        q = np.column_stack(cols)
+    q = _joint_columns(tab, dof, src)
     t = tab.column("t", kind="time") if "t" in tab else None
     if q is None and t is None:
         raise FileFormatError("need joint columns q1..qn or a timestamp column 't [s]'", source=src)
@@ -74,14 +99,14 @@ def write_profiles_csv(path, profiles, q=None, t=None, *, angle_joints=()) -> Pa
     """Write profiles (m) as mm; joints in mm, or deg for indices in ``angle_joints``."""
     head = ["profile", "x [mm]", "z [mm]"]
     if q is not None:
-        head += [f"q{j + 1} [{'deg' if j in angle_joints else 'mm'}]" for j in range(np.shape(q)[1])]
+        head += _joint_header(np.shape(q)[1], angle_joints)
     if t is not None:
         head.append("t [s]")
     lines = [", ".join(head)]
     for i, p in enumerate(profiles):
         extra = []
         if q is not None:
-            extra += [f"{np.rad2deg(v) if j in angle_joints else 1e3 * v:.6f}" for j, v in enumerate(q[i])]
+            extra += _joint_text(q[i], angle_joints)
         if t is not None:
             extra.append(f"{t[i]:.6f}")
         tail = (", " + ", ".join(extra)) if extra else ""
@@ -164,3 +189,45 @@ def interpolate_poses(t_src, T_src, t_query) -> np.ndarray:
     R = Slerp(t_src, Rotation.from_matrix(T_src[:, :3, :3]))(t_query).as_matrix()
     p = np.column_stack([np.interp(t_query, t_src, T_src[:, k, 3]) for k in range(3)])
     return transform_from(R, p)
+
+
+def load_tracker_csv(path, *, dof: int | None = None):
+    """Tracker readings with joint values; returns ``(q (n, dof) m/rad, p_T (n, 3) m)``."""
+    tab = load_csv(path, required=("x", "y", "z"))
+    src = str(path)
+    q = _joint_columns(tab, dof, src)
+    if q is None:
+        raise FileFormatError("need the joint columns q1..qn (with units) of every tracker reading", source=src)
+    return q, np.column_stack([tab.column(c, kind="length") for c in "xyz"])
+
+
+def write_tracker_csv(path, q, p_T, *, angle_joints=()) -> Path:
+    """Write tracker readings (m) as mm; joints in mm, or deg for indices in ``angle_joints``."""
+    rows = [", ".join(_joint_header(np.shape(q)[1], angle_joints) + ["x [mm]", "y [mm]", "z [mm]"])]
+    rows += [", ".join(_joint_text(qi, angle_joints) + [f"{1e3 * v:.5f}" for v in p]) for qi, p in zip(q, p_T)]
+    return atomic_write_text(path, "\n".join(rows) + "\n")
+
+
+def load_block_faces_csv(path) -> list[np.ndarray]:
+    """Points probed on the block's three corner faces; returns three (m_k, 3) arrays (m), faces 0, 1, 2."""
+    tab = load_csv(path, required=("face", "x", "y", "z"))
+    src = str(path)
+    face = tab.column("face")
+    if not np.all(np.isin(face, (0, 1, 2))):
+        bad = int(np.flatnonzero(~np.isin(face, (0, 1, 2)))[0])
+        raise FileFormatError(f"row {bad + 1}: column 'face' must be 0, 1 or 2 (x_B = 0, y_B = 0, z_B = 0), "
+                              f"got {face[bad]:g}", source=src)
+    p = np.column_stack([tab.column(c, kind="length") for c in "xyz"])
+    faces = [p[face == k] for k in range(3)]
+    few = [k for k, f in enumerate(faces) if len(f) < 3]
+    if few:
+        raise FileFormatError(f"face {few[0]} has {len(faces[few[0]])} points: a plane needs at least 3 "
+                              "(10 or more recommended)", source=src)
+    return faces
+
+
+def write_block_faces_csv(path, faces) -> Path:
+    """Write the three faces' tracker points (m) as mm with their face index."""
+    rows = ["face, x [mm], y [mm], z [mm]"]
+    rows += [f"{k}, " + ", ".join(f"{1e3 * v:.5f}" for v in p) for k, f in enumerate(faces) for p in f]
+    return atomic_write_text(path, "\n".join(rows) + "\n")

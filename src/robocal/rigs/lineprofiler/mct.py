@@ -38,13 +38,17 @@ from robocal.geometry import (
     invert_transform,
     matrix_from_rotvec,
     project_to_rotation,
+    rotvec_from_matrix,
     transform_from,
     wahba_rotation,
 )
 from robocal.kinematics import DHChain
 from robocal.validation import check_array, check_points
 
-__all__ = ["MCTResult", "frame2_in_tracker", "block_frame_from_planes", "fit_block_scan", "mct_calibrate"]
+__all__ = ["MCTResult", "BlockScanFit", "frame2_in_tracker", "block_frame_from_planes", "fit_block_scan",
+           "mct_calibrate"]
+
+_X_LABELS = ("X.rx", "X.ry", "X.rz", "X.tx", "X.ty", "X.tz")
 
 
 @dataclass
@@ -53,9 +57,16 @@ class MCTResult:
 
     ``X`` = ``T_E_L``; ``T_T_2``, ``T_T_E`` (at ``q30``), ``T_T_K``, ``T_T_B``,
     ``T_L_B``, ``T_T_L``: the intermediate frames of eqs. 6-12; ``u_L``: P3's
-    direction in L; ``X_std``: (6,) std of ``(rx, ry, rz, tx, ty, tz)`` from
-    first-order propagation of the fits' covariances; ``arc_rms``,
-    ``line_rms``, ``block_rms``, ``scan_rms``: fit residuals (m).
+    direction in L; ``arc_rms``, ``line_rms``, ``block_rms``, ``scan_rms``:
+    fit residuals (m); ``scan_residuals``: point-to-face distances of the
+    block scan (m).
+
+    ``X_cov`` (6, 6) over ``X.rx, X.ry, X.rz`` (rotation vector of
+    ``R_perturbed R_X^T``, rad, as in :func:`.refine.refine_sphere`) and
+    ``X.tx, X.ty, X.tz`` (m), ``X_std`` its root diagonal: first-order
+    propagation of the tracker noise (``tracker_sigma``, m per axis), the
+    height errors (``height_sigma``, m) and the block-scan fit's covariance
+    (see :func:`mct_covariance`). NaN where the data do not determine X.
     """
 
     X: np.ndarray
@@ -74,8 +85,39 @@ class MCTResult:
     block_rms: float
     scan_rms: float
     n_scan_points: int
+    scan_residuals: np.ndarray | None = None
+    X_cov: np.ndarray | None = None
     X_std: np.ndarray | None = None
+    tracker_sigma: float | None = None
+    height_sigma: float | None = None
+    cov_terms: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
+
+
+@dataclass
+class BlockScanFit:
+    """Outcome of :func:`fit_block_scan` (laser frame L at ``q30``, metres).
+
+    ``T_L_B`` block corner frame, ``u`` P3's direction in L, ``rms`` and
+    ``residuals`` point-to-face distances, ``ident`` the fit's
+    identifiability (covariance over ``u.a, u.b, B.rx, B.ry, B.rz, B.tx,
+    B.ty, B.tz`` scaled by the residual variance). :meth:`perturbed` maps a
+    step in those 8 parameters to ``(T_L_B, u)`` -- what error propagation
+    differentiates.
+    """
+
+    T_L_B: np.ndarray
+    u: np.ndarray
+    rms: float
+    residuals: np.ndarray
+    n_points: int
+    ident: object
+    x: np.ndarray
+    _unpack: object = field(repr=False, default=None)
+
+    def perturbed(self, dx) -> tuple[np.ndarray, np.ndarray]:
+        u, R, t = self._unpack(self.x + np.asarray(dx, float))
+        return transform_from(R, t), u
 
 
 def _link(chain: DHChain, index: int, q_value: float) -> np.ndarray:
@@ -97,15 +139,18 @@ def frame2_in_tracker(arc_T, q2_arc, line_T, q3_line, h0: float, h1: float, chai
                                       "turn R2 by at least 5 deg (20-60 deg recommended)")
     if np.ptp(q3_line) <= 0:
         raise DegenerateGeometryError("the P3 stroke has no length: move P3 while the tracker records")
-    arc = fit_circle_3d(arc_T)
+    return _frame2(fit_circle_3d(arc_T), fit_line(line_T), arc_T, q2_arc, line_T, q3_line, h0, h1, chain)
+
+
+def _frame2(arc, line, arc_T, q2_arc, line_T, q3_line, h0, h1, chain):
+    """Eq. 6 from the fitted arc and line (the part of :func:`frame2_in_tracker` after the fits)."""
     lo, hi = np.argmin(q2_arc), np.argmax(q2_arc)
     turn = np.cross(arc_T[lo] - arc.centre, arc_T[hi] - arc.centre)
     n_A = arc.axis * np.sign(turn @ arc.axis)
-    line = fit_line(line_T)
     n_B = line.direction * np.sign((line_T[np.argmax(q3_line)] - line_T[np.argmin(q3_line)]) @ line.direction)
-    # P3's direction in frame 2 from link 3's D-H row; R2's axis is z_2
-    A3 = _link(chain, 2, 0.0)
-    R_T_2 = wahba_rotation(np.array([[0.0, 0.0, 1.0], A3[:3, 2]]), np.array([n_A, n_B]))
+    # P3's direction in frame 2 from P3's own D-H row; R2's axis is z_2
+    A_P3 = _link(chain, chain.n_links - 1, 0.0)
+    R_T_2 = wahba_rotation(np.array([[0.0, 0.0, 1.0], A_P3[:3, 2]]), np.array([n_A, n_B]))
     T_T_2 = transform_from(R_T_2, arc.centre + (h1 - h0) * n_A)
     return T_T_2, arc.centre, n_A, n_B, arc, line
 
@@ -129,8 +174,12 @@ def block_frame_from_planes(face_points) -> tuple[np.ndarray, float]:
         normals.append(n)
         ds.append(d)
     N = np.array(normals)
-    if abs(np.linalg.det(N)) < 0.1:
+    det = np.linalg.det(N)
+    if abs(det) < 0.1:
         raise DegenerateGeometryError("block faces are nearly parallel: cannot build the block frame")
+    if det < 0:
+        raise InputError("block faces are listed in left-handed order: faces 0, 1, 2 must be x_B = 0, y_B = 0, "
+                         "z_B = 0 of a right-handed corner frame (swap two of them)")
     corner = np.linalg.solve(N, np.array(ds))
     R = project_to_rotation(N.T)  # columns ~ x_B, y_B, z_B
     rms = float(np.sqrt(np.mean(np.concatenate([f.residuals for f in fits]) ** 2)))
@@ -174,7 +223,7 @@ def fit_block_scan(profiles, q3, q30: float, size, *, u0=(0.0, -1.0, 0.0), tol: 
 
     Returns
     -------
-    T_L_B, u, rms, n_points, cov (9, 9) over (u perturbation 3, rotvec 3, t 3)
+    BlockScanFit
     """
     q3 = check_array(q3, "scan q3", shape=(len(profiles),))
     m, s = [], []
@@ -220,28 +269,156 @@ def fit_block_scan(profiles, q3, q30: float, size, *, u0=(0.0, -1.0, 0.0), tol: 
 
     x0 = np.r_[0, 0, 0, 0, 0, t0]
     ls = least_squares(fun, x0, method="lm", xtol=1e-12, ftol=1e-12)
-    # second pass: relabel every point by its nearest face of the fitted corner, drop far ones
-    u, R, t = unpack(ls.x)
-    p_B = (m + s[:, None] * u - t) @ R
-    inside = np.all(p_B < 3 * tol, axis=1) & np.all(p_B > -np.asarray(size) - 3 * tol, axis=1)
-    lab2 = np.argmin(np.abs(p_B), axis=1)
-    near = inside & (np.abs(p_B[np.arange(len(p_B)), lab2]) < 3 * tol)
-    mu, su, lu, use = m[near], s[near], lab2[near], near
-    ls = least_squares(fun, ls.x, method="lm", xtol=1e-12, ftol=1e-12)
+    # relabel every point by its nearest face of the fitted corner (dropping far
+    # ones) and refit until the labels settle: the first fit starts from the
+    # sheared cloud, whose labels near the edges can be wrong
+    size = np.asarray(size, float)
+    labels = None
+    for _ in range(6):
+        u, R, t = unpack(ls.x)
+        p_B = (m + s[:, None] * u - t) @ R
+        inside = np.all(p_B < 3 * tol, axis=1) & np.all(p_B > -size - 3 * tol, axis=1)
+        lab2 = np.argmin(np.abs(p_B), axis=1)
+        near = inside & (np.abs(p_B[np.arange(len(p_B)), lab2]) < 3 * tol)
+        new = np.where(near, lab2, -1)
+        if labels is not None and np.array_equal(new, labels):
+            break
+        labels = new
+        mu, su, lu, use = m[near], s[near], lab2[near], near
+        ls = least_squares(fun, ls.x, method="lm", xtol=1e-12, ftol=1e-12)
     u, R, t = unpack(ls.x)
     r = ls.fun
     s2 = float(r @ r / max(len(r) - 8, 1))
     ident = analyze_jacobian(ls.jac, ["u.a", "u.b", "B.rx", "B.ry", "B.rz", "B.tx", "B.ty", "B.tz"],
                              residual_variance=s2)
-    return transform_from(R, t), u, float(np.sqrt(np.mean(r * r))), int(use.sum()), ident
+    return BlockScanFit(transform_from(R, t), u, float(np.sqrt(np.mean(r * r))), r.copy(), int(use.sum()), ident,
+                        ls.x.copy(), unpack)
 
 
-def mct_calibrate(data, chain: DHChain) -> MCTResult:
+def _block_permutation(T_T_B, scan: BlockScanFit, n_B) -> tuple[int, ...]:
+    """A cube corner looks the same after a 120 deg turn about its diagonal, so the
+    scan alone cannot say which face is x_B: the cyclic relabelling that maps P3's
+    direction in L (u) onto the tracker's ``n_B``."""
+    best = None
+    for perm in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        R_T_L = T_T_B[:3, :3] @ scan.T_L_B[:3, perm].T
+        score = (R_T_L @ scan.u) @ n_B
+        if best is None or score > best[0]:
+            best = (score, perm)
+    return best[1]
+
+
+def _compose(arc_T, q2_arc, line_T, q3_line, h0, h1, faces, T_L_B, perm, chain, q30):
+    """Eqs. 6, 7, 12, 5 from the measurements: ``(X, T_T_2, T_T_E, T_T_B, T_L_B (relabelled), T_T_L, fits)``."""
+    T_T_2, O_A, n_A, n_B, arc, line = frame2_in_tracker(arc_T, q2_arc, line_T, q3_line, h0, h1, chain)
+    T_T_E = T_T_2 @ _link(chain, chain.n_links - 1, q30) @ chain.T_tool  # eq. 7
+    T_T_B, block_rms = block_frame_from_planes(faces)
+    T_L_B = T_L_B.copy()
+    T_L_B[:3, :3] = T_L_B[:3, perm]
+    T_T_L = T_T_B @ invert_transform(T_L_B)  # eq. 12
+    X = invert_transform(T_T_E) @ T_T_L  # eq. 5
+    return X, T_T_2, T_T_E, T_T_B, T_L_B, T_T_L, (O_A, n_A, n_B, arc, line, block_rms)
+
+
+def _x_delta(X, X0) -> np.ndarray:
+    """(6,) rotation vector of ``R R0^T`` and ``t - t0``."""
+    return np.r_[rotvec_from_matrix(X[:3, :3] @ X0[:3, :3].T), X[:3, 3] - X0[:3, 3]]
+
+
+def _tracker_sigma(arc, line, faces) -> float:
+    """Per-axis tracker noise (m) pooled from the arc, line and face-plane fits.
+
+    A point's distance to a fitted circle or line has two noise components,
+    to a plane one; the fits use 6 (circle), 4 (line) and 3 (each plane)
+    degrees of freedom.
+    """
+    ss = np.sum(arc.residuals ** 2) + np.sum(line.residuals ** 2)
+    dof = 2 * len(arc.residuals) - 6 + 2 * len(line.residuals) - 4
+    for f in faces:
+        fp = fit_plane(f)
+        ss += np.sum(fp.residuals ** 2)
+        dof += len(f) - 3
+    return float(np.sqrt(ss / dof)) if dof > 0 else float("nan")
+
+
+def mct_covariance(data, chain: DHChain, scan: BlockScanFit, perm, X, *, tracker_sigma: float,
+                   height_sigma: float, step: float = 1e-7) -> tuple[np.ndarray, dict]:
+    """First-order covariance (6, 6) of the MCT hand-eye matrix ``X`` (seed 004 eq. 5).
+
+    ``X`` is a function of every tracker point (arc, line, block faces), of
+    the two heights and of the block-scan fit's 8 parameters; the three groups
+    are independent. Its Jacobian is taken by forward differences (``step`` m
+    on the tracker points and heights, the same in the scan's parameter units)
+    -- the chain of fits (3D circle, line, three planes, Wahba) has no closed
+    form derivative worth writing -- and ``cov = sum_g J_g Sigma_g J_g^T``
+    with ``Sigma = tracker_sigma^2 I`` for the tracker, ``height_sigma^2 I``
+    for ``(h0, h1)`` and the scan fit's own covariance. Coordinates as
+    :attr:`MCTResult.X_cov`. Returns ``(cov, terms)``, ``terms`` the per-group
+    contributions to the standard deviations (for the report).
+    """
+    q2, q3 = np.asarray(data.q_arc)[:, -2], np.asarray(data.q_line)[:, -1]
+    q30 = float(np.asarray(data.q_scan0)[-1])
+    arc_T, line_T = np.asarray(data.arc_T, float), np.asarray(data.line_T, float)
+    faces = [np.asarray(f, float) for f in data.block_faces_T]
+    h = np.array([data.h0, data.h1], float)
+
+    _, _, T_T_E0, T_T_B0, T_L_B0, T_T_L0, (_, _, _, arc0, line0, _) = _compose(
+        arc_T, q2, line_T, q3, h[0], h[1], faces, scan.T_L_B, perm, chain, q30)
+    A_tool = _link(chain, chain.n_links - 1, q30) @ chain.T_tool
+
+    def column(Xp):
+        return _x_delta(Xp, X) / step
+
+    def x_from_frame2(arc, line, arc_pts, line_pts, hh):  # frame 2 moved, the laser frame in T did not
+        T_T_2 = _frame2(arc, line, arc_pts, q2, line_pts, q3, hh[0], hh[1], chain)[0]
+        return invert_transform(T_T_2 @ A_tool) @ T_T_L0
+
+    cols_tr = []
+    for k in range(arc_T.size):
+        p = arc_T.copy()
+        p.flat[k] += step
+        cols_tr.append(column(x_from_frame2(fit_circle_3d(p), line0, p, line_T, h)))
+    for k in range(line_T.size):
+        p = line_T.copy()
+        p.flat[k] += step
+        cols_tr.append(column(x_from_frame2(arc0, fit_line(p), arc_T, p, h)))
+    # a face point moves only its own plane: refit the block frame alone
+    inv_T_T_E, inv_T_L_B = invert_transform(T_T_E0), invert_transform(T_L_B0)
+    for j, f in enumerate(faces):
+        for k in range(f.size):
+            fj = f.copy()
+            fj.flat[k] += step
+            T_T_B, _ = block_frame_from_planes([fj if i == j else faces[i] for i in range(3)])
+            cols_tr.append(column(inv_T_T_E @ T_T_B @ inv_T_L_B))
+    J_tr = np.array(cols_tr).T
+    J_h = np.array([column(x_from_frame2(arc0, line0, arc_T, line_T, h + step * e)) for e in np.eye(2)]).T
+    J_s = []
+    for e in np.eye(len(scan.x)):
+        T_L_B_s, _ = scan.perturbed(step * e)
+        T_L_B_s[:3, :3] = T_L_B_s[:3, perm]
+        J_s.append(column(inv_T_T_E @ T_T_B0 @ invert_transform(T_L_B_s)))
+    J_s = np.array(J_s).T
+    C_tr = tracker_sigma ** 2 * J_tr @ J_tr.T
+    C_h = height_sigma ** 2 * J_h @ J_h.T
+    C_s = J_s @ scan.ident.cov @ J_s.T  # NaN rows of an unidentifiable scan parameter propagate
+    cov = C_tr + C_h + C_s
+    terms = {"tracker": np.sqrt(np.diag(C_tr)), "heights": np.sqrt(np.diag(C_h)),
+             "block scan": np.sqrt(np.diag(C_s))}
+    return cov, terms
+
+
+def mct_calibrate(data, chain: DHChain, *, tracker_sigma: float | None = None, height_sigma: float = 0.02e-3,
+                  covariance: bool = True) -> MCTResult:
     """Hand-eye matrix by the MCT method (seed 004 eqs. 5-12) from :class:`~.simulate.MCTData`-like input.
 
     ``data`` needs: ``q_arc`` (n, 3), ``arc_T`` (n, 3), ``q_line`` (k, 3),
     ``line_T`` (k, 3), ``h0``, ``h1``, ``q_scan0`` (3,), ``block_faces_T``
     (3 arrays), ``block_size``, ``scan_q3`` (S,), ``scan_profiles``.
+
+    ``tracker_sigma`` (m per axis; default: pooled from the arc, line and
+    face fits) and ``height_sigma`` (m, the measured ``h0`` and ``h1``) set
+    the covariance of ``X`` (:func:`mct_covariance`); ``covariance=False``
+    skips it (Monte Carlo loops).
     """
     if chain.dof < 2 or chain.joint_types[-2:] != ("revolute", "prismatic"):
         raise InputError(f"MCT needs a chain ending in a revolute then a prismatic joint, got {chain.joint_types}")
@@ -260,42 +437,43 @@ def mct_calibrate(data, chain: DHChain) -> MCTResult:
         if drift > 1e-6:
             warnings.append(Diagnostic("inconsistent_data",
                                        f"{name}: joints other than the moving one changed by up to {drift:.3g}"))
-    T_T_2, O_A, n_A, n_B, arc, line = frame2_in_tracker(data.arc_T, q_arc[:, -2], data.line_T, q_line[:, -1],
-                                                       data.h0, data.h1, chain)
     q_scan0 = check_array(data.q_scan0, "q_scan0", shape=(chain.dof,))
     if abs(q_scan0[-2] - q_line[0, -2]) > 1e-9:
         warnings.append(Diagnostic("inconsistent_data", "R2 at the block scan differs from R2 during the P3 stroke; "
                                    "frame 2 is built at the stroke's R2 value"))
     q30 = float(q_scan0[-1])
-    T_T_E = T_T_2 @ _link(chain, chain.n_links - 1, q30) @ chain.T_tool  # eq. 7
+    # P3 direction in L starts from the nominal scan axis of the profiler
+    scan = fit_block_scan(data.scan_profiles, data.scan_q3, q30, data.block_size, u0=(0.0, -1.0, 0.0))
+    T_T_B, _ = block_frame_from_planes(data.block_faces_T)
+    _, _, n_B, _, _, _ = frame2_in_tracker(data.arc_T, q_arc[:, -2], data.line_T, q_line[:, -1], data.h0, data.h1,
+                                           chain)
+    perm = _block_permutation(T_T_B, scan, n_B)
+    X, T_T_2, T_T_E, T_T_B, T_L_B, T_T_L, (O_A, n_A, n_B, arc, line, block_rms) = _compose(
+        data.arc_T, q_arc[:, -2], data.line_T, q_line[:, -1], data.h0, data.h1, data.block_faces_T, scan.T_L_B,
+        perm, chain, q30)
     ball = line.point + n_B * ((O_A - line.point) @ n_B)
     y_K = n_B - (n_B @ n_A) * n_A
     y_K /= np.linalg.norm(y_K)
     T_T_K = transform_from(np.column_stack([n_A, y_K, np.cross(n_A, y_K)]), ball)  # eq. 8
-    T_T_B, block_rms = block_frame_from_planes(data.block_faces_T)
-    # P3 direction in L starts from the nominal: frame E's z in L for the mounting X0 ~ identity-free guess
-    u0 = (0.0, -1.0, 0.0)
-    T_L_B, u_L, scan_rms, n_pts, ident = fit_block_scan(data.scan_profiles, data.scan_q3, q30, data.block_size, u0=u0)
-    # A cube corner looks the same after a 120 deg turn about its diagonal, so the
-    # scan alone cannot say which face is x_B: pick the cyclic relabelling that
-    # maps P3's direction in L (u) onto the tracker's n_B.
-    best = None
-    for perm in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
-        T_cand = T_L_B.copy()
-        T_cand[:3, :3] = T_L_B[:3, perm]
-        T_T_L = T_T_B @ invert_transform(T_cand)
-        score = (T_T_L[:3, :3] @ u_L) @ n_B
-        if best is None or score > best[0]:
-            best = (score, T_cand, T_T_L)
-    _, T_L_B, T_T_L = best  # eq. 12
-    X = invert_transform(T_T_E) @ T_T_L  # eq. 5
     # consistency: P3's direction seen by the tracker (n_B) and by the scan (u in L) must agree through X
-    e_dir = np.rad2deg(np.arccos(np.clip((T_T_L[:3, :3] @ u_L) @ n_B, -1, 1)))
+    e_dir = np.rad2deg(np.arccos(np.clip((T_T_L[:3, :3] @ scan.u) @ n_B, -1, 1)))
     if e_dir > 0.5:
         warnings.append(Diagnostic("inconsistent_data", f"P3 direction from the block scan and from the tracker "
                                    f"differ by {e_dir:.3g} deg"))
     warnings += list(arc.warnings)
-    warnings += ident.diagnostics()
-    return MCTResult(X=X, T_T_2=T_T_2, T_T_E=T_T_E, T_T_K=T_T_K, T_T_B=T_T_B, T_L_B=T_L_B, T_T_L=T_T_L, u_L=u_L,
-                     n_A=n_A, O_A=O_A, n_B=n_B, arc_rms=arc.rms, line_rms=line.rms, block_rms=block_rms,
-                     scan_rms=scan_rms, n_scan_points=n_pts, warnings=warnings)
+    warnings += scan.ident.diagnostics()
+    res = MCTResult(X=X, T_T_2=T_T_2, T_T_E=T_T_E, T_T_K=T_T_K, T_T_B=T_T_B, T_L_B=T_L_B, T_T_L=T_T_L, u_L=scan.u,
+                    n_A=n_A, O_A=O_A, n_B=n_B, arc_rms=arc.rms, line_rms=line.rms, block_rms=block_rms,
+                    scan_rms=scan.rms, n_scan_points=scan.n_points, scan_residuals=scan.residuals, warnings=warnings)
+    if covariance:
+        sig = _tracker_sigma(arc, line, data.block_faces_T) if tracker_sigma is None else float(tracker_sigma)
+        if not np.isfinite(sig) or sig < 0 or not np.isfinite(height_sigma) or height_sigma < 0:
+            raise InputError(f"tracker and height sigmas must be finite and >= 0, got {sig!r} and {height_sigma!r}")
+        cov, terms = mct_covariance(data, chain, scan, perm, X, tracker_sigma=sig, height_sigma=float(height_sigma))
+        res.X_cov, res.X_std, res.cov_terms = cov, np.sqrt(np.diag(cov)), terms
+        res.tracker_sigma, res.height_sigma = sig, float(height_sigma)
+        bad = [lab for lab, v in zip(_X_LABELS, res.X_std) if not np.isfinite(v)]
+        if bad:
+            warnings.append(Diagnostic("rank_deficient", "no standard deviation for " + ", ".join(bad) +
+                                       ": the block scan does not determine them", params=tuple(bad)))
+    return res
