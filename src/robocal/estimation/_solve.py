@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy import stats
+from scipy import special
 from scipy.optimize import least_squares
 
 from robocal.diagnostics import Diagnostic
@@ -140,7 +140,8 @@ def _clipped_variance(q, dims, m, rank, n_sigma, max_iter=20) -> float:
         return 0.0
     udims, which = np.unique(dims, return_inverse=True)
     t_u = np.array([outlier_threshold(n_sigma, int(d)) for d in udims])
-    c_u = stats.chi2.cdf(t_u, udims + 2) / stats.chi2.cdf(t_u, udims)
+    # chi2.cdf(t, k) = P(k/2, t/2), the regularised lower incomplete gamma function
+    c_u = special.gammainc(udims / 2 + 1, t_u / 2) / special.gammainc(udims / 2, t_u / 2)
     t, c = t_u[which], c_u[which]
     inl = None
     for _ in range(max_iter):

@@ -17,11 +17,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.stats import chi2, norm
 
 from robocal.diagnostics import Diagnostic
 from robocal.errors import InputError, NotEnoughDataError
-from robocal.estimation import LSQResult, Problem, analyze_jacobian, solve
+from robocal.estimation import LSQResult, Problem, analyze_jacobian, outlier_threshold, solve
 from robocal.io import CalibrationResult
 from robocal.rigs.humanoid.model import CAMERA_PARAMS, FEET, HumanoidModel
 from robocal.rigs.humanoid.simulate import JOINT_RESOLUTION, HumanoidDataset
@@ -436,7 +435,7 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
     blocks = np.stack([np.stack([S[:, 2 * idx, 2 * idx], S[:, 2 * idx, 2 * idx + 1]], -1),
                        np.stack([S[:, 2 * idx + 1, 2 * idx], S[:, 2 * idx + 1, 2 * idx + 1]], -1)], -2)
     score = np.einsum("vni,vnij,vnj->vn", resid, np.linalg.inv(blocks), resid) / res.residual_variance
-    thr = chi2.ppf(1.0 - 2.0 * norm.sf(outlier_sigma), 2)
+    thr = outlier_threshold(outlier_sigma, 2)
     flat = np.flatnonzero(score.reshape(-1) > thr)
     outliers = [(used.names[int(i) // N], int(i) % N) for i in flat]
     warnings = [w for w in res.warnings if w.code != "outliers"]

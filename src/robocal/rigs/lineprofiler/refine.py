@@ -123,9 +123,9 @@ def refine_sphere(q, profiles, chain: DHChain, sphere_radius: float, X0, Q0, *, 
     prob.add_residuals(fun, name="point_to_sphere", jacobian=jac, residual_dim=1)
     if return_problem:
         return prob
-    # Solved with SciPy directly and analysed with robocal.estimation.analyze_jacobian:
-    # estimation.solve computes a chi-square quantile per observation (slow for
-    # thousands of points; core fix requested: cache outlier_threshold by dim).
+    # Solved with SciPy directly and analysed with robocal.estimation.analyze_jacobian
+    # (written when estimation.solve took a chi-square quantile per observation, seconds
+    # on 10k points; it now takes one per residual size, so moving to solve() is open).
     free = np.array([k not in hold for k in labels])
     x0 = np.r_[0.0, 0.0, 0.0, X0[:3, 3], Q0]
 
