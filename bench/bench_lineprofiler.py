@@ -1,7 +1,9 @@
-"""AX = XB solvers: accuracy and time, robocal vs OpenCV's calibrateHandEye on the same data.
+"""AX = XB and AX = ZB solvers: accuracy and time, robocal vs OpenCV on the same data.
 
 Run: python bench/bench_lineprofiler.py [--trials 50]
-Prints a Markdown table (mean rotation / translation error vs truth, time per call, ratio to OpenCV).
+Prints two Markdown tables (mean rotation / translation error vs truth, time per call, ratio to
+OpenCV): the five hand-eye methods against ``cv2.calibrateHandEye``, and the robot-world solver
+(Shah's closed form, then refined) against ``cv2.calibrateRobotWorldHandEye`` (Shah and Li).
 """
 
 import argparse
@@ -11,7 +13,7 @@ import cv2
 import numpy as np
 
 from robocal.geometry import invert_transform, matrix_from_rotvec, transform_from
-from robocal.rigs.lineprofiler.handeye import AXXB_METHODS, calibrate_hand_eye, transform_error
+from robocal.rigs.lineprofiler.handeye import AXXB_METHODS, calibrate_hand_eye, calibrate_robot_world, transform_error
 
 CV = {"tsai": cv2.CALIB_HAND_EYE_TSAI, "park": cv2.CALIB_HAND_EYE_PARK, "horaud": cv2.CALIB_HAND_EYE_HORAUD,
       "andreff": cv2.CALIB_HAND_EYE_ANDREFF, "daniilidis": cv2.CALIB_HAND_EYE_DANIILIDIS}
@@ -27,6 +29,25 @@ def scene(rng, n, s_r, s_t):
     Tc = transform_from(matrix_from_rotvec(rng.normal(size=(n, 3)) * s_r) @ Tc[:, :3, :3],
                         Tc[:, :3, 3] + rng.normal(size=(n, 3)) * s_t)
     return X, Tg, Tc
+
+
+def robot_world_scene(rng, n, s_r, s_t):
+    """``A_i X = Z B_i``: A = T_cam_world (noisy, as seen by the camera), B = T_gripper_base."""
+    def T(ang=1.0, tr=0.5):
+        return transform_from(matrix_from_rotvec(rng.normal(size=3) * ang), rng.normal(size=3) * tr)
+
+    X, Z = T(), T()
+    TB = invert_transform(np.array([T() for _ in range(n)]))
+    TA = Z @ TB @ invert_transform(X)
+    TA = transform_from(matrix_from_rotvec(rng.normal(size=(n, 3)) * s_r) @ TA[:, :3, :3],
+                        TA[:, :3, 3] + rng.normal(size=(n, 3)) * s_t)
+    return X, Z, TA, TB
+
+
+def cv_robot_world(TA, TB, method):
+    Rb, tb, Rg, tg = cv2.calibrateRobotWorldHandEye(TA[:, :3, :3], TA[:, :3, 3], TB[:, :3, :3], TB[:, :3, 3],
+                                                    method=method)
+    return transform_from(Rb, tb.ravel()), transform_from(Rg, tg.ravel())
 
 
 def timed(f, reps=5):
@@ -61,6 +82,26 @@ def main():
             rows[name] = (1e3 * e[:, 0].mean(), 1e3 * e[:, 1].mean(), 1e3 * np.median(ts))
         for name, (er, et, tm) in rows.items():
             print(f"| {m} | {name} | {er:.3f} | {et:.3f} | {tm:.3f} | {tm / rows['OpenCV'][2]:.1f} |")
+
+    rw = [robot_world_scene(rng, a.poses, 1e-3, 1e-3) for _ in range(a.trials)]
+    print("\nAX = ZB (X = T_world_base, Z = T_cam_gripper), same noise on A = T_cam_world; errors of X | Z\n")
+    print("| solver | X rot [mrad] | X t [mm] | Z rot [mrad] | Z t [mm] | time [ms] | time / OpenCV Shah |")
+    print("|---|---|---|---|---|---|---|")
+    rows = {}
+    for name, f in (("OpenCV Shah", lambda TA, TB: cv_robot_world(TA, TB, cv2.CALIB_ROBOT_WORLD_HAND_EYE_SHAH)),
+                    ("OpenCV Li", lambda TA, TB: cv_robot_world(TA, TB, cv2.CALIB_ROBOT_WORLD_HAND_EYE_LI)),
+                    ("robocal (Shah)", lambda TA, TB: (lambda r: (r.X, r.Z))(calibrate_robot_world(TA, TB,
+                                                                                                   refine=False))),
+                    ("robocal+refine", lambda TA, TB: (lambda r: (r.X, r.Z))(calibrate_robot_world(TA, TB)))):
+        errs, ts = [], []
+        for X, Z, TA, TB in rw:
+            (Xe, Ze), dt = timed(lambda: f(TA, TB), reps=3)
+            errs.append([*transform_error(Xe, X), *transform_error(Ze, Z)])
+            ts.append(dt)
+        rows[name] = (*(1e3 * np.array(errs).mean(axis=0)), 1e3 * np.median(ts))
+    for name, v in rows.items():
+        print(f"| {name} | {v[0]:.3f} | {v[1]:.3f} | {v[2]:.3f} | {v[3]:.3f} | {v[4]:.3f} | "
+              f"{v[4] / rows['OpenCV Shah'][4]:.1f} |")
 
 
 if __name__ == "__main__":
