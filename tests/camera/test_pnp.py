@@ -117,6 +117,16 @@ def test_pnp_bad_inputs(cam):
         solve_pnp("camera", p, uv)
 
 
+@pytest.mark.parametrize("solver", [solve_pnp, solve_pnp_planar])
+def test_degenerate_image_points_raise_a_named_error(cam, solver):
+    # OpenCV answered these with an assertion (SQPnP), a NaN pose or "behind the camera" (IPPE)
+    p = BOARD.object_points()[:8]
+    for uv, what in ((np.tile([[300.0, 200.0]], (8, 1)), "coincide"),
+                     (np.c_[np.linspace(100, 200, 8), np.full(8, 200.0)], "are collinear")):
+        with pytest.raises(DegenerateGeometryError, match=f"uv: the 8 image points {what}"):
+            solver(cam, p, uv)
+
+
 def test_pnp_jacobian_matches_finite_differences(cam):
     p = BOARD.object_points()
     uv, J = pnp_jacobian(cam, p, T_TRUE)

@@ -82,13 +82,55 @@ def test_user_error_is_one_line_exit_2(tmp_path, capsys, monkeypatch):
 
 def test_unknown_rig_in_demo_is_user_error(capsys):
     assert main(["demo", "--rigs", "nonexistent", "--no-progress"]) == 2
-    assert "unknown rig" in capsys.readouterr().err
+    assert "nonexistent is not a rig with a demo" in capsys.readouterr().err
+    # installed but without a demo, or an empty list: an error too, not a silent exit 0
+    assert main(["demo", "--rigs", "handeye", "--no-progress"]) == 2
+    assert main(["demo", "--rigs", ",", "--no-progress"]) == 2
 
 
 def test_parser_lists_installed_rigs():
-    parser = build_parser()
-    text = parser.format_help()
-    assert "demo" in text
+    from robocal.cli import discover_rigs
+
+    text = build_parser().format_help()
+    names = [r.name for r in discover_rigs()]
+    assert {"projector", "humanoid", "mirror", "flow", "lineprofiler"} <= set(names)
+    assert all(n in text for n in ["demo", *names])
+
+
+def test_help_shows_only_meaningful_defaults(capsys):
+    with pytest.raises(SystemExit):
+        main(["demo", "--help"])
+    out = capsys.readouterr().out
+    assert "(default: None)" not in out and "(default: False)" not in out and "(default: 2026)" in out
+    assert out.count("(default:") == 3  # --out's and --rigs' own texts, --seed's value
+
+
+def test_out_that_is_a_file_or_cannot_be_made_is_one_line_exit_2(tmp_path, capsys, monkeypatch):
+    import robocal.cli.main as m
+
+    monkeypatch.setattr(m, "discover_rigs", lambda: [_toy_rig()])
+    afile = tmp_path / "f"
+    afile.write_text("")
+    for out in (afile, afile / "sub"):
+        assert main(["demo", "--out", str(out), "--no-progress"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and err.startswith("robocal: error: --out: ") and str(afile) in err
+
+
+def test_library_error_is_prefixed_with_the_input_file(capsys, monkeypatch):
+    import robocal.cli.main as m
+
+    rig = _toy_rig()
+
+    def add_commands(p):
+        sub = p.add_subparsers(dest="sub")
+        c = sub.add_parser("calibrate")
+        c.add_argument("input")
+        c.set_defaults(func=lambda a: (_ for _ in ()).throw(InputError("points 0 and 1 coincide")))
+
+    monkeypatch.setattr(m, "discover_rigs", lambda: [Rig("toy", "t", "t", add_commands, rig.demo)])
+    assert main(["toy", "calibrate", "in.yaml"]) == 2
+    assert capsys.readouterr().err == "robocal: error: in.yaml: points 0 and 1 coincide\n"
 
 
 def test_usage_error_in_a_rig_subcommand_is_one_line_exit_2(capsys, monkeypatch):
@@ -101,3 +143,13 @@ def test_usage_error_in_a_rig_subcommand_is_one_line_exit_2(capsys, monkeypatch)
     err = capsys.readouterr().err
     assert err.count("\n") == 1, err
     assert err.startswith("robocal toy calibrate: error:") and "input" in err and "--help" in err
+
+
+def test_results_record_the_cli_command_and_api_results_none(tmp_path, monkeypatch):
+    import robocal.cli.main as m
+
+    monkeypatch.setattr(m, "discover_rigs", lambda: [_toy_rig()])
+    assert main(["demo", "--out", str(tmp_path / "d d"), "--no-progress"]) == 0
+    res = json.loads((tmp_path / "d d" / "toy" / "result.json").read_text())
+    assert res["command"] == f"robocal demo --out '{tmp_path / 'd d'}' --no-progress"  # quoted, re-runnable
+    assert CalibrationResult(rig="toy", method="m", estimate={}).command == ""  # not pytest's argv

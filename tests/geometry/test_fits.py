@@ -117,6 +117,28 @@ def test_circle_2d_unbiased_on_short_arc_where_kasa_fails():
     assert abs(np.mean(pred) / geo.std() - 1) < 0.08
 
 
+@pytest.mark.filterwarnings("error")  # no RuntimeWarning from a negative variance either
+def test_nearly_degenerate_fits_report_large_std_and_warn():
+    # inverting J^T J here gave radius std 6e-6 on a radius the points barely constrain
+    rng = np.random.default_rng(0)
+    x = np.linspace(0, 1, 50)
+    f = fit_circle_2d(np.c_[x, 1e-4 * rng.normal(size=50)])
+    assert f.std[2] > 0.1 * f.radius and "weakly_determined" in [w.code for w in f.warnings]
+    u = rng.uniform(-0.1, 0.1, (200, 2))
+    g = fit_sphere(np.c_[u, 1e-5 * rng.normal(size=200)])
+    assert g.radius_std > 0.1 * g.radius and "weakly_determined" in [w.code for w in g.warnings]
+
+
+def test_circle_2d_std_matches_monte_carlo_on_a_short_arc():
+    # 15 deg arc, noise 0.1 % of the radius: the linearised std must still match the spread
+    rng = np.random.default_rng(4)
+    clean = arc_points(60, np.radians(15), 1.0, np.zeros(2))
+    fits = [fit_circle_2d(clean + 1e-3 * rng.normal(size=clean.shape)) for _ in range(300)]
+    spread = np.std([f.radius for f in fits])
+    predicted = np.sqrt(np.mean([f.std[2] ** 2 for f in fits]))
+    assert abs(spread / predicted - 1) < 0.2  # 300 trials: std of the ratio ~4 %, bias of nonlinearity
+
+
 def test_circle_2d_exact_and_three_points():
     centre, R = np.array([3.0, -1.0]), 2.0
     p = arc_points(7, np.radians(200), R, centre)

@@ -1,5 +1,7 @@
 """URDF loading and writing: conventions, round trips, kept extras, malformed files."""
 
+import os
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -56,6 +58,8 @@ def test_round_trip_keeps_kinematics_and_extras(nao_path, tmp_path):
     out = tmp_path / "nao_out.urdf"
     text = nao.to_urdf(out)
     assert out.read_text() == text
+    # the project's atomic writer: readable by others like any new file (was mkstemp's 0600)
+    assert out.stat().st_mode & 0o044 == 0o044 or os.umask(os.umask(0)) & 0o044
     again = KinematicTree.from_urdf(out)
     rng = np.random.default_rng(20)
     q = rng.uniform(-1, 1, (10, nao.n_joints))

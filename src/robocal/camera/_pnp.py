@@ -123,8 +123,23 @@ def _check_inputs(camera, p_obj, uv, min_count: int):
         raise InputError(f"p_obj and uv must have the same number of points, got {p.shape[0]} and {q.shape[0]}")
     if p.shape[0] < min_count:
         raise NotEnoughDataError(f"PnP needs at least {min_count} points, got {p.shape[0]}")
+    # coincident or collinear image points determine no pose; OpenCV's answer to
+    # them is an assertion (SQPnP), a NaN pose or "behind the camera" (IPPE)
+    sv = np.linalg.svd(q - q.mean(axis=0), compute_uv=False)
+    if sv[0] < 1e-6 or sv[1] <= 1e-9 * sv[0]:
+        what = "coincide" if sv[0] < 1e-6 else "are collinear"
+        raise DegenerateGeometryError(f"uv: the {q.shape[0]} image points {what}; the pose is not determined")
     # OpenCV rejects strided views (e.g. uv[:, ::-1] or a column slice)
     return np.ascontiguousarray(p), np.ascontiguousarray(q)
+
+
+def _opencv(fn, *args, **kw):
+    """Call an OpenCV solver; its assertion errors on degenerate data become a named error."""
+    try:
+        return fn(*args, **kw)
+    except cv2.error as exc:
+        first = str(exc).strip().splitlines()[-1] if str(exc).strip() else repr(exc)
+        raise DegenerateGeometryError(f"OpenCV could not solve this PnP problem: {first}") from None
 
 
 def reprojection_residuals(camera: CameraModel, p_obj, uv, T_cam_obj) -> np.ndarray:
@@ -144,8 +159,9 @@ def _solution(camera, p, q, T) -> PnPSolution:
 
 
 def _refine(camera, p, q, rvec, tvec):
-    rvec, tvec = cv2.solvePnPRefineLM(
-        p.reshape(-1, 1, 3), q.reshape(-1, 1, 2), camera.K, camera.dist, rvec.copy(), tvec.copy(), _REFINE_CRITERIA
+    rvec, tvec = _opencv(
+        cv2.solvePnPRefineLM, p.reshape(-1, 1, 3), q.reshape(-1, 1, 2), camera.K, camera.dist, rvec.copy(),
+        tvec.copy(), _REFINE_CRITERIA
     )
     return rvec, tvec
 
@@ -187,8 +203,8 @@ def solve_pnp(camera: CameraModel, p_obj, uv, *, refine: bool = True) -> PnPSolu
         raise DegenerateGeometryError(
             f"p_obj: points are collinear or coincident (singular values {s.tolist()}); the pose is not determined"
         )
-    ok, rvec, tvec = cv2.solvePnP(
-        p.reshape(-1, 1, 3), q.reshape(-1, 1, 2), camera.K, camera.dist, flags=cv2.SOLVEPNP_SQPNP
+    ok, rvec, tvec = _opencv(
+        cv2.solvePnP, p.reshape(-1, 1, 3), q.reshape(-1, 1, 2), camera.K, camera.dist, flags=cv2.SOLVEPNP_SQPNP
     )
     if not ok:
         raise ConvergenceError("cv2.solvePnP (SQPnP) found no pose")
@@ -240,8 +256,9 @@ def solve_pnp_planar(camera: CameraModel, p_obj, uv, *, refine: bool = True) -> 
         T_obj_plane[:3, 3] = c
         p_plane = (p - c) @ R.T
         p_plane[:, 2] = 0.0
-    n, rvecs, tvecs, _ = cv2.solvePnPGeneric(
-        p_plane.reshape(-1, 1, 3), q.reshape(-1, 1, 2), camera.K, camera.dist, flags=cv2.SOLVEPNP_IPPE
+    n, rvecs, tvecs, _ = _opencv(
+        cv2.solvePnPGeneric, p_plane.reshape(-1, 1, 3), q.reshape(-1, 1, 2), camera.K, camera.dist,
+        flags=cv2.SOLVEPNP_IPPE
     )
     if n == 0:
         raise ConvergenceError("cv2.solvePnPGeneric (IPPE) found no pose")

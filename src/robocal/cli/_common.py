@@ -12,6 +12,7 @@ import sys
 from collections.abc import Iterable
 from pathlib import Path
 
+from robocal.errors import InputError
 from robocal.io import CalibrationResult, write_result
 from robocal.report import Report
 
@@ -40,7 +41,19 @@ class OneLineErrorParser(argparse.ArgumentParser):
 
 
 class RawHelp(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
-    """Keeps example blocks as written and shows defaults."""
+    """Keeps example blocks as written and shows defaults that say something.
+
+    No "(default: None)" or "(default: False)" for options and flags whose
+    absence is their meaning, and none appended to a help text that already
+    states its default.
+    """
+
+    def _get_help_string(self, action):  # noqa: D102 - argparse hook
+        text = action.help or ""
+        if action.default is None or action.default is False or action.default == argparse.SUPPRESS \
+                or "default" in text:
+            return text
+        return super()._get_help_string(action)
 
 
 def examples_epilog(*lines: str) -> str:
@@ -71,7 +84,12 @@ def prepare_out_dir(out: Path | None, label: str) -> Path:
             n += 1
             out = Path(f"robocal-out-{label}-{stamp}-{n}")
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out} is a file, expected a directory (new or existing)", source="--out")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"cannot create the directory {out} ({exc.strerror or exc})", source="--out") from None
     return out
 
 

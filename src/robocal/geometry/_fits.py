@@ -176,16 +176,22 @@ def _orient(v: np.ndarray) -> np.ndarray:
 
 
 def _lsq_cov(J: np.ndarray, r: np.ndarray, n_params: int) -> np.ndarray:
-    """``sigma_hat^2 (J^T J)^{-1}``; NaN when there are no degrees of freedom."""
+    """``sigma_hat^2 (J^T J)^{-1}``; NaN when there are no degrees of freedom.
+
+    From the SVD of ``J`` (``V diag(1/s^2) V^T``), not by inverting ``J^T J``:
+    a nearly collinear arc or a nearly flat cap squares an already large
+    condition number, and the inverse then returned tiny or negative
+    variances for a radius the points hardly constrain. A direction with no
+    information at all (``s < 1e-13 s_max``) makes every variance infinite.
+    """
     dof = r.size - n_params
-    JtJ = J.T @ J
     if dof <= 0:
-        return np.full(JtJ.shape, np.nan)
+        return np.full((J.shape[1], J.shape[1]), np.nan)
     s2 = float(r @ r) / dof
-    try:
-        return s2 * np.linalg.inv(JtJ)
-    except np.linalg.LinAlgError:
-        return s2 * np.linalg.pinv(JtJ)
+    _, sv, Vt = np.linalg.svd(J, full_matrices=False)
+    if sv[-1] <= 1e-13 * sv[0]:
+        return np.full((J.shape[1], J.shape[1]), np.inf)
+    return s2 * (Vt.T / sv**2) @ Vt
 
 
 def _warnings(ls, checks: list[tuple[str, float, float]]) -> tuple[Diagnostic, ...]:

@@ -26,7 +26,7 @@ from __future__ import annotations
 import datetime as _dt
 import json
 import math
-import sys
+import shlex
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -38,9 +38,21 @@ from robocal.diagnostics import Diagnostic
 from robocal.errors import FileFormatError
 from robocal.io._atomic import atomic_write_text, sha256_file
 
-__all__ = ["SCHEMA", "CalibrationResult", "to_jsonable", "write_result", "load_result", "hash_inputs"]
+__all__ = ["SCHEMA", "CalibrationResult", "to_jsonable", "write_result", "load_result", "hash_inputs",
+           "set_command_line"]
 
 SCHEMA = "robocal.result/1"
+
+#: The command line of the running ``robocal`` CLI (set by its ``main``); results
+#: made through the Python API record "" rather than the host's ``sys.argv``
+#: (which under pytest or Jupyter is not a robocal command at all).
+_COMMAND_LINE = ""
+
+
+def set_command_line(argv) -> None:
+    """Record the CLI's arguments for the ``command`` field of results made from now on (None: forget)."""
+    global _COMMAND_LINE
+    _COMMAND_LINE = "" if argv is None else shlex.join(["robocal", *map(str, argv)])
 
 
 def to_jsonable(obj: Any) -> Any:
@@ -92,7 +104,7 @@ class CalibrationResult:
     warnings: list[Diagnostic] = field(default_factory=list)
     inputs: dict[str, str] = field(default_factory=dict)
     diagnostics: dict = field(default_factory=dict)
-    command: str = field(default_factory=lambda: " ".join(["robocal", *sys.argv[1:]]) if sys.argv else "")
+    command: str = field(default_factory=lambda: _COMMAND_LINE)
     created: str = field(default_factory=_now)
     robocal_version: str = field(default_factory=lambda: __import__("robocal").__version__)
     schema: str = SCHEMA

@@ -16,14 +16,13 @@ own, no network access). Any problem raises
 from __future__ import annotations
 
 import copy
-import os
-import tempfile
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
 
 from robocal.errors import FileFormatError, RobocalError
+from robocal.io import atomic_write_text
 from robocal.kinematics._common import transform_from_xyz_rpy, xyz_rpy_from_transform
 from robocal.kinematics._joint import Joint, Mimic
 from robocal.kinematics._tree import KinematicTree
@@ -226,13 +225,5 @@ def urdf_from_tree(tree: KinematicTree, path=None, *, fold_offsets: bool = True)
     ET.indent(root)
     text = '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
     if path is not None:
-        path = Path(path)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-        try:
-            with os.fdopen(fd, "w", encoding="utf-8") as fh:
-                fh.write(text)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        atomic_write_text(path, text)
     return text

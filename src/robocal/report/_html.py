@@ -44,10 +44,11 @@ pre{background:#f6f6f6;padding:.6em;overflow-x:auto;font-size:.85em}
 
 
 def new_figure(nrows: int = 1, ncols: int = 1, *, size=(6.4, 4.0), **kw):
-    """A matplotlib figure on the non-interactive Agg backend (no display needed)."""
-    import matplotlib
+    """A matplotlib ``Figure`` not attached to pyplot (no display, no backend switch).
 
-    matplotlib.use("Agg", force=False)
+    Rendering goes through :func:`figure_to_data_uri` (``savefig`` to memory),
+    so the user's own backend (a notebook's, say) is left as it was.
+    """
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=size, layout="constrained")

@@ -257,5 +257,7 @@ def _add_handeye(parser) -> None:
 
 
 HANDEYE = Rig(name="handeye", help="AX = XB hand-eye solvers (Tsai, Park, Horaud, Andreff, Daniilidis) + refinement",
-              description="Classic hand-eye calibration from pose lists (see docs/rigs/lineprofiler.md).",
+              description="Classic hand-eye calibration from pose lists (see docs/rigs/lineprofiler.md).\n\n"
+                          + examples_epilog(f"robocal handeye calibrate {EXAMPLES}/gripper_poses.csv "
+                                            f"{EXAMPLES}/target_poses.csv --method park --out he"),
               add_commands=_add_handeye)
