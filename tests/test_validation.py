@@ -64,3 +64,49 @@ def test_shape_messages_read_as_expected_vs_got(got, shape, message):
 
 def test_leading_ellipsis_means_any_batch():
     assert check_array(np.zeros((7, 5, 2)), "x", shape=(..., 2)).shape == (7, 5, 2)
+
+
+@pytest.mark.parametrize(
+    "x, message",
+    [
+        (True, "x must be a number, got a boolean (true)"),
+        (np.False_, "x must be a number, got a boolean (false)"),
+        ([1.0, True], "x must contain numbers only, got a boolean (true) at index (1,)"),
+        ([[1.0, 2.0], (3.0, np.False_)], "x must contain numbers only, got a boolean (false) at index (1, 1)"),
+    ],
+)
+def test_booleans_are_not_numbers(x, message):
+    # A YAML 'true' must not become 1.0.
+    with pytest.raises(InputError) as info:
+        check_array(x, "x")
+    assert str(info.value) == message
+    with pytest.raises(InputError, match="boolean"):
+        check_positive(x, "x")
+
+
+def test_boolean_arrays_and_numbers_still_convert():
+    # an ndarray of bools is an explicit mask: converted as numpy does
+    np.testing.assert_array_equal(check_array(np.array([True, False]), "mask"), [1.0, 0.0])
+    np.testing.assert_array_equal(check_array([1, 2.5, np.int64(3)], "x"), [1.0, 2.5, 3.0])
+    assert check_array(True, "flag", dtype=bool) == np.True_  # a boolean target dtype is not refused
+
+
+def test_unconvertible_input_is_an_input_error():
+    with pytest.raises(InputError, match=r"x must be numeric, got int \(int too large"):
+        check_array(10**400, "x")
+    with pytest.raises(InputError, match=r"x must be numeric, got list"):
+        check_array([1, 10**400], "x")
+    loop = [1.0]
+    loop.append(loop)  # what a YAML alias like '&a [1, *a]' gives
+    with pytest.raises(InputError, match="must be numeric"):
+        check_array(loop, "x")
+
+
+def test_boolean_search_walks_shared_lists_once():
+    from robocal.validation import _first_leaf
+
+    shared = [1.0]
+    for _ in range(60):  # YAML aliases can share lists: 2**60 leaves if walked naively
+        shared = [shared, shared]
+    assert _first_leaf(shared, lambda v: isinstance(v, bool)) is None
+    assert _first_leaf([[1.0], [2.0, [False]]], lambda v: isinstance(v, bool)) == (1, 1, 0)

@@ -25,6 +25,43 @@ __all__ = [
 ]
 
 
+def _is_bool(v) -> bool:
+    return isinstance(v, (bool, np.bool_))
+
+
+def _bool_text(v) -> str:
+    return "true" if v else "false"
+
+
+def _first_leaf(x, match) -> tuple[int, ...] | None:
+    """Index of the first leaf of nested lists/tuples ``x`` for which ``match(leaf)`` is true.
+
+    Returns ``()`` when ``x`` itself is a matching scalar and ``None`` when
+    nothing matches. Each list is walked once, so lists shared or nested in
+    themselves (YAML aliases) cannot make the walk loop or blow up.
+    """
+    if not isinstance(x, (list, tuple)):
+        return () if match(x) else None
+    seen = {id(x)}
+    stack = [iter(enumerate(x))]
+    path: list[int] = []
+    while stack:
+        for i, v in stack[-1]:
+            if isinstance(v, (list, tuple)):
+                if id(v) not in seen:
+                    seen.add(id(v))
+                    path.append(i)
+                    stack.append(iter(enumerate(v)))
+                    break
+            elif match(v):
+                return (*path, i)
+        else:
+            stack.pop()
+            if path:
+                path.pop()
+    return None
+
+
 def format_shape(shape: Sequence[int | str | None]) -> str:
     """Render an expected shape such as ``(None, 3)`` as ``(..., 3)``."""
     parts = ["..." if s is None or s is Ellipsis else str(s) for s in shape]
@@ -59,10 +96,23 @@ def check_array(
         Reject NaN and infinity.
     dtype : numpy dtype
         Target dtype (float64 by default).
+
+    Booleans (``True``, ``np.True_``, or inside lists) are not numbers and are
+    rejected when ``dtype`` is numeric: a YAML ``true`` must not become 1.0.
+    A boolean *ndarray* is an explicit mask and is converted as numpy does.
     """
+    if np.issubdtype(dtype, np.number) and (isinstance(x, (list, tuple)) or _is_bool(x)):
+        where = _first_leaf(x, _is_bool)
+        if where == ():
+            raise InputError(f"{name} must be a number, got a boolean ({_bool_text(x)})")
+        if where is not None:
+            leaf = x
+            for i in where:
+                leaf = leaf[i]
+            raise InputError(f"{name} must contain numbers only, got a boolean ({_bool_text(leaf)}) at index {where}")
     try:
         arr = np.asarray(x, dtype=dtype)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:
         raise InputError(f"{name} must be numeric, got {type(x).__name__} ({exc})") from None
     if shape is not None:
         # ``(..., 3)`` and ``(3,)`` both mean "trailing axis of size 3"

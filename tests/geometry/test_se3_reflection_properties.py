@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import array_shapes
 
-from robocal.errors import DegenerateGeometryError, NonFiniteError
+from robocal.errors import DegenerateGeometryError, NonFiniteError, ShapeError
 from robocal.geometry import (
     apply_rotation,
     apply_transform,
@@ -18,8 +18,10 @@ from robocal.geometry import (
     reflect_frame,
     reflect_points,
     reflection_transform,
+    rotation_angle,
     rotation_of,
     rotvec_translation_from_transform,
+    skew,
     transform_from,
     transform_from_pq,
     transform_from_rotvec,
@@ -157,3 +159,17 @@ def test_reflection_errors():
         transform_from_pq([0, 0, 0, 0, 0, np.nan, 1])
     with pytest.raises(NonFiniteError):
         pq_from_transform(np.full((4, 4), np.nan))
+
+
+@pytest.mark.parametrize("call, name", [
+    (lambda: invert_transform(np.eye(3)), "T must have shape \\(\\.\\.\\., 4, 4\\), got \\(3, 3\\)"),
+    (lambda: apply_transform(np.eye(4), np.ones((5, 2))), "points must have shape \\(\\.\\.\\., 3\\)"),
+    (lambda: transform_from(np.eye(3), [1.0, 2.0]), "t must have shape"),
+    (lambda: compose(np.eye(4), np.eye(3)), "transform 1 must have shape"),
+    (lambda: skew([1.0, 2.0]), "v must have shape"),
+    (lambda: rotation_angle(np.eye(4)), "R must have shape"),
+])
+def test_small_helpers_name_a_wrong_shape(call, name):
+    # an IndexError or a silent broadcast deep in NumPy otherwise
+    with pytest.raises(ShapeError, match=name):
+        call()

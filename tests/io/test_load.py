@@ -4,7 +4,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from robocal.errors import FileFormatError, NonFiniteError, RobocalError, ShapeError, UnitError
+import yaml
+
+from robocal.errors import FileFormatError, InputError, NonFiniteError, RobocalError, ShapeError, UnitError
 from robocal.io import load_csv, load_document, parse_document, to_si
 
 
@@ -91,10 +93,10 @@ def test_csv_units_and_errors(tmp_path):
     with pytest.raises(FileFormatError, match="column 'y' is missing"):
         t.column("y")
     p.write_text("x [mm], z [mm]\n1, nan\n")
-    with pytest.raises(FileFormatError, match=r"row 1, column 'z': value is nan"):
+    with pytest.raises(FileFormatError, match=r"row 1 \(line 2\), column 'z': value is nan"):
         load_csv(p)
     p.write_text("x [mm], z [mm]\n1\n")
-    with pytest.raises(FileFormatError, match="row 1 has 1 values, header has 2"):
+    with pytest.raises(FileFormatError, match=r"row 1 \(line 2\) has 1 values, header has 2"):
         load_csv(p)
     p.write_text("x [furlong]\n1\n")
     with pytest.raises(UnitError, match="unknown unit 'furlong'"):
@@ -120,3 +122,191 @@ def test_fuzz_any_text_gives_a_document_or_a_robocal_error(text):
         doc.array("points", kind="length", shape=("N", 3))
     except RobocalError:
         pass
+
+
+def test_csv_errors_name_the_file_line(tmp_path):
+    # "row N" counts data rows; with comments and blank lines the file line differs, and both are given.
+    p = tmp_path / "prof.csv"
+    p.write_text("# scan 7\n\nx [mm], z [mm]\n1, 2\n\n# second pass\n3, nan\n4, 5\n")
+    with pytest.raises(FileFormatError, match=r"prof.csv: row 2 \(line 7\), column 'z': value is nan"):
+        load_csv(p)
+    p.write_text("x [mm], z [mm]\n# skipped\n1, 2\n3, abc\n")
+    with pytest.raises(FileFormatError, match=r"row 2 \(line 4\), column 'z': not a number: ' abc'"):
+        load_csv(p)
+    p.write_text("x [mm], z [mm]\n\n\n1, 2, 3\n")
+    with pytest.raises(FileFormatError, match=r"row 1 \(line 4\) has 3 values, header has 2"):
+        load_csv(p)
+    t = load_csv(p, text="# c\nx [mm]\n1\n\n2\n")
+    assert t.lines.tolist() == [3, 5]
+    assert t.where(1) == "row 2 (line 5)"
+
+
+def test_utf8_bom_is_not_part_of_the_first_name(tmp_path):
+    # Excel's "CSV UTF-8" starts the file with a byte-order mark.
+    p = tmp_path / "pts.csv"
+    p.write_text("x [mm], y [mm]\n1, 2\n", encoding="utf-8-sig")
+    assert p.read_bytes().startswith(b"\xef\xbb\xbf")
+    t = load_csv(p, required=["x", "y"])
+    np.testing.assert_allclose(t.column("x", kind="length"), [0.001])
+    assert load_csv(p, text=p.read_text(encoding="utf-8")).units["x"] == "mm"
+    for name, text in [("a.json", '{"units": {"length": "mm"}, "h": 2900}'), ("a.yaml", "units: {length: mm}\nh: 2900\n")]:
+        f = tmp_path / name
+        f.write_text(text, encoding="utf-8-sig")
+        assert load_document(f).float("h", kind="length") == pytest.approx(2.9)
+
+
+@pytest.mark.parametrize(
+    "suffix, text, match",
+    [
+        (".yaml", "units: {length: m}\nH: true\n", r"x.yaml: field 'H': must be a number, got a boolean \(true\)"),
+        (".yaml", "H: {value: false, unit: m}\n", r"x.yaml: field 'H': must be a number, got a boolean \(false\)"),
+        (".yaml", "units: {length: m}\nH: [1.0, [2, true]]\n",
+         r"x.yaml: field 'H': must contain numbers only, got a boolean \(true\) at index \(1, 1\)"),
+        (".json", '{"units": {"length": "m"}, "H": [true, 2]}',
+         r"x.json: field 'H': must contain numbers only, got a boolean \(true\) at index \(0,\)"),
+    ],
+)
+def test_booleans_are_not_numbers(suffix, text, match):
+    doc = parse_document(text, suffix=suffix, source=f"x{suffix}")
+    with pytest.raises(InputError, match=match):
+        doc.array("H", kind="length")
+    with pytest.raises(InputError, match="boolean"):
+        doc.array("H")
+
+
+def test_null_is_reported_as_empty_not_as_nan():
+    doc = parse_document("units: {length: m}\nH: null\nP: [[1, 2], [3, null]]\nQ: {value: null, unit: m}\n", source="x.yaml")
+    with pytest.raises(FileFormatError, match=r"x.yaml: field 'H': is empty \(null\), expected a number"):
+        doc.float("H", kind="length")
+    with pytest.raises(FileFormatError, match=r"field 'H': is empty \(null\), expected an array of shape \(N, 2\)"):
+        doc.array("H", kind="length", shape=("N", 2))
+    with pytest.raises(FileFormatError, match=r"field 'P': contains an empty value \(null\) at index \(1, 1\)"):
+        doc.array("P", kind="length")
+    with pytest.raises(FileFormatError, match=r"field 'Q': is empty \(null\)"):
+        doc.float("Q", kind="length")
+    # where non-finite values are allowed, null is JSON's way to write a missing value
+    assert np.isnan(doc.array("P", finite=False)[1, 1])
+
+
+@pytest.mark.parametrize(
+    "units, match",
+    [
+        ("cm", r"x.yaml: field 'units': must be a mapping of kind to unit, e.g. \{length: mm, angle: deg\}, got str \('cm'\)"),
+        ("null", r"field 'units': must be a mapping of kind to unit.*got null"),
+        ("[mm, deg]", r"field 'units': must be a mapping of kind to unit.*got list"),
+        ("{angel: deg}", r"x.yaml: field 'units.angel': unknown kind 'angel' \(known: angle, angular_rate, .*length"),
+        ("{length: deg}", r"field 'units.length': must be a unit of length \(m, cm, mm, um\), got 'deg' \(a unit of angle\)"),
+        ("{length: furlong}", r"field 'units.length': unknown unit 'furlong' \(units of length: m, cm, mm, um\)"),
+        ("{length: true}", r"field 'units.length': must be a unit of length \(m, cm, mm, um\), got bool \(True\)"),
+    ],
+)
+def test_units_mapping_is_validated(units, match):
+    doc = parse_document(f"units: {units}\nH: 290\nyaw: 90\n", source="x.yaml")
+    with pytest.raises((FileFormatError, UnitError), match=match):
+        doc.float("H", kind="length")
+    with pytest.raises(RobocalError, match=match):  # also for inline quantities and for sub-documents
+        parse_document(f"units: {units}\nrig: {{H: {{value: 2.9, unit: m}}}}\n", source="x.yaml").sub("rig").float("H", kind="length")
+
+
+def test_units_errors_name_the_nested_field_and_free_text_units_still_load():
+    doc = parse_document("rig:\n  units: {lenght: mm}\n  H: 290\n", source="x.yaml")
+    with pytest.raises(UnitError, match=r"x.yaml: field 'rig.units.lenght': unknown kind 'lenght'"):
+        doc.sub("rig").float("H", kind="length")
+    # a result file's units map estimate names to units; a file may use 'units' as a note.
+    # Neither is an error until a quantity is read through them.
+    doc = parse_document("units: {t: m, R: '1'}\nt: [1, 2, 3]\n", source="result.yaml")
+    np.testing.assert_allclose(doc.array("t"), [1, 2, 3])
+    assert parse_document("units: rad for angles, m for lengths\nx: 1\n").raw("x") == 1
+    good = parse_document("units: {length: mm, dimensionless: 1, angular_rate: deg/s}\nH: 290\n")
+    assert good.units == {"length": "mm", "dimensionless": "1", "angular_rate": "deg/s"}
+
+
+# -- mapping-shaped fuzzing: exercise the loader paths, not only the YAML parser --------
+
+_scalars = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(),  # unbounded: ints too large for a float
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.text(max_size=4),
+    st.sampled_from(["m", "mm", "cm", "deg", "rad", "s", "px", "1", "furlong", "nan", "1e3"]),
+)
+_values = st.recursive(
+    _scalars,
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.sampled_from(["value", "unit", "x"]), inner, max_size=3),
+    max_leaves=12,
+)
+_units = st.one_of(
+    st.dictionaries(st.sampled_from(["length", "angle", "time", "pixel", "angel", "speed"]),
+                    st.sampled_from(["m", "mm", "deg", "s", "px", "m/s", "furlong"]) | _scalars, max_size=3),
+    _values,
+)
+_point_lists = st.lists(st.lists(st.one_of(st.floats(-1e3, 1e3), _scalars), min_size=2, max_size=4), max_size=4)
+_fields = {"units": _units, "points": _point_lists | _values, "H": _values, "count": _values, "name": _values, "flag": _values}
+_documents = st.fixed_dictionaries(
+    {},
+    optional={
+        **_fields,
+        "rig": st.fixed_dictionaries({}, optional=_fields) | _values,
+        "items": st.lists(st.fixed_dictionaries({}, optional=_fields) | _values, max_size=3) | _values,
+    },
+)
+
+
+def _has(x, match):
+    if isinstance(x, dict):
+        return any(_has(v, match) for v in x.values())
+    if isinstance(x, list):
+        return any(_has(v, match) for v in x)
+    return match(x)
+
+
+def _exercise(doc):
+    """Every accessor on ``doc``: a checked value or a RobocalError, never another exception."""
+    for call in (
+        lambda: doc.array("points", kind="length", shape=("N", 3)),
+        lambda: doc.array("points", kind="length", shape=("N", 3), finite=False),
+        lambda: doc.array("H"),
+        lambda: doc.float("H", kind="length", positive=True),
+        lambda: doc.float("H", kind="angle", default=0.5),
+        lambda: doc.int("count", minimum=0),
+        lambda: doc.str("name", choices=("a", "b")),
+        lambda: doc.bool("flag", default=False),
+    ):
+        try:
+            out = call()
+        except RobocalError:
+            continue
+        if isinstance(out, np.ndarray):
+            assert out.dtype == np.float64
+    for key in ("points", "H"):
+        # a value read as finite numbers is finite, and never came from a boolean
+        try:
+            arr = doc.array(key)
+        except RobocalError:
+            continue
+        assert np.all(np.isfinite(arr))
+        raw = doc.raw(key)
+        value = raw["value"] if isinstance(raw, dict) else raw
+        assert not _has(value, lambda v: isinstance(v, bool))
+    try:
+        pts = doc.array("points", kind="length", shape=("N", 3))
+    except RobocalError:
+        pass
+    else:
+        assert pts.ndim == 2 and pts.shape[1] == 3
+
+
+@settings(max_examples=200, deadline=None)
+@given(_documents, st.sampled_from([".yaml", ".json"]))
+def test_fuzz_mapping_shaped_documents_give_values_or_robocal_errors(data, suffix):
+    text = json.dumps(data) if suffix == ".json" else yaml.safe_dump(data)
+    doc = parse_document(text, suffix=suffix, source=f"fuzz{suffix}")  # a mapping always parses
+    _exercise(doc)
+    for sub in ("rig", "items"):
+        try:
+            docs = [doc.sub(sub)] if sub == "rig" else doc.items_list(sub)
+        except RobocalError:
+            continue
+        for d in docs:
+            _exercise(d)

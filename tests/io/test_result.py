@@ -4,6 +4,7 @@ import stat
 
 import numpy as np
 import pytest
+import yaml
 
 from robocal.diagnostics import Diagnostic
 from robocal.errors import FileFormatError
@@ -41,9 +42,39 @@ def test_result_round_trip(tmp_path, suffix):
     assert back.robocal_version
 
 
-def test_json_is_strict(tmp_path):
-    path = write_result(tmp_path / "r.json", _result(tmp_path))
-    json.loads(path.read_text(), parse_constant=lambda c: pytest.fail(f"non-standard constant {c}"))
+def _strict_json(text):
+    def refuse(constant):
+        raise AssertionError(f"non-standard JSON constant {constant}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+@pytest.mark.parametrize("suffix", [".json", ".yaml"])
+def test_non_finite_values_are_written_as_null(tmp_path, suffix):
+    # docs/results.md: "Non-finite numbers are written as null: a consumer never reads a NaN."
+    res = _result(tmp_path)
+    res.estimate = {"H": np.inf, "t": np.array([1.0, -np.inf, np.nan]), "k": np.float32("nan"), "R": np.eye(3)}
+    res.std = {"H": float("nan"), "t": [0.1, np.inf, np.float64("nan")], "k": None, "R": np.full((3, 3), np.nan)}
+    res.residual_rms = np.nan
+    res.diagnostics = {"iterations": np.int64(7), "condition_number": np.inf, "cost_history": [2.0, np.nan, 1.0],
+                       "per_view": {"rms": np.array([0.5, np.inf])}}
+    path = write_result(tmp_path / f"result{suffix}", res)
+    text = path.read_text()
+    if suffix == ".json":
+        d = _strict_json(text)
+    else:
+        assert ".nan" not in text.lower() and ".inf" not in text.lower()
+        d = yaml.safe_load(text)
+    assert d["estimate"]["H"] is None and d["estimate"]["k"] is None
+    assert d["estimate"]["t"] == [1.0, None, None]
+    assert d["estimate"]["R"] == np.eye(3).tolist()
+    assert d["std"]["H"] is None and d["std"]["t"] == [0.1, None, None] and d["std"]["k"] is None
+    assert d["std"]["R"] == [[None] * 3] * 3
+    assert d["residual_rms"] is None
+    assert d["diagnostics"] == {"iterations": 7, "condition_number": None, "cost_history": [2.0, None, 1.0],
+                                "per_view": {"rms": [0.5, None]}}
+    back = load_result(path)
+    assert back.estimate["t"] == [1.0, None, None] and back.diagnostics["condition_number"] is None
 
 
 def test_load_result_rejects_other_files(tmp_path):

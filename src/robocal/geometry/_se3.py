@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from robocal.geometry._so3 import matrix_from_quaternion, matrix_from_rotvec, quaternion_from_matrix, rotvec_from_matrix
+from robocal.geometry._so3 import _tail, matrix_from_quaternion, matrix_from_rotvec, quaternion_from_matrix, rotvec_from_matrix
 from robocal.validation import check_array
 
 __all__ = [
@@ -29,8 +29,8 @@ __all__ = [
 
 def transform_from(R, t) -> np.ndarray:
     """Homogeneous transform from rotation ``(..., 3, 3)`` and translation ``(..., 3)``."""
-    R = np.asarray(R, dtype=float)
-    t = np.asarray(t, dtype=float)
+    R = _tail(R, (3, 3), "R")
+    t = _tail(t, (3,), "t")
     lead = np.broadcast_shapes(R.shape[:-2], t.shape[:-1])
     T = np.zeros(lead + (4, 4))
     T[..., :3, :3] = R
@@ -57,29 +57,29 @@ def translation_of(T) -> np.ndarray:
 
 def invert_transform(T) -> np.ndarray:
     """Inverse of a rigid transform, exact (uses R^T, not a general inverse)."""
-    T = np.asarray(T, dtype=float)
+    T = _tail(T, (4, 4), "T")
     Rt = np.swapaxes(T[..., :3, :3], -1, -2)
     return transform_from(Rt, -np.einsum("...ij,...j->...i", Rt, T[..., :3, 3]))
 
 
 def compose(*Ts) -> np.ndarray:
     """Compose transforms left to right: ``compose(T_a_b, T_b_c) == T_a_c``."""
-    out = np.asarray(Ts[0], dtype=float)
-    for T in Ts[1:]:
-        out = out @ np.asarray(T, dtype=float)
+    out = _tail(Ts[0], (4, 4), "transform 0")
+    for k, T in enumerate(Ts[1:], 1):
+        out = out @ _tail(T, (4, 4), f"transform {k}")
     return out
 
 
 def apply_transform(T, points) -> np.ndarray:
     """Transform points: ``T (..., 4, 4)`` applied to ``points (..., 3)``, broadcasting."""
-    T = np.asarray(T, dtype=float)
-    p = np.asarray(points, dtype=float)
+    T = _tail(T, (4, 4), "T")
+    p = _tail(points, (3,), "points")
     return np.einsum("...ij,...j->...i", T[..., :3, :3], p) + T[..., :3, 3]
 
 
 def apply_rotation(R, vectors) -> np.ndarray:
     """Rotate vectors: ``R (..., 3, 3)`` applied to ``vectors (..., 3)``, broadcasting."""
-    return np.einsum("...ij,...j->...i", np.asarray(R, float), np.asarray(vectors, float))
+    return np.einsum("...ij,...j->...i", _tail(R, (3, 3), "R"), _tail(vectors, (3,), "vectors"))
 
 
 def transform_from_pq(pq) -> np.ndarray:

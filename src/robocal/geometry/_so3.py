@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from robocal.errors import DegenerateGeometryError
+from robocal.errors import DegenerateGeometryError, ShapeError
 from robocal.validation import check_array
 
 __all__ = [
@@ -40,6 +40,21 @@ __all__ = [
 ]
 
 
+def _tail(a, tail: tuple, name: str) -> np.ndarray:
+    """``a`` as a float array whose trailing shape is ``tail``, else a ShapeError.
+
+    The light check of the small hot-path helpers (skew, transform_from, ...):
+    a wrong shape otherwise surfaces as an IndexError or a silent broadcast
+    deep in NumPy. Values are not scanned (NaN in, NaN out): the
+    ``check_*`` validators at a workflow's boundary do that once.
+    """
+    a = np.asarray(a, dtype=float)
+    if a.shape[a.ndim - len(tail):] != tail or a.ndim < len(tail):
+        want = "(..., " + ", ".join(map(str, tail)) + ")"
+        raise ShapeError(f"{name} must have shape {want}, got {a.shape}")
+    return a
+
+
 def _batched(fn, arr: np.ndarray, tail: int) -> np.ndarray:
     """Apply a SciPy Rotation constructor/export to any leading batch shape."""
     lead = arr.shape[: arr.ndim - tail]
@@ -59,7 +74,7 @@ def skew(v) -> np.ndarray:
     -------
     ndarray, shape (..., 3, 3)
     """
-    v = np.asarray(v, dtype=float)
+    v = _tail(v, (3,), "v")
     z = np.zeros(v.shape[:-1])
     x, y, w = v[..., 0], v[..., 1], v[..., 2]
     return np.stack(
@@ -69,7 +84,7 @@ def skew(v) -> np.ndarray:
 
 def unskew(S) -> np.ndarray:
     """Inverse of :func:`skew` (uses the antisymmetric part), shape (..., 3)."""
-    S = np.asarray(S, dtype=float)
+    S = _tail(S, (3, 3), "S")
     return 0.5 * np.stack(
         [S[..., 2, 1] - S[..., 1, 2], S[..., 0, 2] - S[..., 2, 0], S[..., 1, 0] - S[..., 0, 1]], axis=-1
     )
@@ -199,7 +214,7 @@ def compose_gibbs(r1, r2) -> np.ndarray:
 
 def rotation_angle(R) -> np.ndarray:
     """Rotation angle in [0, pi] (rad) of (..., 3, 3) matrices, robust near 0 and pi."""
-    R = np.asarray(R, dtype=float)
+    R = _tail(R, (3, 3), "R")
     s = np.linalg.norm(unskew(R), axis=-1)
     c = 0.5 * (np.trace(R, axis1=-2, axis2=-1) - 1.0)
     return np.arctan2(s, c)
@@ -207,12 +222,12 @@ def rotation_angle(R) -> np.ndarray:
 
 def rotation_distance(R_a, R_b) -> np.ndarray:
     """Angle (rad) of ``R_a^T R_b``: the geodesic distance on SO(3)."""
-    return rotation_angle(np.swapaxes(np.asarray(R_a, float), -1, -2) @ np.asarray(R_b, float))
+    return rotation_angle(np.swapaxes(_tail(R_a, (3, 3), "R_a"), -1, -2) @ _tail(R_b, (3, 3), "R_b"))
 
 
 def project_to_rotation(M) -> np.ndarray:
     """Nearest rotation matrix (Frobenius norm) to a 3x3 matrix, via SVD with det guard."""
-    M = np.asarray(M, dtype=float)
+    M = _tail(M, (3, 3), "M")
     U, _, Vt = np.linalg.svd(M)
     d = np.sign(np.linalg.det(U @ Vt))
     D = np.ones(M.shape[:-1])

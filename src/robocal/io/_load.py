@@ -10,14 +10,19 @@ Quantities carry units in the file, in one of two forms::
     units: {length: mm, angle: deg}      # document default per kind
     points: [[0, 0], [1200, 0]]          # read with kind="length" -> mm -> m
 
+The ``units`` mapping is checked the first time a quantity is read: its keys
+must be known kinds (``length``, ``angle``, ``time``, ...) and its values
+units of that kind, so ``units: cm`` or ``units: {angel: deg}`` is an error,
+not a silently ignored line.
+
 CSV files have a header row; a column's unit goes in brackets:
-``x [mm], z [mm], profile``.
+``x [mm], z [mm], profile``. Text is read as UTF-8 with an optional byte-order
+mark (Excel's "CSV UTF-8"); errors name the data row and the file line.
 """
 
 from __future__ import annotations
 
 import csv
-import io
 import json
 import math
 from dataclasses import dataclass, field
@@ -28,15 +33,31 @@ import numpy as np
 import yaml
 
 from robocal.errors import FileFormatError, RobocalError, UnitError
-from robocal.io._units import to_si, unit_kind
-from robocal.validation import check_array
+from robocal.io._units import UNITS, to_si, unit_kind
+from robocal.validation import _first_leaf, check_array, format_shape
 
 __all__ = ["Document", "load_document", "parse_document", "CsvTable", "load_csv"]
 
 _MISSING = object()
 
+#: kinds a document's ``units`` mapping may name, and the units of each
+_KIND_UNITS: dict[str, list[str]] = {}
+for _unit, (_kind, _) in UNITS.items():
+    _KIND_UNITS.setdefault(_kind, []).append(_unit)
+
+
+def _read_text(path: Path, source: str) -> str:
+    """A file's text as UTF-8, without a leading byte-order mark."""
+    try:
+        return path.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise FileFormatError("file not found", source=source) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise FileFormatError(f"cannot read file ({exc})", source=source) from None
+
 
 def _parse_text(text: str, suffix: str, source: str) -> Any:
+    text = text.removeprefix("\ufeff")
     try:
         if suffix == ".json":
             return json.loads(text)
@@ -64,23 +85,49 @@ class Document:
         Dotted path of this mapping inside the file (for nested documents).
     units : dict
         Default unit per kind (``{"length": "mm"}``), inherited by sub-documents.
+
+    A malformed ``units`` entry is raised by the first read that gives a
+    ``kind`` (files that use ``units`` as free text and read no quantities,
+    such as result files, still load).
     """
 
     data: dict
     source: str = "<input>"
     prefix: str = ""
     units: dict = field(default_factory=dict)
+    units_error: RobocalError | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
         if not isinstance(self.data, dict):
             where = f"field '{self.prefix}'" if self.prefix else "top level"
             raise FileFormatError(f"{where} must be a mapping, got {type(self.data).__name__}", source=self.source)
-        own = self.data.get("units")
-        if isinstance(own, dict):
-            merged = dict(self.units)
-            for kind, unit in own.items():
-                merged[str(kind)] = str(unit)
-            self.units = merged
+        if "units" in self.data:
+            own = self.data["units"]
+            error = self._check_units(own)
+            if error is not None:
+                self.units_error = error
+            else:
+                self.units = {**self.units, **{kind: str(unit) for kind, unit in own.items()}}
+
+    def _check_units(self, own) -> RobocalError | None:
+        """The error in a ``units`` mapping (kind -> unit of that kind), or None."""
+        kinds = ", ".join(sorted(_KIND_UNITS))
+        if not isinstance(own, dict):
+            got = "null" if own is None else f"{type(own).__name__} ({own!r})"
+            return self.error("units", f"must be a mapping of kind to unit, e.g. {{length: mm, angle: deg}}, got {got}")
+        for kind, unit in own.items():
+            key = f"units.{kind}"
+            if kind not in _KIND_UNITS:
+                return self.error(key, f"unknown kind {kind!r} (known: {kinds})", UnitError)
+            known = ", ".join(_KIND_UNITS[kind])
+            if isinstance(unit, bool) or not isinstance(unit, (str, int)):
+                return self.error(key, f"must be a unit of {kind} ({known}), got {type(unit).__name__} ({unit!r})", UnitError)
+            if str(unit) not in UNITS:
+                return self.error(key, f"unknown unit {str(unit)!r} (units of {kind}: {known})", UnitError)
+            got_kind = UNITS[str(unit)][0]
+            if got_kind != kind:
+                return self.error(key, f"must be a unit of {kind} ({known}), got {unit!r} (a unit of {got_kind})", UnitError)
+        return None
 
     # -- helpers -------------------------------------------------------------
     def _path(self, key: str) -> str:
@@ -109,14 +156,17 @@ class Document:
         val = self.raw(key, default)
         if val is default and default is not _MISSING and not isinstance(val, dict):
             val = {} if val is None else val
-        return Document(val, self.source, self._path(key), dict(self.units))
+        return Document(val, self.source, self._path(key), dict(self.units), self.units_error)
 
     def items_list(self, key: str) -> list["Document"]:
         """A list of mappings, each as a :class:`Document`."""
         val = self.raw(key)
         if not isinstance(val, list):
             raise self.error(key, f"must be a list, got {type(val).__name__}")
-        return [Document(v, self.source, f"{self._path(key)}[{i}]", dict(self.units)) for i, v in enumerate(val)]
+        return [
+            Document(v, self.source, f"{self._path(key)}[{i}]", dict(self.units), self.units_error)
+            for i, v in enumerate(val)
+        ]
 
     def _unit_for(self, key: str, kind: str | None, value):
         if isinstance(value, dict):
@@ -141,15 +191,28 @@ class Document:
             ``units`` mapping; it is an error if neither gives one.
         shape : tuple, optional
             Expected trailing shape, as in :func:`robocal.validation.check_array`.
+        finite : bool
+            Reject NaN, infinity and ``null``; with ``finite=False`` a ``null``
+            reads as NaN (JSON has no NaN).
+
+        Booleans are not numbers: ``true`` where a number is expected is an error.
         """
         if key not in self.data and default is not _MISSING:
             return default
-        value, unit = self._unit_for(key, kind, self.raw(key))
+        raw = self.raw(key)
+        if kind is not None and self.units_error is not None:
+            raise self.units_error
+        value, unit = self._unit_for(key, kind, raw)
+        if finite:
+            where = _first_leaf(value, lambda v: v is None)
+            if where == ():
+                want = f"an array of shape {format_shape(shape)}" if shape else "a number"
+                raise self.error(key, f"is empty (null), expected {want}")
+            if where is not None:
+                raise self.error(key, f"contains an empty value (null) at index {where}, expected numbers")
         try:
             arr = check_array(value, "value", shape=shape, finite=finite)
             if shape is not None and arr.ndim != len(shape):
-                from robocal.validation import format_shape
-
                 raise FileFormatError(f"must have shape {format_shape(shape)}, got {tuple(arr.shape)}")
         except RobocalError as exc:
             msg = exc.message.replace("value must", "must").replace("value contains", "contains")
@@ -234,22 +297,27 @@ def load_document(path) -> Document:
     source = str(path)
     if path.suffix.lower() not in (".yaml", ".yml", ".json"):
         raise FileFormatError(f"expected a .yaml, .yml or .json file, got {path.suffix or 'no suffix'!r}", source=source)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise FileFormatError("file not found", source=source) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise FileFormatError(f"cannot read file ({exc})", source=source) from None
+    text = _read_text(path, source)
     return parse_document(text, suffix=path.suffix.lower(), source=source)
 
 
 @dataclass
 class CsvTable:
-    """Columns of a CSV file as float arrays, with the units from the header."""
+    """Columns of a CSV file as float arrays, with the units from the header.
+
+    ``lines[i]`` is the file line (1-based) of data row ``i``, for messages.
+    """
 
     columns: dict[str, np.ndarray]
     units: dict[str, str | None]
     source: str
+    lines: np.ndarray | None = None
+
+    def where(self, i: int) -> str:
+        """``"row 3 (line 5)"`` for data row index ``i`` (0-based), as used in messages."""
+        if self.lines is None:
+            return f"row {i + 1}"
+        return f"row {i + 1} (line {int(self.lines[i])})"
 
     def __len__(self) -> int:
         return len(next(iter(self.columns.values()))) if self.columns else 0
@@ -299,31 +367,36 @@ def load_csv(path, *, required=(), finite: bool = True, text: str | None = None)
     """
     source = str(path)
     if text is None:
-        try:
-            text = Path(path).read_text(encoding="utf-8")
-        except FileNotFoundError:
-            raise FileFormatError("file not found", source=source) from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise FileFormatError(f"cannot read file ({exc})", source=source) from None
-    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
-    if not lines:
+        text = _read_text(Path(path), source)
+    text = text.removeprefix("\ufeff")
+    # (file line number, text) of the lines that are neither blank nor comments
+    kept = [(n, ln) for n, ln in enumerate(text.splitlines(), 1) if ln.strip() and not ln.lstrip().startswith("#")]
+    if not kept:
         raise FileFormatError("file has no header row", source=source)
-    rows = list(csv.reader(io.StringIO("\n".join(lines))))
+    reader = csv.reader(ln for _, ln in kept)
+    rows, row_lines = [], []
+    try:
+        for row in reader:
+            rows.append(row)
+            row_lines.append(kept[reader.line_num - 1][0])  # last physical line of the record
+    except csv.Error as exc:
+        raise FileFormatError(f"line {kept[reader.line_num - 1][0]}: not valid CSV ({exc})", source=source) from None
     header = [_split_header(c) for c in rows[0]]
     names = [h[0] for h in header]
     if len(set(names)) != len(names):
         raise FileFormatError(f"duplicate column names in header {names}", source=source)
     data = np.empty((len(rows) - 1, len(names)))
     for i, row in enumerate(rows[1:]):
+        where = f"row {i + 1} (line {row_lines[i + 1]})"
         if len(row) != len(names):
-            raise FileFormatError(f"row {i + 1} has {len(row)} values, header has {len(names)}", source=source)
+            raise FileFormatError(f"{where} has {len(row)} values, header has {len(names)}", source=source)
         for j, cell in enumerate(row):
             try:
                 data[i, j] = float(cell)
             except ValueError:
-                raise FileFormatError(f"row {i + 1}, column '{names[j]}': not a number: {cell!r}", source=source) from None
+                raise FileFormatError(f"{where}, column '{names[j]}': not a number: {cell!r}", source=source) from None
             if finite and not math.isfinite(data[i, j]):
-                raise FileFormatError(f"row {i + 1}, column '{names[j]}': value is {cell.strip()}", source=source)
+                raise FileFormatError(f"{where}, column '{names[j]}': value is {cell.strip()}", source=source)
     missing = [r for r in required if r not in names]
     if missing:
         raise FileFormatError(f"missing column(s) {', '.join(missing)} (have: {', '.join(names)})", source=source)
@@ -333,4 +406,6 @@ def load_csv(path, *, required=(), finite: bool = True, text: str | None = None)
                 unit_kind(unit)
             except UnitError as exc:
                 raise UnitError(exc.message, source=source) from None
-    return CsvTable({n: data[:, j].copy() for j, n in enumerate(names)}, {n: u for n, u in header}, source)
+    return CsvTable(
+        {n: data[:, j].copy() for j, n in enumerate(names)}, {n: u for n, u in header}, source, np.array(row_lines[1:], dtype=int)
+    )
