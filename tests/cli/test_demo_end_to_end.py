@@ -32,7 +32,7 @@ def test_every_rig_has_help_with_examples(tmp_path):
     for rig in discover_rigs():
         proc = _run(rig.name, "--help", cwd=tmp_path)
         assert proc.returncode == 0, proc.stderr
-        assert rig.name in proc.stdout
+        assert rig.name in proc.stdout and "examples:" in proc.stdout, f"{rig.name} --help has no examples"
 
 
 def test_bad_rig_input_is_one_line_exit_2(tmp_path):

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from robocal.errors import InputError, NotEnoughDataError
+from robocal.errors import DegenerateGeometryError, InputError, NotEnoughDataError
 from robocal.rigs.flow.model import SensorArray, integrate_twists, relative_twists, rot2, se2_exp, se2_log, seed_array
 from robocal.rigs.flow.odometry import SensorSteps, dead_reckon, fuse_steps
 
@@ -169,3 +169,38 @@ def test_property_exact_fusion_for_any_placement(R, psi, phi, scale):
     arr = SensorArray([R, 0.35, 0.2], [psi, 2.0, -2.0], [phi, 0.1, -0.2], [scale, 1.0, 1.1], None)
     od = dead_reckon(_steps(t, _exact_disp(arr, poses)), arr)
     assert np.abs(od.poses - poses).max() < 1e-9
+
+
+def test_degenerate_array_is_rejected():
+    # every sensor at the centre (all R = 0), or all at one point: A of eq. 9 has rank 2
+    with pytest.raises(DegenerateGeometryError, match="one point.*rank < 3"):
+        SensorArray([0.0, 0.0, 0.0], [0.0, 1.0, 2.0], [0.0] * 3, [1.0] * 3, None)
+    with pytest.raises(DegenerateGeometryError, match="rank < 3"):
+        SensorArray([0.35, 0.35], [1.0, 1.0], [0.0, 0.3], [1.0, 1.0], None)
+    SensorArray([0.0, 0.35], [0.0, 1.0], [0.0, 0.0], [1.0, 1.0], None)  # two distinct points suffice
+
+
+def test_singular_step_is_bridged_never_nan():
+    # two of three sensors at one point: a step with only those two valid cannot see the
+    # rotation; it must be bridged (velocity held) rather than give NaN
+    t, poses, _ = _drive(K=100)
+    arr = SensorArray([0.35, 0.35, 0.35], [1.0, 1.0, -1.5], [0.0, 0.2, 0.0], [1.0, 1.0, 1.0], None)
+    st = _steps(t, _exact_disp(arr, poses))
+    st.valid[2, 50:53] = False
+    with np.errstate(all="raise"):
+        od = dead_reckon(st, arr)
+    assert np.all(np.isfinite(od.poses))
+    assert np.array_equal(np.flatnonzero(od.bridged), [50, 51, 52])
+    assert np.abs(od.poses - poses).max() < 1e-3
+
+
+def test_bridged_interval_holds_velocity_over_its_own_length():
+    # a longer interval (a dropped record) is bridged at the previous velocity, not its displacement
+    t, poses, _ = _drive(K=100)
+    arr = seed_array()
+    keep = np.r_[0:50, 60:101]
+    t2, p2 = t[keep], poses[keep]
+    st = _steps(t2, _exact_disp(arr, p2))
+    st.valid[:, 49] = False          # the 10-frame interval t[49] -> t[60]
+    od = dead_reckon(st, arr)
+    assert od.bridged[49] and np.allclose(od.twists[49], 11 * od.twists[48])

@@ -8,6 +8,7 @@ import pytest
 from robocal.errors import InputError, NotEnoughDataError
 from robocal.io import write_result
 from robocal.rigs.humanoid.calibrate import calibrate, resolve_parameters
+from robocal.rigs.humanoid.model import HumanoidModel
 from robocal.rigs.humanoid.simulate import draw_truth, simulate_dataset
 
 
@@ -60,6 +61,44 @@ def test_unidentifiable_parameters_get_no_value(model, corner_data, tmp_path):
     # everything else is still estimated, with a std
     ok = [lab for lab in cal.free if lab not in cal.unidentifiable]
     assert all(cal.std(lab) is not None for lab in ok)
+
+
+def test_undetermined_parameters_do_not_bias_the_determined_ones(model, corner_data, tmp_path):
+    # one null direction (HeadYaw ~ camera roll/yaw/y with the head still): one gauge parameter is
+    # held, not all four; holding all four at 0 biased LHipRoll by +6.9 sigma on this data set
+    cal = calibrate(model, corner_data, parameters="all")
+    assert len(cal.held) == 1 and cal.held[0] in cal.unidentifiable
+    assert set(cal.unidentifiable) == {"HeadYaw", "camera.roll", "camera.yaw", "camera.y"}
+    rows = cal.parameter_rows(corner_data.truth.params)
+    z = np.array([r["error/std"] for r in rows if r["error/std"] is not None])
+    assert len(z) == len(cal.free) - 4 and np.all(np.abs(z) < 3.5), rows
+    # the rank is the problem's, not "N of N": 24 of 25, and the same in result.json
+    assert cal.jacobian_rank == (24, 25)
+    assert "Jacobian rank 24 of 25 free parameters (4 not determined" in cal.summary()
+    d = json.loads(write_result(tmp_path / "r.json", cal.to_result()).read_text())
+    assert (d["diagnostics"]["rank"], d["diagnostics"]["n_free"]) == (24, 25)
+    assert d["diagnostics"]["gauge_held"] == cal.held
+    # the corrected tree keeps the fitted combination: it reproduces the calibrated projection
+    n = len(model.joint_names)
+    folded = HumanoidModel(cal.corrected_tree(), model.camera, model.board, model.mounts)
+    d = corner_data
+    board = np.zeros_like(cal.params)  # boards are not part of the robot description
+    board[n + 5:] = cal.params[n + 5:]
+    np.testing.assert_allclose(folded.project(d.theta, d.feet, board), model.project(d.theta, d.feet, cal.params),
+                               atol=1e-7)
+
+
+def test_one_view_of_a_board_holds_a_minimal_gauge(model, corner_data):
+    # a single right-board view leaves 3 null directions over the 9 right-side parameters: 3 are
+    # held, 9 get no value, and the 12 others stay unbiased (they were off by up to 5.5 sigma)
+    keep = [i for i, f in enumerate(corner_data.feet) if f == "left"] + [corner_data.feet.index("right")]
+    data = corner_data.subset(keep)
+    cal = calibrate(model, data)
+    assert cal.jacobian_rank == (18, 21) and len(cal.held) == 3 and len(cal.unidentifiable) == 9
+    rows = cal.parameter_rows(data.truth.params)
+    z = np.array([r["error/std"] for r in rows if r["error/std"] is not None])
+    assert len(z) == 12 and np.all(np.abs(z) < 3.5), rows
+    assert not cal.outlier_corners
 
 
 def test_tied_hip_yaw_pitch(model, tied_model):

@@ -6,7 +6,7 @@ import pytest
 from robocal.errors import InputError
 from robocal.kinematics import KinematicTree
 from robocal.rigs.humanoid.model import FEET, HumanoidModel, default_model_path, rpy_matrix
-from robocal.rigs.humanoid.simulate import draw_truth, sample_poses
+from robocal.rigs.humanoid.simulate import board_outline, draw_truth, sample_poses
 
 
 def test_nao_geometry_matches_aldebaran_and_spec(model):
@@ -76,6 +76,21 @@ def test_board_faces_the_camera_and_pose_matches_projection(model):
         np.testing.assert_allclose(model.camera.project_points(model.object_points, T), uv[v], atol=1e-9)
         assert T[:3, 2] @ T[:3, 3] / np.linalg.norm(T[:3, 3]) > 0.5  # printed face toward the camera
         assert np.all(model.tree.within_limits(q[v] - truth.params[:n]))
+
+
+def test_sampled_poses_show_the_whole_board(model):
+    # issue 4: "poses ... with the board fully visible": the outer squares too, not only the inner
+    # corners (before, 56 % of sampled poses had outer squares cut by the image border)
+    rng = np.random.default_rng(6)
+    truth = draw_truth(model, rng)
+    feet, q = sample_poses(model, 12, rng, truth=truth)
+    n = len(model.joint_names)
+    edge = board_outline(model.board)
+    np.testing.assert_allclose(np.ptp(edge[:4, :2], axis=0), [7 * 0.025, 5 * 0.025])  # the 5 x 7 squares
+    for v, foot in enumerate(feet):
+        fi = FEET.index(foot)
+        T = model.T_opt_board(q[v][None], foot, truth.params[n:n + 5], truth.params[n + 5 + 3 * fi:n + 8 + 3 * fi])[0]
+        assert np.all(model.camera.in_image(model.camera.project_points(edge, T), margin=3.9)), v
 
 
 def test_corrected_tree_reproduces_the_calibrated_projection(model, tmp_path):

@@ -293,3 +293,111 @@ def test_marker_covariance_agrees_with_the_camera_pnp_covariance(setup):
     ours = full[9:12, 9:12]
     ref = pnp_covariance(cam, scene.rectangle.object_points(), scene.T_c_m[0], 0.5)[3:, 3:]
     assert np.allclose(ours, ref, rtol=1e-5, atol=1e-12 * np.abs(ref).max())
+
+
+def test_implausible_answers_are_flagged(setup):
+    # The audit's two silent wrong answers (exit 0, small std, metres / the x sign off).
+    cam, scene = setup
+    o = simulate_observations(cam, scene, np.random.default_rng(0), sigma_px=0.5)[0]
+    ok = calibrate_single(cam, scene.rectangle, scene.body_points_r, o, sigma_px=0.5)
+    assert "inconsistent_data" not in [w.code for w in ok.warnings]
+    # (a) rectangle in cm where mm were meant: 10x too small -> camera ~2.8 m from the body
+    small = MarkerRectangle(scene.rectangle.width / 10, scene.rectangle.height / 10)
+    r = calibrate(cam, small, scene.body_points_r, [o], sigma_px=0.5)
+    msgs = [w.message for w in r.warnings if w.code == "inconsistent_data"]
+    assert any("from the nearest body point" in m and "mirror_rectangle" in m for m in msgs), msgs
+    # (b) body model with x not flipped (given in ri): chi2 ~ 200 on 34 dof at the declared 0.5 px
+    r = calibrate(cam, scene.rectangle, scene.body_points_r * [-1.0, 1.0, 1.0], [o], sigma_px=0.5)
+    msgs = [w.message for w in r.warnings if w.code == "inconsistent_data"]
+    assert any("chi2" in m and "x not flipped" in m for m in msgs), msgs
+    # without a declared sigma the chi-square test has nothing to test against
+    r = calibrate_single(cam, scene.rectangle, scene.body_points_r * [-1.0, 1.0, 1.0], o)
+    assert not any("chi2" in w.message for w in r.warnings)
+
+
+def test_no_refine_reports_the_covariance_of_the_average():
+    # refine=False returns the mean of the single-image estimates; its covariance is
+    # sum(C_k)/K^2, larger than the joint estimate's (audit: std t 25-37 mm reported vs 30-48 mm).
+    from robocal.rigs.mirror.calibrate import predicted_covariance
+
+    rng = np.random.default_rng(4)
+    cam, scene = default_setup(4, rng)
+    obs = simulate_observations(cam, scene, rng, sigma_px=0.5)
+    joint = calibrate(cam, scene.rectangle, scene.body_points_r, obs, sigma_px=0.5)
+    avg = calibrate(cam, scene.rectangle, scene.body_points_r, obs, sigma_px=0.5, refine=False)
+    C = sum(predicted_covariance(cam, scene.rectangle, scene.body_points_r, s.T_r_c, s.T_c_m, [o], 0.5)
+            for s, o in zip(avg.singles, obs)) / 16
+    assert np.allclose(avg.cov, C, rtol=1e-9)
+    assert np.trace(avg.cov[3:, 3:]) > 1.3 * np.trace(joint.cov[3:, 3:])
+
+
+def _ambiguous_placements(seed):
+    rng = np.random.default_rng(seed)
+    cam, sc = default_setup(4, rng)
+    scene = MirrorScene(sc.T_c_r, sc.T_c_m, sc.body_points_r, MarkerRectangle(0.12, 0.084))
+    return cam, scene, simulate_observations(cam, scene, rng)
+
+
+def test_consensus_switch_keeps_residuals_and_warnings_with_the_new_pose():
+    import importlib
+
+    mod = importlib.import_module("robocal.rigs.mirror.calibrate")
+    cam, scene, obs = _ambiguous_placements(102)  # image 0: ambiguous alone, switched 0 -> 1 by the others
+    singles = [calibrate_single(cam, scene.rectangle, scene.body_points_r, o, sigma_px=0.5) for o in obs]
+    assert singles[0].choice.chosen == 0 and not singles[0].choice.decisive
+    cal = calibrate(cam, scene.rectangle, scene.body_points_r, obs, sigma_px=0.5)
+    s = cal.singles[0]
+    assert s.choice.chosen == 1 and "ambiguous alone" in s.choice.reason
+    # residuals of the switched pose, not of the IPPE pose first picked
+    rms_per_point = np.sqrt(np.mean(np.sum(s.marker_residuals**2, axis=1)))
+    assert np.isclose(rms_per_point, s.choice.marker_rms_px[1], rtol=1e-9)
+    assert not np.isclose(rms_per_point, s.choice.marker_rms_px[0], rtol=1e-3)
+    expected = geometry_warnings(scene.body_points_r, s.T_c_m, name=obs[0].name)
+    assert [w for w in s.warnings if w.code != "degenerate_geometry" or "planar" not in w.message] == expected
+    # with no decisive image the reference is the undecided picks' own median: never "decisive"
+    singles = [calibrate_single(cam, scene.rectangle, scene.body_points_r, o, sigma_px=0.5) for o in obs]
+    for x in singles:
+        x.choice.decisive = False
+    out = mod._consensus_choice(singles, cam, scene.rectangle, scene.body_points_r, obs, 0.5)
+    assert not any(x.choice.decisive for x in out)
+    assert all(any("planar ambiguity" in w.message for w in x.warnings) for x in out if len(x.choice.T_r_c) > 1)
+
+
+def test_outliers_are_named_by_image_and_point_at_a_multiplicity_corrected_threshold():
+    from robocal.estimation import outlier_threshold
+
+    # clean data, 9 placements (216 observations): the largest score (12.0) exceeds the plain
+    # 3-sigma chi2(2) quantile (11.8), which a clean calibration of this size does in ~45 % of runs
+    rng = np.random.default_rng(0)
+    cam, scene = default_setup(9, rng)
+    obs = simulate_observations(cam, scene, rng, sigma_px=0.5)
+    cal = calibrate(cam, scene.rectangle, scene.body_points_r, obs, sigma_px=0.5)
+    assert cal.lsq.observation_scores.max() > outlier_threshold(3.0, 2)
+    assert "outliers" not in [w.code for w in cal.warnings]
+    # two gross errors: named by image and marker letter / body_points row
+    rng = np.random.default_rng(3)
+    cam, scene = default_setup(4, rng)
+    obs = simulate_observations(cam, scene, rng, sigma_px=0.5)
+    b = obs[2].body_uv.copy()
+    b[5] += [4.0, -3.0]
+    obs[2] = MirrorObservation(obs[2].marker_uv, b, obs[2].body_ids, obs[2].name)
+    m = obs[1].marker_uv.copy()
+    m[2] += [3.0, 3.0]
+    obs[1] = MirrorObservation(m, obs[1].body_uv, obs[1].body_ids, obs[1].name)
+    cal = calibrate(cam, scene.rectangle, scene.body_points_r, obs, sigma_px=0.5)
+    w = [w for w in cal.warnings if w.code == "outliers"]
+    assert w and f"{obs[1].name}: marker C" in w[0].message and f"{obs[2].name}: body point 5" in w[0].message
+
+
+def test_multi_image_calibration_does_not_import_scipy_stats():
+    # scipy.stats costs ~0.5 s to import; the chi2 quantiles come from scipy.special
+    import subprocess
+    import sys
+
+    code = ("import sys, numpy as np\n"
+            "from robocal.rigs.mirror.simulate import default_setup, simulate_observations\n"
+            "from robocal.rigs.mirror.calibrate import calibrate\n"
+            "rng = np.random.default_rng(0); cam, sc = default_setup(2, rng)\n"
+            "calibrate(cam, sc.rectangle, sc.body_points_r, simulate_observations(cam, sc, rng), sigma_px=0.5)\n"
+            "assert 'scipy.stats' not in sys.modules\n")
+    subprocess.run([sys.executable, "-c", code], check=True)

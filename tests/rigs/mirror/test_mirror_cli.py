@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from robocal.cli import DemoContext
 from robocal.cli.main import main
@@ -89,3 +90,74 @@ def test_demo_runs_and_passes(tmp_path):
     assert out.passed, out.summary
     assert {"1 image error", "4 placements error", "ArUco image error"} <= set(out.summary)
     assert out.result is not None and (tmp_path / "report.html").exists()
+
+
+def test_report_of_another_rig_or_incomplete_result_is_a_one_line_error(tmp_path, capsys):
+    assert main(["mirror", "calibrate", str(EXAMPLES / "published_single.yaml"), "--out", str(tmp_path / "c")]) == 0
+    capsys.readouterr()
+    good = json.loads((tmp_path / "c" / "result.json").read_text())
+    other = dict(good, rig="projector")
+    missing = json.loads(json.dumps(good))
+    del missing["diagnostics"]["observations"]
+    for label, doc, expect in (("other rig", other, "'projector', not 'mirror'"),
+                               ("missing key", missing, "diagnostics.observations")):
+        p = tmp_path / f"{label.replace(' ', '_')}.json"
+        p.write_text(json.dumps(doc))
+        assert main(["mirror", "report", str(p), "--out", str(tmp_path / "r")]) == 2, label
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("robocal: error:") and "\n" not in err and expect in err and p.name in err, err
+
+
+@pytest.mark.parametrize("argv, expect", [(["--sigma", "-1"], "--sigma"), (["--sigma", "nan"], "--sigma"),
+                                         (["--placements", "0"], "--placements")])
+def test_simulate_rejects_bad_arguments(tmp_path, capsys, argv, expect):
+    with pytest.raises(SystemExit) as exc:  # argparse usage errors exit 2 from the parser
+        main(["mirror", "simulate", *argv, "--out", str(tmp_path)])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and expect in err
+
+
+def test_noise_free_simulation_round_trips(tmp_path):
+    # --sigma 0: the file must not carry sigma_px: 0 (calibrate requires sigma_px > 0)
+    assert main(["mirror", "simulate", "--sigma", "0", "--out", str(tmp_path / "s")]) == 0
+    assert load_input(tmp_path / "s" / "mirror_input.yaml").sigma_px is None
+    assert main(["mirror", "calibrate", str(tmp_path / "s" / "mirror_input.yaml"), "--out", str(tmp_path / "c")]) == 0
+
+
+def test_calibration_errors_name_the_input_file(tmp_path):
+    # errors raised during calibration (not parsing) must still name the file
+    from robocal.errors import NotEnoughDataError
+    from robocal.rigs.mirror.workflow import calibrate_file
+
+    doc = yaml.safe_load((EXAMPLES / "published_single.yaml").read_text())
+    doc["images"][0]["body_uv"] = doc["images"][0]["body_uv"][:3]
+    doc["images"][0]["body_ids"] = [0, 1, 2]
+    p = tmp_path / "three_body_points.yaml"
+    p.write_text(yaml.safe_dump(doc))
+    with pytest.raises(NotEnoughDataError) as exc:
+        calibrate_file(p)
+    assert str(exc.value).startswith(str(p)) and "at least 4" in str(exc.value)
+
+
+def test_planar_choice_is_reported_on_stdout_in_result_and_report(tmp_path, capsys):
+    from robocal.camera import MarkerRectangle
+    from robocal.rigs.mirror.files import write_input
+    from robocal.rigs.mirror.model import MirrorScene
+    from robocal.rigs.mirror.simulate import default_setup, simulate_observations
+
+    cam, s0 = default_setup()
+    scene = MirrorScene(s0.T_c_r, s0.T_c_m, s0.body_points_r, MarkerRectangle(0.12, 0.084))  # ambiguous
+    obs = simulate_observations(cam, scene, np.random.default_rng(0), sigma_px=0.5)
+    p = write_input(tmp_path / "amb.yaml", cam, scene.rectangle, scene.body_points_r, obs, sigma_px=0.5)
+    assert main(["mirror", "calibrate", str(p), "--out", str(tmp_path / "c")]) == 0
+    out = capsys.readouterr().out
+    assert "planar choice: 1 of 1 image(s) had two marker poses" in out
+    pc = json.loads((tmp_path / "c" / "result.json").read_text())["diagnostics"]["single_image"][0]["planar_choice"]
+    assert pc["ambiguous"] and len(pc["candidate_T_r_c"]) == 2 and "marker_rms_px_per_point" in pc
+    assert "marker_rms_px" not in pc  # one name per definition (single_image[k].marker_rms_px is per coordinate)
+    html = (tmp_path / "c" / "report.html").read_text()
+    assert "decisive" in html and ("other pose&#x27;s t_r_c" in html or "other pose's t_r_c" in html)
+    # the published scene has no ambiguity: no line
+    assert main(["mirror", "calibrate", str(EXAMPLES / "published_single.yaml"), "--out", str(tmp_path / "d")]) == 0
+    assert "planar choice" not in capsys.readouterr().out

@@ -34,12 +34,30 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from robocal.diagnostics import Diagnostic
 from robocal.errors import InputError, NotEnoughDataError
 from robocal.estimation import Problem, solve
 from robocal.rigs.flow.model import SensorArray, rot2
 from robocal.rigs.flow.odometry import SensorSteps
 
-__all__ = ["ArrayCalibration", "calibrate_array", "interpolate_poses", "window_observations"]
+__all__ = ["ArrayCalibration", "calibrate_array", "interpolate_poses", "window_observations", "KERNEL_SYSTEMATIC"]
+
+#: Shortest window, frame intervals: one-frame windows difference the reference every frame
+#: and make the white-noise sigma meaningless (it shrank 4x at window 0 before this check).
+MIN_WINDOW_FRAMES = 4
+
+#: Jackknife segments: contiguous blocks of windows deleted one at a time.
+JACKKNIFE_SEGMENTS = 10
+
+#: Systematic uncertainty per parameter kind from the flow kernel's pixel locking (the
+#: sub-pixel fit's pull towards whole pixels). It depends on the direction and speed of each
+#: sensor's flow, which the drive repeats, so it is the same in every part of a drive and
+#: invisible to resampling: e.g. sensor s270 of the simulated rig, whose flow is along its x
+#: axis in every manoeuvre, comes out 10-12 mm short in R and 1.3-1.6 % low in scale on every
+#: seed. Values: RMS error over sensors and seeds of rendered calibration drives (gravel,
+#: 400 Hz, equiangular kernel, seeds 100-103, 6 s; docs/rigs/flow.md), rounded up. Other
+#: kernel modes and textures may differ (``refine="lk"`` flips the s270 bias to about +9 mm).
+KERNEL_SYSTEMATIC = {"R": 0.007, "psi": np.radians(0.6), "phi": np.radians(0.2), "scale": 0.009}
 
 
 def interpolate_poses(t_ref, poses_ref, t):
@@ -69,7 +87,11 @@ def window_observations(steps: SensorSteps, poses, window: float):
         ``theta_k1 - theta_k0``.
     """
     K = steps.disp.shape[1]
-    m = max(1, int(round(window / np.median(steps.dt))))
+    dt = float(np.median(steps.dt))
+    if not np.isfinite(window) or window < MIN_WINDOW_FRAMES * dt * (1 - 1e-9):
+        raise InputError(f"window must be at least {MIN_WINDOW_FRAMES} frame intervals ({MIN_WINDOW_FRAMES * dt:.4g} s "
+                         f"at this log's {1 / dt:.4g} Hz), got {window} s")
+    m = int(round(window / dt))
     J = K // m
     if J < 4:
         raise NotEnoughDataError(f"the drive gives {J} windows of {window} s; calibration needs at least 4 (a longer drive)")
@@ -96,9 +118,23 @@ class ArrayCalibration:
     ----------
     array : SensorArray
         The calibrated placement.
+        Parameters the drive does not determine keep their nominal values
+        (listed in ``undetermined``).
     std : dict
-        ``{"<sensor>.R": m, ".psi": rad, ".phi": rad, ".scale": 1}``; None
-        where the drive does not determine a parameter.
+        Statistical standard deviation, ``{"<sensor>.R": m, ".psi": rad,
+        ".phi": rad, ".scale": 1}``: the segment jackknife (``std_jackknife``,
+        honest for time-correlated flow errors), or the white-noise model
+        (``std_model``) on drives too short for it. None where the drive does
+        not determine a parameter.
+    std_model, std_jackknife : dict
+        The two ingredients of ``std`` (same keys; None where undetermined or
+        not computed).
+    systematic : dict
+        Systematic uncertainty of the flow kernel (pixel locking of the
+        sub-pixel fit, which no resampling of one drive can see), same units;
+        see :data:`KERNEL_SYSTEMATIC`. Combine as ``hypot(std, systematic)``.
+    undetermined : list of str
+        Parameters the drive does not determine (kept at nominal).
     residual_rms : float
         RMS of the window residuals, m.
     n_windows : ndarray of int, shape (n,)
@@ -113,6 +149,14 @@ class ArrayCalibration:
     n_windows: np.ndarray
     lsq: object
     warnings: list = field(default_factory=list)
+    std_model: dict = field(default_factory=dict)
+    std_jackknife: dict = field(default_factory=dict)
+    systematic: dict = field(default_factory=dict)
+    undetermined: list = field(default_factory=list)
+
+    def total_std(self) -> dict:
+        """``hypot(std, systematic)`` per parameter (None where undetermined)."""
+        return {k: (None if v is None else float(np.hypot(v, self.systematic.get(k, 0.0)))) for k, v in self.std.items()}
 
     def estimate_dict(self) -> dict:
         out = {}
@@ -127,8 +171,30 @@ class ArrayCalibration:
         return {k: {"R": "m", "psi": "rad", "phi": "rad", "scale": "1"}[k.split(".")[-1]] for k in self.estimate_dict()}
 
 
+def _problem(M, dP, dth, names, x0s, keep):
+    """The windowed model of the module doc over the windows ``keep[i]`` of each sensor."""
+    prob = Problem()
+    for i, nm in enumerate(names):
+        Mi, dPi, dthi = M[i][keep[i]], dP[keep[i]], dth[keep[i]]
+        prob.add_block(nm, x0s[i], labels=[f"{nm}.R", f"{nm}.psi", f"{nm}.phi", f"{nm}.scale"], unit=["m", "rad", "rad", "1"])
+
+        def fun(p, nm=nm, Mi=Mi, dPi=dPi, dthi=dthi):
+            R, psi, phi, sc = p[nm]
+            r = np.array([R * np.cos(psi), R * np.sin(psi)])
+            lhs = sc * np.einsum("ab,jb->ja", rot2(phi), Mi)
+            rhs = dPi + np.einsum("jab,b->ja", rot2(dthi), r) - r
+            return lhs - rhs
+
+        prob.add_residuals(fun, name=nm, blocks=[nm], residual_dim=2)
+    return prob
+
+
+def _solve(prob, loss):
+    return solve(prob, method="lm" if loss == "linear" else "trf", loss=loss)
+
+
 def calibrate_array(steps: SensorSteps, t_ref, poses_ref, nominal: SensorArray, *, window: float = 0.1,
-                    loss: str = "linear") -> ArrayCalibration:
+                    loss: str = "linear", jackknife: bool = True) -> ArrayCalibration:
     """Estimate every sensor's ``(R, psi, phi, scale)`` from a drive with a reference trajectory.
 
     Parameters
@@ -139,23 +205,32 @@ def calibrate_array(steps: SensorSteps, t_ref, poses_ref, nominal: SensorArray, 
         Reference trajectory (motion capture, a total station, a simulator):
         times (s) and ``(X, Y, theta)`` (m, m, rad).
     nominal : SensorArray
-        Names and starting values.
+        Names and starting values; parameters the drive does not determine
+        keep these values.
     window : float
-        Window length, s.
+        Window length, s (at least :data:`MIN_WINDOW_FRAMES` frame intervals).
     loss : str
         Robust loss for :func:`robocal.estimation.solve` (``"soft_l1"``,
         ``"huber"``, ...); outlying windows are named either way.
+    jackknife : bool
+        Compute the statistical std by a delete-one-segment jackknife over
+        :data:`JACKKNIFE_SEGMENTS` contiguous stretches of the drive (fewer, down
+        to 4, for drives of fewer windows; none below that: ``std_model`` only). The flow
+        errors are correlated in time (the kernel's bias follows the slowly
+        changing sub-pixel phase), so the white-noise std from the residual
+        scatter understates the error and grows with ``window``; the
+        jackknife sees the correlation and does not depend on ``window``.
     """
     if steps.disp.shape[0] != nominal.n:
         raise InputError(f"the log has {steps.disp.shape[0]} sensors but the array describes {nominal.n}")
     poses = interpolate_poses(t_ref, poses_ref, steps.t)
     M, dP, dth = window_observations(steps, poses, window)
-    prob = Problem()
+    J = dP.shape[0]
     starts = []
-    n_win = np.zeros(nominal.n, int)
+    keep = np.all(np.isfinite(M), axis=2)                          # (n, J)
+    n_win = keep.sum(axis=1)
     for i, nm in enumerate(nominal.names):
-        ok = np.all(np.isfinite(M[i]), axis=1)
-        n_win[i] = ok.sum()
+        ok = keep[i]
         if ok.sum() < 3:
             raise NotEnoughDataError(f"sensor {nm}: only {ok.sum()} complete windows with a valid flow (need >= 3)")
         Mi, dPi, dthi = M[i][ok], dP[ok], dth[ok]
@@ -167,26 +242,57 @@ def calibrate_array(steps: SensorSteps, t_ref, poses_ref, nominal: SensorArray, 
         sol, *_ = np.linalg.lstsq(rows.reshape(-1, 4), dPi.reshape(-1), rcond=None)
         a, b, rx, ry = sol
         x0 = np.array([np.hypot(rx, ry), np.arctan2(ry, rx), np.arctan2(b, a), np.hypot(a, b)])
-        if not np.all(np.isfinite(x0)) or x0[3] <= 0:
+        if not np.all(np.isfinite(x0)) or x0[3] <= 0 or x0[0] < 1e-6:
             x0 = np.array([nominal.R[i], nominal.psi[i], nominal.phi[i], nominal.scale[i]])
         starts.append(x0)
-        prob.add_block(nm, x0, labels=[f"{nm}.R", f"{nm}.psi", f"{nm}.phi", f"{nm}.scale"], unit=["m", "rad", "rad", "1"])
-
-        def fun(p, nm=nm, Mi=Mi, dPi=dPi, dthi=dthi):
-            R, psi, phi, sc = p[nm]
-            r = np.array([R * np.cos(psi), R * np.sin(psi)])
-            lhs = sc * np.einsum("ab,jb->ja", rot2(phi), Mi)
-            rhs = dPi + np.einsum("jab,b->ja", rot2(dthi), r) - r
-            return lhs - rhs
-
-        prob.add_residuals(fun, name=nm, blocks=[nm], residual_dim=2)
-    res = solve(prob, method="lm" if loss == "linear" else "trf", loss=loss)
-    est = res.params
+    res = _solve(_problem(M, dP, dth, nominal.names, starts, keep), loss)
+    est = {nm: np.array(res.params[nm], float) for nm in nominal.names}
+    labels = [f"{nm}.{p}" for nm in nominal.names for p in ("R", "psi", "phi", "scale")]
+    undetermined = [lab for lab in labels if res.std.get(lab) is None]
+    # an undetermined parameter has no value from the data (the solver leaves it anywhere on
+    # the null space, e.g. R = 0 on a straight drive): it keeps its nominal value
+    nom = {"R": nominal.R, "psi": nominal.psi, "phi": nominal.phi, "scale": nominal.scale}
+    for lab in undetermined:
+        nm, p = lab.split(".")
+        est[nm][("R", "psi", "phi", "scale").index(p)] = nom[p][nominal.names.index(nm)]
+    std_model = {lab: (None if lab in undetermined else float(res.std[lab])) for lab in labels}
+    std_jk = {lab: None for lab in labels}
+    G = min(JACKKNIFE_SEGMENTS, J // 2)
+    if jackknife and G >= 4:
+        seg = np.minimum(np.arange(J) * G // J, G - 1)
+        x_full = [est[nm] for nm in nominal.names]
+        reps = []
+        for g in range(G):
+            kg = keep & (seg != g)[None, :]
+            if np.any(kg.sum(axis=1) < 3):
+                continue
+            rg = _solve(_problem(M, dP, dth, nominal.names, x_full, kg), loss)
+            reps.append(np.concatenate([rg.params[nm] for nm in nominal.names]))
+        if len(reps) >= 4:
+            G = len(reps)
+            reps = np.array(reps)
+            d = reps - np.concatenate(x_full)[None, :]
+            ang = np.array([lab.split(".")[1] in ("psi", "phi") for lab in labels])
+            d[:, ang] = np.angle(np.exp(1j * d[:, ang]))
+            d = d - d.mean(axis=0)
+            sd = np.sqrt((G - 1) / G * np.sum(d**2, axis=0))
+            std_jk = {lab: (None if lab in undetermined else float(sd[j])) for j, lab in enumerate(labels)}
+    # the jackknife when the drive allows it: the white-noise std follows the window length
+    # (residuals correlated in time), the jackknife does not
+    std = {lab: (std_jk[lab] if std_jk[lab] is not None else std_model[lab]) for lab in labels}
+    systematic = {lab: (None if lab in undetermined else float(KERNEL_SYSTEMATIC[lab.split(".")[1]])) for lab in labels}
     arr = nominal.copy(
         R=np.array([est[nm][0] for nm in nominal.names]),
-        psi=np.array([np.angle(np.exp(1j * est[nm][1])) for nm in nominal.names]),
-        phi=np.array([np.angle(np.exp(1j * est[nm][2])) for nm in nominal.names]),
+        # angles wrapped to within 180 deg of the nominal ones (270 stays 270, not -90)
+        psi=np.array([nominal.psi[i] + np.angle(np.exp(1j * (est[nm][1] - nominal.psi[i]))) for i, nm in enumerate(nominal.names)]),
+        phi=np.array([nominal.phi[i] + np.angle(np.exp(1j * (est[nm][2] - nominal.phi[i]))) for i, nm in enumerate(nominal.names)]),
         scale=np.array([est[nm][3] for nm in nominal.names]),
     )
-    return ArrayCalibration(array=arr, std=dict(res.std), residual_rms=float(res.rms), n_windows=n_win, lsq=res,
-                            warnings=list(res.warnings))
+    warnings = list(res.warnings)
+    if undetermined:
+        warnings.append(Diagnostic("rank_deficient", f"the drive does not determine {', '.join(undetermined)}: they keep "
+                                   "their nominal values (R and psi need turns, phi and scale need translation)",
+                                   params=tuple(undetermined)))
+    return ArrayCalibration(array=arr, std=std, residual_rms=float(res.rms), n_windows=n_win, lsq=res,
+                            warnings=warnings, std_model=std_model, std_jackknife=std_jk, systematic=systematic,
+                            undetermined=undetermined)

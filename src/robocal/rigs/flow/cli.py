@@ -46,15 +46,31 @@ examples:
   robocal flow evaluate examples/flow/loop/run.yaml --array cal/array_calibrated.yaml --out ev"""
 
 
-def _flow_config(args) -> FlowConfig:
-    return FlowConfig(subpixel=args.subpixel, refine=args.refine, search=args.search)
+_KERNEL_ARGS = ("subpixel", "refine", "search")
+
+
+def _flow_config(args, spec=None) -> FlowConfig:
+    d = FlowConfig()
+    kw = {k: getattr(args, k) if getattr(args, k, None) is not None else getattr(d, k) for k in _KERNEL_ARGS}
+    if spec is not None:
+        kw["window"] = spec.window
+    return FlowConfig(**kw)
+
+
+def _check_kernel_args(args, spec) -> None:
+    """Kernel options act on raw frames only: on a flow log they would be silently ignored."""
+    given = [f"--{k}" for k in _KERNEL_ARGS if getattr(args, k, None) is not None]
+    if given and spec.frames is None:
+        raise InputError(f"{spec.path}: {', '.join(given)} {'acts' if len(given) == 1 else 'act'} on raw frames, but this run gives only a flow log "
+                         f"('flow_log: {spec.flow_log.name}', flow computed by the sensors); drop the option(s) or add 'frames'")
 
 
 def _add_flow_args(p):
-    p.add_argument("--subpixel", default="equiangular", choices=("none", "half", "quarter", "parabolic", "equiangular"),
-                   help="sub-pixel method of the block matcher (half = PX4FLOW)")
-    p.add_argument("--refine", default="none", choices=("none", "lk"), help="frame-level Gauss-Newton refinement")
-    p.add_argument("--search", type=int, default=4, help="integer search range, +/- px")
+    p.add_argument("--subpixel", default=None, choices=("none", "half", "quarter", "parabolic", "equiangular"),
+                   help="sub-pixel method of the block matcher (half = PX4FLOW; default equiangular); raw frames only")
+    p.add_argument("--refine", default=None, choices=("none", "lk"),
+                   help="frame-level Gauss-Newton refinement (default none); raw frames only")
+    p.add_argument("--search", type=int, default=None, help="integer search range, +/- px (default 4); raw frames only")
     p.add_argument("--no-progress", action="store_true", help="never show progress bars")
 
 
@@ -90,7 +106,8 @@ def cmd_odometry(args) -> int:
     spec = load_run(args.input)
     out = prepare_out_dir(args.out, "flow-odometry")
     pg = lambda it, desc: progress(it, desc=desc, enabled=not args.no_progress)  # noqa: E731
-    od, flows, steps = odometry_run(spec, config=_flow_config(args), allow_missing=args.allow_missing,
+    _check_kernel_args(args, spec)
+    od, flows, steps = odometry_run(spec, config=_flow_config(args, spec), allow_missing=args.allow_missing,
                                     robust=not args.no_robust, method=args.integration, progress=pg)
     from robocal.rigs.flow.log import write_poses_csv
 
@@ -115,34 +132,63 @@ def cmd_odometry(args) -> int:
 
 def cmd_calibrate(args) -> int:
     spec = load_run(args.input)
+    if not np.isfinite(args.window) or args.window <= 0:
+        raise InputError(f"--window must be > 0 s, got {args.window}")
+    _check_kernel_args(args, spec)
     out = prepare_out_dir(args.out, "flow-calibrate")
     pg = lambda it, desc: progress(it, desc=desc, enabled=not args.no_progress)  # noqa: E731
-    cal, steps = calibration_run(spec, config=_flow_config(args), window=args.window, loss=args.loss, progress=pg)
+    cal, steps = calibration_run(spec, config=_flow_config(args, spec), window=args.window, loss=args.loss, progress=pg)
     res = calibration_result(cal, spec)
     report = Report("robocal flow calibrate", subtitle=str(spec.path))
     sec = report.section("Calibrated array")
     sec.parameters(res.estimate, res.std, res.units)
-    sec.text(f"Residual RMS {cal.residual_rms * 1e3:.3f} mm per {args.window} s window; "
-             "standard deviations are sampling error under the model (the reference is taken as exact).")
+    tot = cal.total_std()
+    rows = []
+    for k, v in res.estimate.items():
+        conv, u = _display(res.units[k])
+        und = k in cal.undetermined
+        rows.append({"parameter": k, "value": conv(v), "unit": u,
+                     "std (statistical)": None if und else conv(res.std[k]),
+                     "systematic (kernel)": None if und else conv(cal.systematic[k]),
+                     "total": None if und else conv(tot[k]),
+                     "note": "not determined: kept nominal" if und else ""})
+    sec.table(rows, digits=4, caption="statistical std: delete-one-segment jackknife over the drive (the flow errors "
+              "are correlated in time); systematic: the flow kernel's pixel-locking bias, measured on rendered drives "
+              "(docs/rigs/flow.md); total = both in quadrature. Use the total to judge the values.")
+    sec.text(f"Residual RMS {cal.residual_rms * 1e3:.3f} mm per {args.window} s window; the reference is taken as exact.")
     sec.diagnostics(cal.warnings)
     cam = {"focal_px": spec.focal_px, "window": spec.window}
-    atomic_write_text(out / "array_calibrated.yaml", array_yaml(cal.array, cam))
+    if spec.rate is not None:
+        cam["rate"] = {"value": spec.rate, "unit": "Hz"}
+    extra = {"undetermined_kept_nominal": list(cal.undetermined)} if cal.undetermined else None
+    atomic_write_text(out / "array_calibrated.yaml", array_yaml(cal.array, cam, extra))
     write_run(out, res, report)
     print(f"wrote {out / 'array_calibrated.yaml'}")
+    print(f"  {'parameter':14s} {'value':>10s} {'unit':5s} +/- statistical  +/- kernel systematic")
     for k, v in res.estimate.items():
-        sd = res.std.get(k)
-        unit = res.units[k]
-        conv = np.degrees if unit == "rad" else (lambda x: x * 1e3) if unit == "m" else (lambda x: x)
-        u = {"rad": "deg", "m": "mm"}.get(unit, unit)
-        print(f"  {k:14s} {conv(v):10.4f} +/- {conv(sd) if sd is not None else float('nan'):.4f} {u}")
+        conv, u = _display(res.units[k])
+        if k in cal.undetermined:
+            print(f"  {k:14s} {conv(v):10.4f} {u:5s} not determined by this drive (kept nominal)")
+        else:
+            print(f"  {k:14s} {conv(v):10.4f} {u:5s} +/- {conv(res.std[k]):<12.4f} +/- {conv(cal.systematic[k]):.4f}")
     return 0
+
+
+def _display(unit):
+    """Converter and unit for printing a parameter stored in SI units."""
+    if unit == "rad":
+        return np.degrees, "deg"
+    if unit == "m":
+        return (lambda x: x * 1e3), "mm"
+    return (lambda x: x), ("" if unit == "1" else unit)
 
 
 def cmd_evaluate(args) -> int:
     spec = load_run(args.input)
     out = prepare_out_dir(args.out, "flow-evaluate")
     pg = lambda it, desc: progress(it, desc=desc, enabled=not args.no_progress)  # noqa: E731
-    od, _, steps = odometry_run(spec, config=_flow_config(args), progress=pg)
+    _check_kernel_args(args, spec)
+    od, _, steps = odometry_run(spec, config=_flow_config(args, spec), progress=pg)
     cal_od = None
     if args.array is not None:
         from robocal.io import load_document

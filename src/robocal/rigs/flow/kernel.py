@@ -60,6 +60,12 @@ __all__ = [
 
 SUBPIXEL_MODES = ("none", "half", "quarter", "parabolic", "equiangular")
 AGGREGATE_MODES = ("mean", "median", "trimmed")
+
+#: Per-frame flow error (RMS per axis, px) with all 25 blocks in use, by sub-pixel mode, and
+#: with ``refine="lk"``: measured on shifted real photographs (gravel, 2x2 binning,
+#: ``test_flow_rmse_on_real_photographs_vs_opencv -s``, docs/rigs/flow.md). The fusion's
+#: weights, covariance and outlier test scale with it (:attr:`FlowConfig.sigma_px`).
+SIGMA_PX = {"none": 0.32, "half": 0.16, "quarter": 0.075, "parabolic": 0.12, "equiangular": 0.06, "lk": 0.03}
 _BATCH = 256  # frame pairs per kernel call: large enough to fill SIMD lanes, small enough for L2
 
 
@@ -134,6 +140,11 @@ class FlowConfig:
     max_spread_px: float = 0.45
     refine: str = "none"
     refine_iterations: int = 3
+
+    @property
+    def sigma_px(self) -> float:
+        """Flow error of a frame with all blocks in use, px (:data:`SIGMA_PX` of this mode)."""
+        return SIGMA_PX["lk" if self.refine == "lk" else self.subpixel]
 
     def __post_init__(self):
         for name in ("window", "block", "grid", "min_blocks"):

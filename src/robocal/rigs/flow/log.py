@@ -3,7 +3,8 @@
 A run is described by a YAML file (``run.yaml``)::
 
     units: {length: mm, angle: deg}
-    camera: {focal_px: 166.67, window: 64}     # focal length in (binned) pixels
+    camera: {focal_px: 166.67, window: 64}     # focal length in (binned) pixels;
+                                                 # optional sigma_px: flow error per frame, px
     sensors:                                     # >= 2 sensors, in log order
       - {name: s60,  R: 350, psi: 60,  phi: 0, scale: 1}
       - {name: s120, R: 350, psi: 120, phi: 0}
@@ -148,8 +149,14 @@ def read_flow_csv(path, n_sensors: int, *, allow_missing: bool = False) -> FlowR
 
 
 def steps_from_records(rec: FlowRecords, focal_px: float, config: FlowConfig = FlowConfig(), *,
-                       sigma_px: float = 0.06) -> SensorSteps:
-    """Gyro-compensate (eqs. 3–4) and scale (eq. 5) logged flow into :class:`SensorSteps`."""
+                       sigma_px: float | None = None) -> SensorSteps:
+    """Gyro-compensate (eqs. 3–4) and scale (eq. 5) logged flow into :class:`SensorSteps`.
+
+    ``sigma_px``: the sensors' per-frame flow error with all blocks in use (px); by default
+    ``config.sigma_px`` (the simulator's equiangular kernel). A real log should state its own
+    (``camera: sigma_px`` in run.yaml: about 0.16 px for PX4FLOW's half-pixel firmware).
+    """
+    sigma_px = config.sigma_px if sigma_px is None else float(sigma_px)
     n, K = rec.quality.shape
     dt = np.diff(rec.t)
     disp = np.full((n, K, 2), np.nan)
@@ -165,7 +172,7 @@ def steps_from_records(rec: FlowRecords, focal_px: float, config: FlowConfig = F
 
 
 def steps_from_frames(frames, t, gyro, height, focal_px: float, config: FlowConfig = FlowConfig(), *,
-                      sigma_px: float = 0.06, progress=None):
+                      sigma_px: float | None = None, progress=None):
     """Run the flow kernel on every sensor's frames and build :class:`SensorSteps`.
 
     Parameters
@@ -175,6 +182,8 @@ def steps_from_frames(frames, t, gyro, height, focal_px: float, config: FlowConf
     gyro : array_like, shape (n, T-1, 3)
     height : array_like, shape (n, T-1)
     focal_px : float
+    sigma_px : float, optional
+        Flow error with all blocks in use, px; default ``config.sigma_px`` (the kernel mode's).
     progress : callable, optional
         ``progress(iterable, desc=...)`` wrapper for a progress bar.
 
@@ -184,6 +193,7 @@ def steps_from_frames(frames, t, gyro, height, focal_px: float, config: FlowConf
     flows : list of FrameFlow
         Per-sensor kernel output (flow in px, quality, reasons).
     """
+    sigma_px = config.sigma_px if sigma_px is None else float(sigma_px)
     frames = np.asarray(frames)
     if frames.ndim != 4:
         raise ShapeError(f"frames must have shape (n_sensors, T, {config.window}, {config.window}), got {frames.shape}")
@@ -271,6 +281,7 @@ class RunSpec:
     reference: Path | None
     wheel: Path | None
     rate: float | None
+    sigma_px: float | None = None
 
     def inputs(self) -> list:
         return [p for p in (self.path, self.flow_log, self.frames, self.reference, self.wheel) if p is not None]
@@ -285,6 +296,7 @@ def load_run(path) -> RunSpec:
     focal = cam.float("focal_px", positive=True)
     window = cam.int("window", default=64, minimum=8)
     rate = cam.float("rate", kind="frequency", default=None) if "rate" in cam else None
+    sigma_px = cam.float("sigma_px", positive=True) if "sigma_px" in cam else None
 
     def opt(key):
         if key not in doc:
@@ -298,7 +310,7 @@ def load_run(path) -> RunSpec:
     flow_log, frames = opt("flow_log"), opt("frames")
     if flow_log is None and frames is None:
         raise FileFormatError("needs 'flow_log' (per-sensor flow records) or 'frames' (raw frames)", source=str(path))
-    return RunSpec(Path(path), array, focal, window, flow_log, frames, opt("reference"), opt("wheel"), rate)
+    return RunSpec(Path(path), array, focal, window, flow_log, frames, opt("reference"), opt("wheel"), rate, sigma_px)
 
 
 def load_steps(spec: RunSpec, config: FlowConfig | None = None, *, allow_missing: bool = False, progress=None,
@@ -314,4 +326,4 @@ def load_steps(spec: RunSpec, config: FlowConfig | None = None, *, allow_missing
         steps, flows = steps_from_frames(d["frames"], d["t"], d["gyro"], d["height"], spec.focal_px, config, progress=progress)
         return steps, flows
     rec = read_flow_csv(spec.flow_log, spec.array.n, allow_missing=allow_missing)
-    return steps_from_records(rec, spec.focal_px, config), None
+    return steps_from_records(rec, spec.focal_px, config, sigma_px=spec.sigma_px), None

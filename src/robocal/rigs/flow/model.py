@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robocal.errors import InputError, NotEnoughDataError
+from robocal.errors import DegenerateGeometryError, InputError, NotEnoughDataError
 from robocal.validation import check_array
 
 __all__ = ["SensorArray", "seed_array", "rot2", "se2_exp", "se2_log", "integrate_twists", "relative_twists"]
@@ -74,6 +74,15 @@ class SensorArray:
                 f"the array has {n} sensor(s): one sensor gives 2 equations for the 3 unknowns "
                 "(dX, dY, dtheta) of seed 003 eq. 9 — at least 2 sensors are needed"
             )
+        # eq. 9 needs rank(A) = 3: the rotation is seen only through sensors at different
+        # points (all at one point, e.g. every R = 0, leave dtheta undetermined)
+        sv = np.linalg.svd(self.design_matrix(), compute_uv=False)
+        if sv[-1] <= 1e-9 * max(1.0, sv[0]):
+            pos = ", ".join(f"({x * 1e3:.1f}, {y * 1e3:.1f})" for x, y in self.positions)
+            raise DegenerateGeometryError(
+                f"sensor array: all sensors sit at one point (positions {pos} mm; expected at least 2 distinct "
+                "points): A of seed 003 eq. 9 has rank < 3 and the rotation is undetermined"
+            )
 
     @property
     def n(self) -> int:
@@ -121,7 +130,10 @@ class SensorArray:
         phi = [it.float("phi", kind="angle", default=0.0) for it in items]
         scale = [it.float("scale", default=1.0, positive=True) for it in items]
         names = [it.str("name", default=f"s{i}") for i, it in enumerate(items)]
-        return cls(np.array(R), np.array(psi), np.array(phi), np.array(scale), names)
+        try:
+            return cls(np.array(R), np.array(psi), np.array(phi), np.array(scale), names)
+        except (InputError, DegenerateGeometryError) as exc:
+            raise type(exc)(f"{doc.source}: {exc}") from None
 
     def copy(self, **kw) -> "SensorArray":
         d = dict(R=self.R.copy(), psi=self.psi.copy(), phi=self.phi.copy(), scale=self.scale.copy(), names=list(self.names))

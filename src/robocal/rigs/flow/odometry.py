@@ -232,7 +232,10 @@ def fuse_steps(steps: SensorSteps, array: SensorArray, *, robust: bool = True, o
             b = build_b(dth)
             u, Ninv, rss, r = _solve_weighted(A, b, np.where(used, w0, 0.0))
     m = used.sum(axis=1)
-    bridged = m < 2
+    # a step whose sensors all sit at one point (two valid sensors of a rank-3 array may) has
+    # a singular normal matrix: it is bridged like a step without sensors, never NaN
+    singular = ~np.all(np.isfinite(u), axis=1)
+    bridged = (m < 2) | singular
     chi2 = np.where(m >= 2, rss, np.nan)
     chi2 = np.where(2 * m - 3 > 0, chi2, np.nan)
     # steps without two sensors hold the last good twist (constant-velocity bridge)
@@ -242,7 +245,9 @@ def fuse_steps(steps: SensorSteps, array: SensorArray, *, robust: bool = True, o
             raise NotEnoughDataError("no interval has two valid sensors: the log cannot give a trajectory")
         fill = np.maximum.accumulate(np.where(~bridged, np.arange(K), -1))
         fill = np.where(fill < 0, good[0], fill)
-        u = u[fill]
+        # hold the velocity, not the displacement: a bridged interval may be longer (a dropped record)
+        dt = steps.dt
+        u = u[fill] * (dt / dt[fill])[:, None]
         Ninv = np.where(bridged[:, None, None], np.nan, Ninv)
     return u, Ninv, used.T, rejected.T, bridged, chi2
 
@@ -264,6 +269,8 @@ def dead_reckon(steps: SensorSteps, array: SensorArray, *, pose0=(0.0, 0.0, 0.0)
     if method not in ("exact", "euler"):
         raise InputError(f"method must be 'exact' or 'euler', got {method!r}")
     u, cov, used, rejected, bridged, chi2 = fuse_steps(steps, array, robust=robust)
+    if not np.all(np.isfinite(u)):  # pragma: no cover - fuse_steps bridges singular steps
+        raise NotEnoughDataError("the array gave no finite twist for some steps")
     poses = integrate_twists(u, pose0, method=method)
     dt = steps.dt
     vel = u / dt[:, None]
@@ -271,8 +278,8 @@ def dead_reckon(steps: SensorSteps, array: SensorArray, *, pose0=(0.0, 0.0, 0.0)
     warnings = []
     if bridged.any():
         idx = np.flatnonzero(bridged)
-        warnings.append(Diagnostic("low_quality", f"{idx.size} of {len(u)} intervals had fewer than 2 valid sensors; "
-                                   "the previous velocity was held", indices=tuple(int(i) for i in idx[:200])))
+        warnings.append(Diagnostic("low_quality", f"{idx.size} of {len(u)} intervals had fewer than 2 valid sensors "
+                                   "(or only sensors at one point); the previous velocity was held", indices=tuple(int(i) for i in idx[:200])))
     for i in range(array.n):
         inval = ~steps.valid[i]
         if inval.mean() > 0.05:

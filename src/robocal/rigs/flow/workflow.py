@@ -69,7 +69,8 @@ def write_simulation(run: SimRun, out_dir, *, frames: bool = True, flow_config: 
         paths["frames"] = buf
     paths["reference"] = write_poses_csv(out / "truth.csv", run.t, run.poses, comment="true robot poses (simulation)")
     paths["wheel"] = write_poses_csv(out / "wheel.csv", run.t, run.wheel_poses, comment="wheel odometry with slip")
-    cam = {"focal_px": round(cfg.camera.focal_px, 4), "window": cfg.camera.window, "rate": {"value": cfg.camera.rate, "unit": "Hz"}}
+    cam = {"focal_px": round(cfg.camera.focal_px, 4), "window": cfg.camera.window, "rate": {"value": cfg.camera.rate, "unit": "Hz"},
+           "sigma_px": flow_config.sigma_px}
     extra = {k: Path(v).name for k, v in paths.items()}
     paths["run"] = atomic_write_text(out / "run.yaml", array_yaml(cfg.array_nominal, cam, extra))
     truth = array_yaml(cfg.array_true, cam)
@@ -149,13 +150,22 @@ def calibration_run(spec: RunSpec, *, config: FlowConfig | None = None, window: 
     return cal, steps
 
 
-def calibration_result(cal, spec: RunSpec, *, method: str = "windowed-lsq") -> CalibrationResult:
+def calibration_result(cal, spec: RunSpec | None = None, *, method: str = "windowed-lsq") -> CalibrationResult:
+    """The shared result schema: ``std`` is the statistical std (segment jackknife, see
+    :func:`~robocal.rigs.flow.calibrate.calibrate_array`); the kernel systematic, their
+    combination and the parameters kept at nominal are in ``diagnostics``."""
+    keys = cal.estimate_dict()
     return CalibrationResult(
-        rig="flow", method=method, estimate=cal.estimate_dict(),
-        std={k: cal.std.get(k) for k in cal.estimate_dict()}, units=cal.units(),
+        rig="flow", method=method, estimate=keys,
+        std={k: cal.std.get(k) for k in keys}, units=cal.units(),
         residual_rms=cal.residual_rms, residual_unit="m", warnings=list(cal.warnings),
-        inputs=hash_inputs(spec.inputs()),
-        diagnostics={"windows_per_sensor": cal.n_windows.tolist(), "iterations": cal.lsq.iterations,
+        inputs=hash_inputs(spec.inputs()) if spec is not None else {},
+        diagnostics={"undetermined_kept_nominal": list(cal.undetermined),
+                     "std_systematic_kernel": {k: cal.systematic.get(k) for k in keys},
+                     "std_total": cal.total_std(),
+                     "std_model_white_noise": {k: cal.std_model.get(k) for k in keys},
+                     "std_jackknife": {k: cal.std_jackknife.get(k) for k in keys},
+                     "windows_per_sensor": cal.n_windows.tolist(), "iterations": cal.lsq.iterations,
                      "condition_number": cal.lsq.condition_number, "cost_history": cal.lsq.cost_history},
     )
 

@@ -19,13 +19,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from robocal.diagnostics import Diagnostic
-from robocal.errors import InputError, NotEnoughDataError
+from robocal.errors import InconsistentDataError, InputError, NotEnoughDataError
 from robocal.estimation import LSQResult, Problem, analyze_jacobian, outlier_threshold, solve
 from robocal.io import CalibrationResult
 from robocal.rigs.humanoid.model import CAMERA_PARAMS, FEET, HumanoidModel
 from robocal.rigs.humanoid.simulate import JOINT_RESOLUTION, HumanoidDataset
 
-__all__ = ["PARAMETER_SETS", "resolve_parameters", "HumanoidCalibration", "calibrate", "build_problem"]
+__all__ = ["PARAMETER_SETS", "resolve_parameters", "HumanoidCalibration", "calibrate", "build_problem",
+           "choose_gauge", "check_views_consistent", "plausibility_warnings"]
 
 #: Named parameter sets (``--params``): see :func:`resolve_parameters`.
 PARAMETER_SETS = {
@@ -125,6 +126,28 @@ def corner_noise(model: HumanoidModel, data: HumanoidDataset, x) -> float:
     return float(np.sqrt(ss / max(dof, 1)))
 
 
+def choose_gauge(pre) -> list[str]:
+    """One parameter per null-space direction to hold fixed (the gauge), from an
+    :class:`~robocal.estimation.Identifiability` of the selected problem.
+
+    Pivoted QR on the transposed null-space basis ``N^T`` (k x n, column-scaled coordinates)
+    picks the k parameters with the largest independent null-space components, so that fixing
+    them removes every null direction and the k x k block of ``N`` stays well conditioned.
+    Among near-equal components a parameter outside the seed's usual set (HeadYaw, HeadPitch,
+    camera.x, camera.y) is preferred, as its value is the least interesting one.
+    """
+    import scipy.linalg
+
+    N = np.asarray(pre.null_space)
+    k = N.shape[1] if N.ndim == 2 else 0
+    if k == 0:
+        return []
+    prefer = np.array([1.2 if lab in ("HeadYaw", "HeadPitch", "camera.x", "camera.y") else 1.0
+                       for lab in pre.labels])
+    _, _, piv = scipy.linalg.qr(N.T * prefer, pivoting=True, mode="economic")
+    return [pre.labels[j] for j in sorted(piv[:k])]
+
+
 def build_problem(model: HumanoidModel, data: HumanoidDataset, free: Sequence[str], *, tie: bool = False,
                   x0=None, analytic: bool = True, corner_sigma: float = 0.3,
                   joint_sigma: float = 0.0) -> tuple[Problem, np.ndarray]:
@@ -206,6 +229,10 @@ class HumanoidCalibration:
     first_iterations: int = 0
     held: list = field(default_factory=list)
     first_cost_history: np.ndarray | None = None
+    undetermined: list = field(default_factory=list)
+    rank: int | None = None
+    n_params: int | None = None
+    two_pass: bool = False
 
     # -- queries -----------------------------------------------------------------------------
     @property
@@ -214,16 +241,34 @@ class HumanoidCalibration:
 
     @property
     def unidentifiable(self) -> list[str]:
-        """Selected parameters the data do not determine (no value is reported for them)."""
-        return [lab for lab in self.labels if lab in self.held or lab in self.lsq.unidentifiable]
+        """Selected parameters the data do not determine (no value is reported for them): those with
+        a component in the Jacobian's null space (the gauge ``held`` is among them)."""
+        bad = set(self.undetermined) | set(self.held) | set(self.lsq.unidentifiable)
+        return [lab for lab in self.labels if lab in bad]
+
+    @property
+    def jacobian_rank(self) -> tuple[int, int]:
+        """``(rank, number of free parameters)`` of the selected problem, before any gauge is held."""
+        if self.rank is None:
+            return self.lsq.rank, len(self.lsq.free_labels)
+        return self.rank, self.n_params
+
+    @property
+    def correlations(self) -> list:
+        """Strongest correlations among the determined parameters ``(a, b, r)`` (the ones of
+        undetermined parameters depend on the gauge and mean nothing)."""
+        bad = set(self.unidentifiable)
+        return [(a, b, c) for a, b, c in self.lsq.correlations if a not in bad and b not in bad]
 
     def value(self, label: str) -> float | None:
         """Estimate of a parameter; None for an unidentifiable one; fixed ones at their value."""
-        if label in self.held or (label in self.lsq.std and self.lsq.std[label] is None):
+        if label in self.unidentifiable or (label in self.lsq.std and self.lsq.std[label] is None):
             return None
         return float(self.params[self.labels.index(label)])
 
     def std(self, label: str) -> float | None:
+        if label in self.unidentifiable:
+            return None
         return self.lsq.std.get(label)
 
     @property
@@ -248,10 +293,13 @@ class HumanoidCalibration:
         return {p: (self.value(f"camera.{p}") if f"camera.{p}" in self.free else 0.0) for p in CAMERA_PARAMS}
 
     def corrected_tree(self):
-        """Tree with offsets and the camera correction folded into the joint origins
-        (unidentifiable parameters left at 0)."""
-        p = np.where([self.value(lab) is None for lab in self.labels], 0.0, self.params)
-        return self.model.corrected_tree(p).fold_offsets()
+        """Tree with offsets and the camera correction folded into the joint origins.
+
+        Undetermined parameters enter at the solution the gauge picked (the gauge ``held`` at its
+        start value, the others fitted): that combination, not its parts, is what the data fix, so
+        the tree reproduces the calibrated projection.
+        """
+        return self.model.corrected_tree(self.params).fold_offsets()
 
     def write_urdf(self, path) -> str:
         """Write the corrected URDF (use it with the raw sensor angles)."""
@@ -291,11 +339,12 @@ class HumanoidCalibration:
             "cost_history_first_pass": self.first_cost_history,
             "status": lsq.status,
             "message": lsq.message,
-            "rank": lsq.rank,
-            "n_free": len(lsq.free_labels),
+            "rank": self.jacobian_rank[0],
+            "n_free": self.jacobian_rank[1],
+            "gauge_held": list(self.held),
             "condition_number": lsq.condition_number,
             "singular_values": lsq.singular_values,
-            "correlations": [[a, b, c] for a, b, c in lsq.correlations[:10]],
+            "correlations": [[a, b, c] for a, b, c in self.correlations[:10]],
             "unidentifiable": self.unidentifiable,
             "weakly_determined": lsq.weakly_determined,
             "rms_x_px": float(self.rms_xy[0]),
@@ -325,26 +374,99 @@ class HumanoidCalibration:
         """Plain-text summary: RMS, identifiability, the parameter table."""
         lsq = self.lsq
         lines = [f"views used: {self.data.n_views}, corners: {self.residuals.shape[0] * self.residuals.shape[1]}",
-                 f"LM iterations: {lsq.iterations}; residual RMS x {self.rms_xy[0]:.3f} px, "
-                 f"y {self.rms_xy[1]:.3f} px",
-                 f"Jacobian rank {lsq.rank + len(self.held)} of {len(lsq.free_labels) + len(self.held)} free "
-                 f"parameters, condition number {lsq.condition_number:.3g}"
-                 + (f" (without the undetermined {', '.join(self.held)})" if self.held else "")]
+                 f"LM iterations: {self.first_iterations} from zero"
+                 + (f" + {lsq.iterations} with the measured corner noise" if self.two_pass else "")
+                 + f"; residual RMS x {self.rms_xy[0]:.3f} px, y {self.rms_xy[1]:.3f} px",
+                 self.rank_text()]
         for r in self.parameter_rows():
             val = "not identifiable" if r["value"] is None else f"{r['value']:+.4f} +- {r['std']:.4f} {r['unit']}"
             lines.append(f"  {r['parameter']:<18s} {val}")
-        if lsq.correlations:
+        if self.correlations:
             lines.append("strongest correlations: " + ", ".join(f"{a}/{b} {c:+.2f}"
-                                                                 for a, b, c in lsq.correlations[:5]))
-        for w in self.warnings:
-            lines.append(f"warning [{w.code}]: {w.message}")
+                                                                 for a, b, c in self.correlations[:5]))
         return "\n".join(lines)
+
+    def rank_text(self) -> str:
+        """'Jacobian rank r of n free parameters ...', with the undetermined ones and the gauge."""
+        r, n = self.jacobian_rank
+        text = f"Jacobian rank {r} of {n} free parameters"
+        if r < n:
+            text += (f" ({len(self.unidentifiable)} not determined: {', '.join(self.unidentifiable)}; gauge "
+                     f"{', '.join(self.held)} held at the start value)")
+        return text + f", condition number {self.lsq.condition_number:.3g}" + \
+            (f" (of the {len(self.lsq.free_labels)} solved)" if r < n else "")
+
+
+#: A view is refused when its corners lie further than this from the nominal prediction [px]
+#: and :data:`NOMINAL_RATIO` times the median view's distance. Offsets of 0.5 deg (the simulator's
+#: scale) put corners up to 28 px from it, 2 deg up to 110 px; a mislabelled foot 250 px, two
+#: swapped joint records 136 px (measured, 20 x 16 simulated views).
+NOMINAL_MIN_PX = 60.0
+NOMINAL_RATIO = 4.0
+#: After the solve: a joint or camera-rotation offset beyond this [rad] is implausible for an
+#: assembled robot (NAO's are within ~1 deg, seed 001 Table 2).
+PLAUSIBLE_OFFSET = np.radians(5.0)
+
+
+def check_views_consistent(model: HumanoidModel, data: HumanoidDataset, x0=None) -> np.ndarray:
+    """Refuse views whose joint record or foot label does not match the image.
+
+    For each view, the median distance [px] between the detected corners and the corners the
+    model predicts from the joint readings at ``x0`` (default zero offsets, seed 001 eq. 5) is
+    compared with ``max(NOMINAL_MIN_PX, NOMINAL_RATIO * median over views)``: offsets move every
+    view's corners alike, a wrong record or foot moves one view's. Raises
+    :class:`InconsistentDataError` naming the first such view; returns the distances (V,) [px].
+    """
+    x0 = np.zeros(len(model.parameter_labels())) if x0 is None else np.asarray(x0, dtype=float)
+    pred = model.project(data.theta, data.feet, x0, check=False)
+    dist = np.median(np.linalg.norm(pred - data.corners, axis=-1), axis=1)
+    dist = np.where(np.isfinite(dist), dist, np.inf)  # board behind the camera: as far as can be
+    typical = float(np.median(dist))
+    tol = max(NOMINAL_MIN_PX, NOMINAL_RATIO * typical)
+    bad = np.flatnonzero(dist > tol)
+    if bad.size:
+        v = int(bad[np.argmax(dist[bad])])
+        raise InconsistentDataError(
+            f"view {data.names[v]!r} ({data.feet[v]} board): detected corners are {dist[v]:.0f} px (median) from "
+            f"where its joint record puts them, expected < {tol:.0f} px (median view {typical:.0f} px): the joint "
+            f"record or the foot label does not match the image"
+            + (f" ({bad.size} such views: {[data.names[i] for i in bad]})" if bad.size > 1 else ""))
+    return dist
+
+
+def plausibility_warnings(model: HumanoidModel, free, params, view_rms, names,
+                          residual_variance: float) -> list[Diagnostic]:
+    """``inconsistent_data`` warnings after a solve: joint/camera-rotation offsets beyond
+    :data:`PLAUSIBLE_OFFSET`, views whose RMS is 10x the median view's (and > 1 px), and a residual
+    variance 25x the noise model's. Each suggests a wrong joint record, foot label or model."""
+    out = []
+    labels = model.parameter_labels()
+    units = model.parameter_units()
+    big = [(lab, float(np.degrees(params[labels.index(lab)]))) for lab in free
+           if units[labels.index(lab)] == "rad" and not lab.startswith("board.")
+           and abs(params[labels.index(lab)]) > PLAUSIBLE_OFFSET]
+    if big:
+        out.append(Diagnostic("inconsistent_data", "implausible offsets (> {:.0f} deg): {}; check the joint "
+                              "records, foot labels and model".format(
+                                  np.degrees(PLAUSIBLE_OFFSET), ", ".join(f"{a} {b:+.1f} deg" for a, b in big)),
+                              params=tuple(a for a, _ in big)))
+    med = float(np.median(view_rms))
+    far = [i for i, r in enumerate(view_rms) if r > max(1.0, 10 * med)]
+    if far:
+        out.append(Diagnostic("inconsistent_data", f"view(s) fit far worse than the rest (RMS > 10x the median "
+                              f"{med:.2f} px): " + ", ".join(f"{names[i]} {view_rms[i]:.1f} px" for i in far)
+                              + "; check their joint records and foot labels", indices=tuple(far)))
+    if residual_variance > 25.0:
+        out.append(Diagnostic("inconsistent_data", f"residual variance {residual_variance:.3g} times the noise "
+                              f"model's: the model does not explain the data"))
+    return out
 
 
 def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | Sequence[str] = "seed",
               tie: bool = False, jac: str = "analytic", method: str = "lm", x0=None,
               corner_sigma: float | None = None, joint_resolution: float = JOINT_RESOLUTION,
-              outlier_sigma: float = 3.0, progress: bool = False) -> HumanoidCalibration:
+              outlier_sigma: float = 3.0, progress: bool = False,
+              check_consistency: bool = True) -> HumanoidCalibration:
     """Estimate the selected offsets from the corners of every complete view.
 
     Parameters
@@ -375,11 +497,20 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
     outlier_sigma : float
         Corners whose residual exceeds this many sigma (chi-square(2) test on
         the 2x2 noise block, scaled by the residual variance) are named.
+    check_consistency : bool
+        Refuse views whose corners are far from where the joint record and
+        foot label put them (:func:`check_views_consistent`), and warn
+        (``inconsistent_data``) about implausible offsets after the solve
+        (:func:`plausibility_warnings`).
 
     Returns
     -------
     HumanoidCalibration
     """
+    if corner_sigma is not None and not (np.isfinite(corner_sigma) and corner_sigma > 0):
+        raise InputError(f"corner_sigma must be a finite number > 0 px, got {corner_sigma}")
+    if not (np.isfinite(joint_resolution) and joint_resolution >= 0):
+        raise InputError(f"joint_resolution must be a finite number >= 0 rad, got {joint_resolution}")
     free = resolve_parameters(model, parameters)
     messages = list(data.messages)
     ok = _valid_views(data)
@@ -395,30 +526,46 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
     n_res = used.corners.shape[0] * used.corners.shape[1] * 2
     if n_res < len(free):
         raise NotEnoughDataError(f"{n_res} residuals for {len(free)} parameters")
+    if check_consistency:
+        check_views_consistent(model, used, x0)
     joint_sigma = joint_resolution / np.sqrt(12.0)
     sig = 0.3 if corner_sigma is None else float(corner_sigma)
     prob, S = build_problem(model, used, free, tie=tie, x0=x0, analytic=True,
                             corner_sigma=sig, joint_sigma=joint_sigma)
-    # Parameters the poses cannot determine are held at their start value and
-    # reported without a value: LM would otherwise wander along the null space.
+    # Gauge: along each null-space direction LM would wander, so hold one parameter per direction
+    # at its start value (k parameters for a k-dimensional null space) and solve for all others.
+    # Parameters orthogonal to the null space are estimable: their least-squares estimate does not
+    # depend on which point of the solution set the gauge picks, so they stay unbiased; the ones
+    # with a null-space component are gauge-dependent and get no value. Holding every such
+    # parameter instead (k' > k) removes directions the data do determine and biases the rest.
     pre = analyze_jacobian(prob.jacobian_at(), prob.free_labels)
-    held = list(pre.unidentifiable)
-    if held:
-        solvable = [lab for lab in free if lab not in held and prob.ties.get(lab, (None,))[0] not in held]
-        if not solvable:
-            raise NotEnoughDataError(f"the views determine none of the selected parameters ({', '.join(held)})")
+    gauge = choose_gauge(pre)
+    undetermined = list(pre.unidentifiable)
+    warn_held = None
+    if undetermined:
+        tied_to = {lab: prob.ties[lab][0] for lab in prob.ties} if prob.ties else {}
+        undetermined += [lab for lab, master in tied_to.items() if master in undetermined]
+        held_all = set(gauge) | {lab for lab, master in tied_to.items() if master in gauge}
+        solvable = [lab for lab in free if lab not in held_all]
+        if not solvable or all(lab in undetermined for lab in solvable):
+            raise NotEnoughDataError(f"the views determine none of the selected parameters "
+                                     f"({', '.join(undetermined)})")
+        k = len(pre.labels) - pre.rank
         warn_held = Diagnostic(
             "rank_deficient",
-            f"the poses do not determine {', '.join(held)} (Jacobian rank {pre.rank} < {len(pre.labels)} at the "
-            f"start; unobservable: {'; '.join(pre.null_directions())}): held at their start value, no value "
-            f"reported", params=tuple(held))
+            f"the poses do not determine {', '.join(undetermined)} (Jacobian rank {pre.rank} of "
+            f"{len(pre.labels)} at the start; unobservable: {'; '.join(pre.null_directions())}): no value "
+            f"reported for them; {', '.join(gauge)} held at the start value to fix the {k} null "
+            f"direction(s), the others are estimated", params=tuple(undetermined))
         free = solvable
+        gauge = sorted(held_all, key=model.parameter_labels().index)
     prob, S = build_problem(model, used, free, tie=tie, x0=x0, analytic=(jac == "analytic"),
                             corner_sigma=sig, joint_sigma=joint_sigma)
     res = solve(prob, method=method, jac=None if jac == "analytic" else jac, progress=progress,
                 outlier_sigma=outlier_sigma)
     first_iterations = res.iterations
     first_history = np.asarray(res.cost_history)
+    two_pass = False
     if corner_sigma is None and joint_sigma > 0:
         # Second pass with the corner noise measured where joint errors cannot reach.
         sig = corner_noise(model, used, res.params["p"].reshape(-1))
@@ -426,6 +573,7 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
                                 analytic=(jac == "analytic"), corner_sigma=sig, joint_sigma=joint_sigma)
         res = solve(prob, method=method, jac=None if jac == "analytic" else jac, progress=progress,
                     outlier_sigma=outlier_sigma)
+        two_pass = True
     params = res.params["p"].reshape(-1)
     V, N = used.corners.shape[:2]
     resid = model.project(used.theta, used.feet, params, check=False) - used.corners
@@ -439,7 +587,7 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
     flat = np.flatnonzero(score.reshape(-1) > thr)
     outliers = [(used.names[int(i) // N], int(i) % N) for i in flat]
     warnings = [w for w in res.warnings if w.code != "outliers"]
-    if held:
+    if warn_held is not None:
         warnings.insert(0, warn_held)
     if outliers:
         by_view: dict[str, list[int]] = {}
@@ -451,8 +599,13 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
                                    indices=tuple(int(i) for i in flat)))
     dropped = [i for i, good in enumerate(ok) if not good]
     if dropped:
-        warnings.append(Diagnostic("dropped", f"{len(dropped)} view(s) without a fully detected board were "
-                                              f"dropped: {[data.names[i] for i in dropped]}",
+        warnings.append(Diagnostic("dropped", f"{len(dropped)} view(s) without a fully and correctly detected "
+                                              f"board were dropped: {[data.names[i] for i in dropped]}",
                                    indices=tuple(dropped)))
-    return HumanoidCalibration(model, used, res, params, free + held, resid, view_rms, outliers, messages,
-                               warnings, score, sig, joint_resolution, first_iterations, held, first_history)
+    if check_consistency:
+        warnings += plausibility_warnings(model, free, params, view_rms, used.names, res.residual_variance)
+    selected = [lab for lab in model.parameter_labels() if lab in free or lab in gauge]
+    return HumanoidCalibration(model, used, res, params, selected, resid, view_rms, outliers, messages,
+                               warnings, score, sig, joint_resolution, first_iterations, list(gauge),
+                               first_history, undetermined=undetermined, rank=pre.rank,
+                               n_params=len(pre.labels), two_pass=two_pass)

@@ -150,7 +150,8 @@ def build_report(cal: HumanoidCalibration, *, title: str = "NAO leg and camera c
         {"quantity": "joint resolution [deg]", "value": float(np.degrees(cal.joint_resolution))},
         {"quantity": "residual variance / model", "value": float(lsq.residual_variance)},
         {"quantity": "LM iterations (from zero)", "value": cal.first_iterations},
-        {"quantity": "Jacobian rank", "value": f"{lsq.rank + len(cal.held)} of {len(cal.free)}"},
+        {"quantity": "LM iterations (measured corner noise)", "value": lsq.iterations if cal.two_pass else "—"},
+        {"quantity": "Jacobian rank", "value": "{} of {}".format(*cal.jacobian_rank)},
         {"quantity": "condition number (scaled)", "value": float(lsq.condition_number)},
         {"quantity": "outlier corners (> 3 sigma)", "value": len(cal.outlier_corners)},
     ])
@@ -167,11 +168,12 @@ def build_report(cal: HumanoidCalibration, *, title: str = "NAO leg and camera c
     o.table([{"correction": k, "value": v} for k, v in doc.items() if k != "frame"],
             caption=f"camera mounting correction in {doc['frame']}")
     i = rep.section("Identifiability")
-    i.text(f"Jacobian rank {lsq.rank + len(cal.held)} of {len(cal.free)} free parameters; condition number of "
-           f"the column-scaled Jacobian {lsq.condition_number:.3g}.")
+    i.text(cal.rank_text() + " (column-scaled Jacobian).")
     if cal.unidentifiable:
-        i.text("Not determined by these poses (no value reported): " + ", ".join(cal.unidentifiable), cls="warn")
-    i.table([{"parameter a": a, "parameter b": b, "correlation": c} for a, b, c in lsq.correlations[:8]],
+        i.text("Not determined by these poses (no value reported): " + ", ".join(cal.unidentifiable)
+               + f". To fix the null space, {', '.join(cal.held)} was held at its start value and the "
+               "others were estimated; the determined parameters do not depend on that choice.", cls="warn")
+    i.table([{"parameter a": a, "parameter b": b, "correlation": c} for a, b, c in cal.correlations[:8]],
             caption="strongest correlations")
     r = rep.section("Residuals")
     fig, ax = new_figure(1, 2, size=(11, 3.6))

@@ -25,6 +25,8 @@ from robocal.rigs.humanoid.model import FEET, HumanoidModel
 
 __all__ = [
     "JOINT_RESOLUTION",
+    "OUTLINE_MARGIN",
+    "board_outline",
     "DEFAULT_HEAD",
     "Truth",
     "HumanoidDataset",
@@ -142,17 +144,40 @@ def quantise(theta, resolution: float = JOINT_RESOLUTION) -> np.ndarray:
     return theta if resolution <= 0 else np.round(theta / resolution) * resolution
 
 
+#: Margin [px] the outer edge of the printed squares keeps from the image border: the detector
+#: needs the outer squares whole (a cut square shifts or loses the corner next to it).
+OUTLINE_MARGIN = 4.0
+
+
+def board_outline(board) -> np.ndarray:
+    """Outer edge of the squares (not of the quiet zone) in the board frame [m], shape (8, 3):
+    the four outer corners, one square beyond the extreme inner corners, and the edge midpoints
+    (so that lens distortion cannot bend an edge out of the image between corners)."""
+    sq = board.square
+    x0, x1 = -sq, board.cols * sq
+    y0, y1 = -sq, board.rows * sq
+    xm, ym = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+    return np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0],
+                     [xm, y0, 0], [x1, ym, 0], [xm, y1, 0], [x0, ym, 0]], dtype=float)
+
+
 def _views_ok(model, q, foot, params, margin, min_facing, min_clearance):
-    """Visibility, facing and foot-clearance test for candidate joint values q (offsets included)."""
+    """Visibility, facing and foot-clearance test for candidate joint values q (offsets included).
+
+    Visible: every inner corner ``margin`` px inside the image and the outer edge of the squares
+    (:func:`board_outline`) :data:`OUTLINE_MARGIN` px inside, i.e. the whole 5 x 7 board shows.
+    """
     n = len(model.joint_names)
     cam = params[n:n + 5]
     fi = FEET.index(foot)
     board = params[n + 5 + 3 * fi:n + 8 + 3 * fi]
     T = model.T_opt_board(q, foot, cam, board)
-    p = np.einsum("vij,nj->vni", T[:, :3, :3], model.object_points) + T[:, None, :3, 3]
-    front = np.all(p[..., 2] > 0.05, axis=1)
-    uv = model.camera.project(np.where(p[..., 2:3] > 0.05, p, 1.0), check=False)
-    ok = front & np.all(model.camera.in_image(uv, margin=margin), axis=1)
+    ok = np.ones(len(T), dtype=bool)
+    for pts, mg in ((model.object_points, margin), (board_outline(model.board), OUTLINE_MARGIN)):
+        p = np.einsum("vij,nj->vni", T[:, :3, :3], pts) + T[:, None, :3, 3]
+        front = np.all(p[..., 2] > 0.05, axis=1)
+        uv = model.camera.project(np.where(p[..., 2:3] > 0.05, p, 1.0), check=False)
+        ok &= front & np.all(model.camera.in_image(uv, margin=mg), axis=1)
     # printed face toward the camera: the board's +z (into the plate) points away from it
     facing = np.einsum("vi,vi->v", T[:, :3, 2], T[:, :3, 3]) / np.linalg.norm(T[:, :3, 3], axis=1)
     ok &= facing > min_facing
@@ -179,8 +204,9 @@ def sample_poses(model: HumanoidModel, n_per_foot: int, rng: np.random.Generator
 
     For each view, the joints of the viewed leg are drawn uniformly within
     their limits (the HipYawPitch range is shared when tied), the other leg
-    rests straight, the head is at ``head``; a pose is kept when every corner
-    of the board lies ``margin`` px inside the image of the *true* robot, the
+    rests straight, the head is at ``head``; a pose is kept when every inner
+    corner of the board lies ``margin`` px inside the image of the *true* robot
+    and the outer edge of the squares :data:`OUTLINE_MARGIN` px inside, the
     printed face is turned toward the camera (cosine > ``min_facing``) and
     the two feet stay ``min_clearance`` m apart (plate centres).
 
@@ -197,7 +223,7 @@ def sample_poses(model: HumanoidModel, n_per_foot: int, rng: np.random.Generator
     n = len(names)
     lim = np.array([model.tree.joint(j).limits or (-np.pi, np.pi) for j in names])
     alpha = params[:n]
-    batch = batch or max(64, 10 * n_per_foot)  # about 20 % of random leg poses show the board
+    batch = batch or max(256, 80 * n_per_foot)  # about 1.5 % of random leg poses show the whole board
     feet, poses = [], []
     for foot in FEET:
         legs = [names.index(j) for j in model.mounts[foot].leg_joints]

@@ -12,12 +12,27 @@ import numpy as np
 
 from robocal.cli import DemoContext, DemoOutcome, Rig
 from robocal.cli._common import RawHelp, add_out_argument, add_seed_argument, examples_epilog, prepare_out_dir, write_run
+from robocal.errors import InputError, RobocalError
 from robocal.io import load_result
 from robocal.rigs.mirror import workflow
 
 __all__ = ["RIG"]
 
 EXAMPLES = Path("examples/mirror")
+
+
+def _number(kind, minimum, strict):
+    """argparse type: a ``kind`` (int/float) >= minimum (> minimum when strict); bad values -> usage error."""
+    def parse(text):
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        if not np.isfinite(v) or v < minimum or (strict and v == minimum):
+            raise argparse.ArgumentTypeError(f"must be {'>' if strict else '>='} {minimum}, got {text}")
+        return v
+    parse.__name__ = kind.__name__
+    return parse
 
 
 def _add_commands(parser: argparse.ArgumentParser) -> None:
@@ -31,8 +46,9 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
                                "robocal mirror simulate --placements 4 --sigma 0.5 --seed 3 --out sim",
                                "robocal mirror simulate --images --out sim   # rendered images, ArUco body tags",
                                "robocal mirror calibrate sim/mirror_input.yaml --out cal"))
-    p.add_argument("--placements", type=int, default=1, help="number of mirror placements (images)")
-    p.add_argument("--sigma", type=float, default=0.5, help="pixel noise sigma [px] (point files)")
+    p.add_argument("--placements", type=_number(int, 1, False), default=1, help="number of mirror placements (images)")
+    p.add_argument("--sigma", type=_number(float, 0.0, False), default=0.5,
+                   help="pixel noise sigma [px] (point files); 0 = noise-free, sigma_px then left out of the file")
     p.add_argument("--images", action="store_true",
                    help="render images with ArUco tags on the body instead of writing image points")
     add_seed_argument(p)
@@ -80,6 +96,9 @@ def _cmd_calibrate(args) -> int:
     s = cal.std_translation * 1e3
     print(f"t_r_c = [{t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}] mm  (std {s[0]:.1f}, {s[1]:.1f}, {s[2]:.1f} mm); "
           f"rotation std {np.degrees(cal.std_rotation).max():.3g} deg")
+    line = workflow.planar_summary(cal)
+    if line:
+        print(line)
     return 0
 
 
@@ -87,8 +106,14 @@ def _cmd_report(args) -> int:
     from robocal.rigs.mirror.report import build_report
 
     result = load_result(args.result)
+    if result.rig != "mirror":
+        raise InputError(f"{args.result}: a result of rig {result.rig!r}, not 'mirror'")
+    try:
+        report = build_report(result)
+    except RobocalError as exc:
+        raise exc.with_source(str(args.result)) from None
     out = prepare_out_dir(args.out, "mirror-report")
-    write_run(out, None, build_report(result))
+    write_run(out, None, report)
     return 0
 
 
@@ -103,7 +128,10 @@ RIG = Rig(
         "Foot-eye calibration of a mobile robot: a plane mirror with four markers (a known rectangle) in front\n"
         "of the robot; the camera sees the markers and the reflection of feature points on the body.\n"
         "One image gives the camera pose in the robot frame (the patent's method); several mirror\n"
-        "placements are refined jointly with uncertainty."
+        "placements are refined jointly with uncertainty.\n\n"
+        + examples_epilog("robocal mirror simulate --placements 4 --out sim",
+                          f"robocal mirror calibrate {EXAMPLES}/published_single.yaml --out cal",
+                          "robocal mirror report cal/result.json --out cal")
     ),
     add_commands=_add_commands,
     demo=_demo,

@@ -16,6 +16,7 @@ import numpy as np
 
 from robocal.camera import CameraModel, MarkerRectangle
 from robocal.geometry import euler_from_matrix, invert_transform, rotvec_from_matrix
+from robocal.errors import FileFormatError
 from robocal.io import CalibrationResult
 from robocal.report import Report, new_figure
 from robocal.rigs.mirror.calibrate import MirrorCalibration, MirrorObservation, residual_model, _layout
@@ -49,6 +50,7 @@ def result_from_calibration(cal: MirrorCalibration, *, inputs=None, image_paths=
             "T_m_r": s.steps.T_m_r.tolist(),
             "householder_minus_patent": float(np.abs(s.T_c_r_householder - s.steps.T_c_r).max()),
             "planar_choice": s.choice.to_dict(),
+            # per coordinate (u and v), as residual_rms
             "marker_rms_px": float(np.sqrt(np.mean(s.marker_residuals**2))),
             "body_rms_px": float(np.sqrt(np.mean(s.body_residuals**2))),
         })
@@ -77,6 +79,21 @@ def result_from_calibration(cal: MirrorCalibration, *, inputs=None, image_paths=
         residual_rms=float(np.sqrt(np.mean(allres**2))), residual_unit="px",
         warnings=list(cal.warnings), inputs=dict(inputs or {}), diagnostics=diag,
     )
+
+
+#: What :func:`build_report` reads from a result record: (section, keys).
+_REQUIRED = (("estimate", ("T_r_c", "T_c_m")), ("std", ("t_r_c", "rotvec_r_c")),
+             ("diagnostics", ("camera", "rectangle", "body_points_r", "observations", "single_image")))
+
+
+def _check_record(result: CalibrationResult) -> None:
+    """One-line error for a record that is not a complete mirror result (e.g. another rig's)."""
+    for section, keys in _REQUIRED:
+        block = getattr(result, section) or {}
+        for key in keys:
+            if not isinstance(block, dict) or key not in block:
+                raise FileFormatError(f"field '{section}.{key}' is missing: expected a result written by "
+                                      f"'robocal mirror calibrate' (rig {result.rig!r})")
 
 
 def _quat(T):
@@ -148,7 +165,12 @@ def _frames_3d(T_r_c, T_c_m, body_points_r, ax=None):
 
 def build_report(result: CalibrationResult, *, title: str = "robocal mirror — camera-to-robot calibration",
                  images=None) -> Report:
-    """HTML report from a result record (see :func:`result_from_calibration`)."""
+    """HTML report from a result record (see :func:`result_from_calibration`).
+
+    Raises :class:`~robocal.errors.FileFormatError` naming the first missing
+    field when the record lacks what the report is drawn from.
+    """
+    _check_record(result)
     d = result.diagnostics
     cam = CameraModel.from_dict(d["camera"])
     rect = MarkerRectangle(d["rectangle"]["width"], d["rectangle"]["height"])
@@ -179,11 +201,20 @@ def build_report(result: CalibrationResult, *, title: str = "robocal mirror — 
     rows = []
     for si in d["single_image"]:
         Ts = np.asarray(si["T_r_c"])
+        pc = si["planar_choice"]
+        alt = "-"
+        if pc.get("ambiguous") and "candidate_T_r_c" in pc:
+            Ta = np.asarray(pc["candidate_T_r_c"])[1 - int(pc["chosen"])]
+            alt = np.round(Ta[:3, 3] * 1e3, 1).tolist()
         rows.append({"image": si["name"], "t_r_c [mm]": np.round(Ts[:3, 3] * 1e3, 1).tolist(),
                      "marker rms [px]": si["marker_rms_px"], "body rms [px]": si["body_rms_px"],
                      "|Householder - patent|": si["householder_minus_patent"],
-                     "IPPE chosen": si["planar_choice"]["chosen"], "why": si["planar_choice"]["reason"]})
-    s2.table(rows, digits=4)
+                     "IPPE pose": pc["chosen"], "decisive": "yes" if pc.get("decisive", True) else "NO (guess)",
+                     "other pose's t_r_c [mm]": alt, "why": pc["reason"]})
+    s2.table(rows, digits=4, caption="rms per coordinate (u, v). IPPE returns two poses of the four coplanar "
+                                     "markers; pose 0 is the one with the lower marker reprojection error. "
+                                     "'decisive' = a test separated them (else the pick is a guess, and "
+                                     "'other pose's t_r_c' is the equally likely alternative answer).")
     s3 = rep.section("Images: detected and reprojected points, frames m and ri")
     images = images or {}
     for k, o in enumerate(obs[:4]):

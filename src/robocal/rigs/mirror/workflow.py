@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from robocal.errors import InputError, RobocalError
 from robocal.io import hash_inputs, load_document
 from robocal.rigs.mirror.calibrate import MirrorCalibration, calibrate
 from robocal.rigs.mirror.files import load_input, write_input
@@ -17,7 +18,7 @@ from robocal.rigs.mirror.render import default_body_tags, detect_mirror_image, r
 from robocal.rigs.mirror.report import build_report, result_from_calibration
 from robocal.rigs.mirror.simulate import default_setup, simulate_observations
 
-__all__ = ["simulate_files", "calibrate_file", "demo"]
+__all__ = ["simulate_files", "calibrate_file", "planar_summary", "demo"]
 
 INPUT_NAME = "mirror_input.yaml"
 
@@ -36,6 +37,10 @@ def simulate_files(out_dir, *, placements: int = 1, sigma_px: float = 0.5, seed:
     """
     import cv2
 
+    if int(placements) < 1:
+        raise InputError(f"placements: must be >= 1, got {placements}")
+    if not np.isfinite(sigma_px) or sigma_px < 0:
+        raise InputError(f"sigma_px: must be >= 0, got {sigma_px}")
     out_dir = Path(out_dir)
     rng = np.random.default_rng(seed)
     cam, scene = default_setup(placements, rng)
@@ -56,7 +61,10 @@ def simulate_files(out_dir, *, placements: int = 1, sigma_px: float = 0.5, seed:
                            comment="robocal mirror simulate --images: rendered images, ArUco tags on the body")
     else:
         obs = simulate_observations(cam, scene, rng, sigma_px=sigma_px)
-        path = write_input(out_dir / INPUT_NAME, cam, scene.rectangle, scene.body_points_r, obs, sigma_px=sigma_px,
+        # sigma_px: 0 is no noise model calibrate can use (it must be > 0): leave it out, so the noise
+        # level is estimated from the residuals
+        path = write_input(out_dir / INPUT_NAME, cam, scene.rectangle, scene.body_points_r, obs,
+                           sigma_px=sigma_px if sigma_px > 0 else None,
                            comment=f"robocal mirror simulate: {placements} placement(s), {sigma_px} px noise")
     with open(path, "a", encoding="utf-8") as fh:  # ground truth, for the report only
         fh.write(yaml.safe_dump({"truth": _truth_block(scene.T_r_c)}, default_flow_style=None))
@@ -75,11 +83,28 @@ def _read_truth(path) -> np.ndarray | None:
     return T
 
 
+def planar_summary(cal: MirrorCalibration) -> str:
+    """One line on the marker planar ambiguity for stdout ('' when no image had two distinct poses)."""
+    amb = [s for s in cal.singles if s.choice.ambiguous]
+    if not amb:
+        return ""
+    guessed = [o.name for s, o in zip(cal.singles, cal.observations)
+               if s.choice.ambiguous and not s.choice.decisive]
+    text = (f"planar choice: {len(amb)} of {len(cal.singles)} image(s) had two marker poses; "
+            f"{len(amb) - len(guessed)} decided by a test")
+    if guessed:
+        text += f", {len(guessed)} guessed ({', '.join(guessed)})"
+    return text + "; reasons and the other pose's answer in report.html"
+
+
 def calibrate_file(path, *, refine: bool = True, progress: bool = False):
     """Calibrate from an input file: ``(MirrorCalibration, CalibrationResult, Report)``."""
     inp = load_input(path)
-    cal = calibrate(inp.camera, inp.rectangle, inp.body_points_r, inp.observations, sigma_px=inp.sigma_px,
-                    refine=refine, progress=progress)
+    try:
+        cal = calibrate(inp.camera, inp.rectangle, inp.body_points_r, inp.observations, sigma_px=inp.sigma_px,
+                        refine=refine, progress=progress)
+    except RobocalError as exc:  # the library names the image and field; the user also needs the file
+        raise (exc if exc.source else exc.with_source(str(path))) from None
     truth = _read_truth(path)
     inputs = hash_inputs([path, *inp.image_paths.values()])
     result = result_from_calibration(cal, inputs=inputs, image_paths=inp.image_paths, truth=truth)
