@@ -141,7 +141,11 @@ def _print_table(rows) -> None:
 
 def main(argv=None) -> int:
     args = None
-    set_command_line(sys.argv[1:] if argv is None else argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv == ["--version"]:  # answered before the rigs are imported (~1 s)
+        print(f"robocal {robocal.__version__}")
+        return 0
+    set_command_line(argv)
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
