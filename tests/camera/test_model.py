@@ -30,6 +30,21 @@ def test_project_points_matches_opencv_with_pose(cam):
     assert np.max(np.abs(got - ref)) < 1e-9
 
 
+def test_project_points_broadcasts_poses(cam):
+    # V views of the same N points in one call, each matching OpenCV's projectPoints
+    rng = np.random.default_rng(5)
+    p = rng.uniform(-0.1, 0.1, (30, 3))
+    rv, tv = rng.normal(size=(4, 3)) * 0.2, np.c_[rng.normal(size=(4, 2)) * 0.02, np.full(4, 0.6)]
+    T = transform_from_rotvec(rv, tv)
+    uv = cam.project_points(p, T[:, None])
+    assert uv.shape == (4, 30, 2)
+    for k in range(4):
+        ref = cv2.projectPoints(p, rv[k], tv[k], cam.K, cam.dist)[0].reshape(-1, 2)
+        assert np.max(np.abs(uv[k] - ref)) < 1e-9
+    with pytest.raises(ShapeError, match=r"T_cam_obj\[:, None\]"):
+        cam.project_points(p, T)  # (4, 4, 4) against (30, 3): which pose for which point?
+
+
 def test_project_is_vectorised_over_batches(cam, points_in_view):
     p = points_in_view(cam, np.random.default_rng(3), 24).reshape(2, 3, 4, 3)
     uv = cam.project(p)

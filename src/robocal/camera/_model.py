@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from robocal.errors import DegenerateGeometryError, FileFormatError, InputError
+from robocal.errors import DegenerateGeometryError, FileFormatError, InputError, ShapeError
 from robocal.validation import check_array, check_transform
 
 __all__ = ["CameraModel", "camera_from_document"]
@@ -293,12 +293,22 @@ class CameraModel:
         return uv, J
 
     def project_points(self, p_obj, T_cam_obj, *, check: bool = True) -> np.ndarray:
-        """Project object-frame points seen at pose ``T_cam_obj``, (..., 3) -> (..., 2) [px]."""
+        """Project object-frame points seen at pose ``T_cam_obj``, (..., 3) -> (..., 2) [px].
+
+        ``T_cam_obj`` (..., 4, 4) broadcasts against the points' leading
+        dimensions (NumPy rules): one pose for every point, one pose per
+        point, or, for V views of the same N points, ``T[:, None]`` (V, 1, 4, 4)
+        with ``p_obj`` (N, 3) -> (V, N, 2).
+        """
         p = check_array(p_obj, "p_obj", shape=(3,))
         T = check_transform(T_cam_obj, "T_cam_obj")
-        if T.ndim != 2:
-            raise InputError(f"T_cam_obj must have shape (4, 4), got {T.shape}")
-        p_cam = p @ T[:3, :3].T + T[:3, 3]
+        try:
+            lead = np.broadcast_shapes(T.shape[:-2], p.shape[:-1])
+        except ValueError:
+            raise ShapeError(f"T_cam_obj {T.shape} does not broadcast against p_obj {p.shape}; for V views of "
+                             "the same N points pass T_cam_obj[:, None] (V, 1, 4, 4)") from None
+        p_cam = np.einsum("...ij,...j->...i", T[..., :3, :3], p) + T[..., :3, 3]
+        p_cam = np.broadcast_to(p_cam, lead + (3,))
         try:
             return self.project(p_cam, check=check)
         except DegenerateGeometryError as exc:
