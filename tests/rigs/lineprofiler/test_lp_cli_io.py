@@ -123,3 +123,16 @@ def test_mct_input_errors_are_one_line(tmp_path, capsys, file, edit, message):
     assert main(["lineprofiler", "calibrate", str(yaml_path), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and message in err, err
+
+
+def test_handeye_robot_world_example(tmp_path):
+    # the same two pose lists give AX = ZB: T_gripper_cam and T_base_target together
+    assert main(["handeye", "robot-world", str(EX / "gripper_poses.csv"), str(EX / "target_poses.csv"),
+                 "--out", str(tmp_path)]) == 0
+    res = json.loads((tmp_path / "result.json").read_text())
+    assert res["method"] == "robot-world shah+refine"
+    T = np.array(res["estimate"]["T_gripper_cam"])
+    assert np.allclose(T[:3, 3], [0.035, 0.06, 0.12], atol=2e-3)  # 0.2 mm / 1 mrad pose noise, 16 poses
+    assert all(v is not None and 0 < v < 3e-3 for v in res["std"]["T_cam_gripper.translation"])
+    assert np.allclose(np.array(res["estimate"]["T_base_target"]) @ np.array(res["estimate"]["T_target_base"]),
+                       np.eye(4), atol=1e-12)

@@ -242,6 +242,54 @@ def _handeye_calibrate(args) -> int:
     return 0
 
 
+def _robot_world(args) -> int:
+    from robocal.geometry import invert_transform
+    from robocal.rigs.lineprofiler.handeye import calibrate_robot_world
+    from robocal.rigs.lineprofiler.io import interpolate_poses, load_poses
+
+    Tg, tg = load_poses(args.gripper_poses)
+    Tc, tc = load_poses(args.target_poses)
+    if tg is not None and tc is not None and (len(tg) != len(tc) or np.any(np.abs(tg - tc) > 1e-9)):
+        Tg = interpolate_poses(tg, Tg, tc)
+    # A X = Z B with A = T_cam_target, B = T_gripper_base: X = T_target_base, Z = T_cam_gripper
+    res = calibrate_robot_world(Tc, invert_transform(Tg), refine=not args.no_refine)
+
+    def std_of(prefix):
+        if not res.std:
+            return None, None
+        return ([res.std.get(f"{prefix}.{k}") for k in ("rx", "ry", "rz")],
+                [res.std.get(f"{prefix}.{k}") for k in ("tx", "ty", "tz")])
+
+    (xr, xt), (zr, zt) = std_of("X"), std_of("Z")
+    result = CalibrationResult(
+        rig="handeye", method=f"robot-world {res.method}",
+        estimate={"T_target_base": res.X.tolist(), "T_cam_gripper": res.Z.tolist(),
+                  "T_base_target": invert_transform(res.X).tolist(),
+                  "T_gripper_cam": invert_transform(res.Z).tolist()},
+        std={"T_target_base.rotvec": xr, "T_target_base.translation": xt, "T_cam_gripper.rotvec": zr,
+             "T_cam_gripper.translation": zt},
+        units={k: "m" for k in ("T_target_base", "T_cam_gripper", "T_base_target", "T_gripper_cam",
+                                "T_target_base.translation", "T_cam_gripper.translation")}
+        | {"T_target_base.rotvec": "rad", "T_cam_gripper.rotvec": "rad"},
+        residual_rms=res.trans_rms, residual_unit="m", warnings=res.warnings,
+        inputs=hash_inputs([args.gripper_poses, args.target_poses]),
+        diagnostics={"rotation_rms_rad": res.rot_rms, "n_poses": len(Tc),
+                     "convention": "A X = Z B, A = T_cam_target, B = T_gripper_base (inverse of the robot's "
+                                   "T_base_gripper), X = T_target_base, Z = T_cam_gripper; std as rotation "
+                                   "vector of R_perturbed R^T (rad) and translation (m); quaternions scalar-last"})
+    rep = Report("handeye: robot-world AX = ZB", subtitle=res.method)
+    s = rep.section("Estimate")
+    s.parameters({"T_gripper_cam": invert_transform(res.Z), "T_base_target": invert_transform(res.X),
+                  "rotation residual rms [rad]": res.rot_rms, "translation residual rms [m]": res.trans_rms}, {})
+    if res.std:
+        s.parameters({k: 0.0 for k in res.std}, dict(res.std))
+    s.diagnostics(res.warnings)
+    out = prepare_out_dir(args.out, "handeye-robot-world")
+    write_run(out, result, rep)
+    print("T_gripper_cam translation [mm]: " + ", ".join(f"{1e3 * v:.3f}" for v in invert_transform(res.Z)[:3, 3]))
+    return 0
+
+
 def _add_handeye(parser) -> None:
     sub = parser.add_subparsers(dest="subcommand", metavar="COMMAND")
     p = sub.add_parser("calibrate", help="eye-in-hand X = T_gripper_cam from two pose lists",
@@ -254,9 +302,19 @@ def _add_handeye(parser) -> None:
     p.add_argument("--no-refine", action="store_true", help="closed form only (no covariance)")
     add_out_argument(p)
     p.set_defaults(func=_handeye_calibrate)
+    p = sub.add_parser("robot-world", help="A X = Z B: T_gripper_cam and T_base_target together (Shah + refinement)",
+                       formatter_class=RawHelp, epilog=examples_epilog(
+                           f"robocal handeye robot-world {EXAMPLES}/gripper_poses.csv {EXAMPLES}/target_poses.csv "
+                           "--out rw"))
+    p.add_argument("gripper_poses", type=Path, help="T_base_gripper list (CSV/YAML, scalar-last quaternions)")
+    p.add_argument("target_poses", type=Path, help="T_cam_target list (CSV/YAML)")
+    p.add_argument("--no-refine", action="store_true", help="Shah's closed form only (no covariance)")
+    add_out_argument(p)
+    p.set_defaults(func=_robot_world)
 
 
-HANDEYE = Rig(name="handeye", help="AX = XB hand-eye solvers (Tsai, Park, Horaud, Andreff, Daniilidis) + refinement",
+HANDEYE = Rig(name="handeye", help="AX = XB hand-eye solvers (Tsai, Park, Horaud, Andreff, Daniilidis) and "
+                                   "robot-world AX = ZB, with refinement",
               description="Classic hand-eye calibration from pose lists (see docs/rigs/lineprofiler.md).\n\n"
                           + examples_epilog(f"robocal handeye calibrate {EXAMPLES}/gripper_poses.csv "
                                             f"{EXAMPLES}/target_poses.csv --method park --out he"),
