@@ -84,7 +84,7 @@ def main(argv=None) -> int:
                               for v in range(len(th))], reps)
     print()
     print(f"render one 640x480 view: {1e3 * t_r / len(th):.0f} ms; detect its corners "
-          f"(findChessboardCornersSB): {1e3 * t_d / len(th):.0f} ms")
+          f"(findChessboardCorners + cornerSubPix; SB only as fallback): {1e3 * t_d / len(th):.0f} ms")
     return 0
 
 

@@ -67,6 +67,11 @@ def _edit_csv(path, fn):
     ("zero height", lambda b: b[:5] + [b[5][:8] + ["0.0"] + b[5][9:]] + b[6:], "height must be > 0"),
     ("negative height", lambda b: b[:7] + [b[7][:8] + ["-0.1"] + b[7][9:]] + b[8:], "height must be > 0"),
     ("bad sensor index", lambda b: b[:4] + [b[4][:2] + ["7"] + b[4][3:]] + b[5:], "sensor index 7"),
+    ("quality above 255", lambda b: b[:6] + [b[6][:9] + ["999"]] + b[7:], "quality must be in 0..255, got 999"),
+    ("negative quality", lambda b: b[:6] + [b[6][:9] + ["-3"]] + b[7:], "quality must be in 0..255, got -3"),
+    ("dt of one row", lambda b: b[:6] + [b[6][:1] + ["0.0100"] + b[6][2:]] + b[7:], "disagrees with dt = 0.0025"),
+    ("dt overlaps", lambda b: b[:6] + [r[:1] + ["0.0050"] + r[2:] for r in b[6:9]] + b[9:], "reaches back to"),
+    ("dropped intervals", lambda b: b[:300] + b[600:], "0.250000 s of records are missing"),
 ])
 def test_bad_flow_logs(tmp_path, capsys, case, edit, message):
     d = _copy_loop(tmp_path)
@@ -122,3 +127,93 @@ def test_help_lists_examples(capsys):
         main(["flow", "odometry", "--help"])
     out = capsys.readouterr().out
     assert "examples/flow/loop/run.yaml" in out
+
+
+def test_dropped_intervals_are_bridged_over_their_length(tmp_path, capsys):
+    # 100 whole intervals (0.25 s) cut out of the log: with --allow-missing they are bridged at
+    # the last velocity over their real length (before: silently skipped, distance 0.694 -> 0.637 m)
+    d = _copy_loop(tmp_path)
+    _edit_csv(d / "flow.csv", lambda b: b[:300] + b[600:])
+    code, out, err = _run(["flow", "odometry", str(d / "run.yaml"), "--allow-missing", "--out", str(tmp_path / "o"),
+                           "--no-progress"], capsys)
+    assert code == 0 and "[dropped]" in err and "0.2500 s" in err
+    res = json.loads((tmp_path / "o" / "result.json").read_text())
+    assert res["diagnostics"]["summary"]["bridged_steps"] == 1
+    assert res["diagnostics"]["summary"]["invalid_by_reason"]["s60"] == {"dropped interval": 1}
+    assert abs(res["estimate"]["distance"] - 0.694) < 0.02
+
+
+def test_excluded_frames_are_reported_per_sensor(tmp_path, capsys):
+    # 60 of 1200 s270 frames (5 %) with quality 0: reported in stdout, warnings and result.json
+    d = _copy_loop(tmp_path)
+
+    def zero(b):
+        rows = [r for r in b if r[2] == "2"][100:160]
+        for r in rows:
+            r[9] = "0"
+        return b
+
+    _edit_csv(d / "flow.csv", zero)
+    code, out, err = _run(["flow", "odometry", str(d / "run.yaml"), "--out", str(tmp_path / "o"), "--no-progress"], capsys)
+    assert code == 0 and "sensor s270: 60 frames without flow (quality 0 in the log 60)" in out
+    assert "[low_quality] sensor s270: 60 of 1200 frames (5.0 %)" in err
+    summ = json.loads((tmp_path / "o" / "result.json").read_text())["diagnostics"]["summary"]
+    assert summ["invalid_frames"] == {"s60": 0, "s120": 0, "s270": 60}
+    assert summ["invalid_by_reason"]["s270"] == {"quality 0 in the log": 60}
+
+
+def test_kernel_options_on_a_flow_log_are_an_error(tmp_path, capsys):
+    # --subpixel/--refine/--search act on raw frames; on a flow log they were silently ignored
+    for opt in (["--subpixel", "half"], ["--refine", "lk"], ["--search", "6"]):
+        code, _, err = _run(["flow", "odometry", str(EX / "loop" / "run.yaml"), *opt, "--out", str(tmp_path / "o"),
+                             "--no-progress"], capsys)
+        assert code == 2 and f"{opt[0]} acts on raw frames" in err and "flow.csv" in err
+
+
+def test_flow_sigma_comes_from_run_yaml_and_is_checked(tmp_path, capsys):
+    from robocal.rigs.flow.log import load_run, load_steps
+
+    d = _copy_loop(tmp_path)
+    st6, _ = load_steps(load_run(d / "run.yaml"))
+    # a log whose stated flow noise is 6x too small: the chi-square check says so
+    (d / "run.yaml").write_text((d / "run.yaml").read_text().replace("sigma_px: 0.06", "sigma_px: 0.01"))
+    st1, _ = load_steps(load_run(d / "run.yaml"))
+    assert np.allclose(st1.sigma, st6.sigma / 6)
+    code, _, err = _run(["flow", "odometry", str(d / "run.yaml"), "--out", str(tmp_path / "o"), "--no-progress"], capsys)
+    assert code == 0 and "[inconsistent_data]" in err and "sigma_px" in err
+    code, _, err = _run(["flow", "odometry", str(EX / "loop" / "run.yaml"), "--out", str(tmp_path / "o2"), "--no-progress"], capsys)
+    assert code == 0 and "[inconsistent_data]" not in err
+
+
+def test_calibrate_window_must_be_positive(tmp_path, capsys):
+    for w in ("0", "-1"):
+        code, _, err = _run(["flow", "calibrate", str(EX / "calibration" / "run.yaml"), "--window", w,
+                             "--out", str(tmp_path / "c"), "--no-progress"], capsys)
+        assert code == 2 and "--window must be > 0 s" in err
+
+
+def test_straight_drive_calibration_keeps_undetermined_values_nominal(tmp_path, capsys):
+    # a straight drive cannot give R or psi: they stay nominal in stdout, result.json and the YAML
+    # (before: R = 0.0 was written, and the array gave NaN trajectories)
+    sim = tmp_path / "straight"
+    code, _, _ = _run(["flow", "simulate", "--trajectory", "straight", "--duration", "1.5", "--no-frames",
+                       "--supersample", "1", "--out", str(sim), "--no-progress"], capsys)
+    assert code == 0
+    code, out, err = _run(["flow", "calibrate", str(sim / "run.yaml"), "--out", str(tmp_path / "c"), "--no-progress"], capsys)
+    assert code == 0 and "not determined by this drive (kept nominal)" in out
+    res = json.loads((tmp_path / "c" / "result.json").read_text())
+    assert res["estimate"]["s60.R"] == pytest.approx(0.35) and res["std"]["s60.R"] is None
+    assert "s60.R" in res["diagnostics"]["undetermined_kept_nominal"]
+    text = (tmp_path / "c" / "array_calibrated.yaml").read_text()
+    assert "R: 0.0" not in text and "R: 350.0" in text
+    code, out, _ = _run(["flow", "evaluate", str(sim / "run.yaml"), "--array", str(tmp_path / "c" / "array_calibrated.yaml"),
+                         "--out", str(tmp_path / "e"), "--no-progress"], capsys)
+    assert code == 0 and "nan" not in out.lower()
+
+
+def test_degenerate_array_file_is_a_clear_error(tmp_path, capsys):
+    d = _copy_loop(tmp_path)
+    text = (d / "run.yaml").read_text()
+    (d / "run.yaml").write_text(text.replace("R: 350.0", "R: 0.0"))
+    code, _, err = _run(["flow", "odometry", str(d / "run.yaml"), "--out", str(tmp_path / "o"), "--no-progress"], capsys)
+    assert code == 2 and "run.yaml" in err and "rank < 3" in err and err.count("\n") == 1

@@ -43,13 +43,30 @@ def test_rpe_of_a_scale_error_is_the_scale_error():
     assert r2["rot_per_m"] == pytest.approx(1e-4 / 0.002, rel=0.02)
 
 
-def test_straight_line_alignment_falls_back_and_says_so():
+def test_straight_line_alignment_is_least_squares():
+    # a straight drive: collinear positions still define the planar least-squares alignment
+    # (Sturm 2012); the estimate is the reference turned by 2 deg about its start and shifted
     ref = integrate_twists(np.tile([0.01, 0, 0], (100, 1)))
-    est = ref + [0.1, 0.0, 0.0]
+    c, s = np.cos(0.035), np.sin(0.035)
+    est = ref.copy()
+    est[:, :2] = ref[:, :2] @ np.array([[c, -s], [s, c]]).T + [0.1, -0.05]
+    est[:, 0] += 0.002 * np.sin(np.arange(101) / 7.0)      # some noise along the line
     al, method = align_trajectory(est, ref)
-    assert "collinear" in method
+    assert method == "umeyama"
+    a = ate(est, ref)[0]
+    # no other rigid motion does better (brute force over yaw; centroid matching is optimal for a yaw)
+    best = np.inf
+    for yaw in np.linspace(-0.1, 0.1, 2001):
+        R = np.array([[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]])
+        xy = est[:, :2] @ R.T
+        xy += ref[:, :2].mean(0) - xy.mean(0)
+        best = min(best, np.sqrt(np.mean(np.sum((xy - ref[:, :2]) ** 2, 1))))
+    assert a <= best + 1e-9 and a < 0.0016
     ev = evaluate_trajectory(est, ref)
-    assert ev.final_error == pytest.approx(0.1)
+    assert ev.final_error > 0.1
+    # no motion at all: the rotation is free, the first poses are aligned and that is said
+    still = np.zeros((10, 3))
+    assert "first-pose" in align_trajectory(still, still)[1]
 
 
 def test_plot_and_bad_shapes():
@@ -58,3 +75,17 @@ def test_plot_and_bad_shapes():
     assert len(ax.lines) == 4
     with pytest.raises(InputError):
         evaluate_trajectory(ref[:10], ref)
+
+
+def test_rpe_statistics_and_honest_comparison():
+    from robocal.rigs.flow.workflow import compare_text
+
+    ref = _ref(2000)
+    est = integrate_twists(np.stack([np.full(1999, 0.00202), np.zeros(1999), 0.003 * np.sin(np.arange(1999) / 300)], 1))
+    r = rpe_per_distance(est, ref[:2000], lengths=(1.0,))[1.0]
+    assert r["trans_per_m_mean"] <= r["trans_per_m"] and r["trans_per_m_median"] == pytest.approx(0.01, rel=0.1)
+    good = evaluate_trajectory(est, ref[:2000])
+    worse = evaluate_trajectory(integrate_twists(np.stack([np.full(1999, 0.002), np.zeros(1999),
+                                                           0.003 * np.sin(np.arange(1999) / 300) + 2e-5], 1)), ref[:2000])
+    text = compare_text(good, worse)
+    assert "RPE@0.5m" in text and "WORSE" in text

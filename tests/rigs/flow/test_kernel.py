@@ -141,6 +141,27 @@ def test_repeating_pattern_is_detected_as_ambiguous():
     assert _rmse(naive.flow_px[naive.valid], t[naive.valid]) > 1.8 * _rmse(r.flow_px[r.valid], t[r.valid])
 
 
+def test_spread_gate_trade_off_on_brick_and_fast_motion():
+    # measured trade-off behind the default max_spread_px = 0.45 (docs/rigs/flow.md): a 0.35 px
+    # gate halves the aliased brick frames that get through, but rejects good frames of fast motion
+    brick, _ = load_texture("brick")
+    gravel, _ = load_texture("gravel")
+    bad = {}
+    for gate in (0.45, 0.35):
+        n = 0
+        for seed in (1, 2):
+            p, c, t = shifted_pairs(brick, 300, np.random.default_rng(seed), binning=2, max_shift=3.0)
+            r = compute_flow(p, c, FlowConfig(max_spread_px=gate))
+            n += int((np.linalg.norm(r.flow_px - t, axis=1)[r.valid] > 0.5).sum())
+        bad[gate] = n
+    assert FlowConfig().max_spread_px == 0.45
+    assert 0 < bad[0.45] <= 20 and bad[0.35] <= 0.5 * bad[0.45], bad
+    p, c, t = shifted_pairs(gravel, 300, np.random.default_rng(1), binning=2, max_shift=4.0)
+    fast = np.abs(t).max(axis=1) > 3
+    assert compute_flow(p, c).valid[fast].all()
+    assert compute_flow(p, c, FlowConfig(max_spread_px=0.35)).valid[fast].mean() < 0.99
+
+
 def test_speed_limit_and_aliasing_beyond_search_range():
     tex, _ = load_texture("gravel")
     assert speed_limit(FlowConfig(), 1.0, 400.0, 666.7) == pytest.approx(4.5 * 400 / 666.7, rel=1e-6)

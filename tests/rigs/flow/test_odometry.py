@@ -204,3 +204,31 @@ def test_bridged_interval_holds_velocity_over_its_own_length():
     st.valid[:, 49] = False          # the 10-frame interval t[49] -> t[60]
     od = dead_reckon(st, arr)
     assert od.bridged[49] and np.allclose(od.twists[49], 11 * od.twists[48])
+
+
+def test_understated_flow_noise_is_flagged():
+    # flow errors 4x the stated sigma: the median chi-square ratio says so (about 16 vs 1)
+    t, poses, rng = _drive(K=400)
+    arr = seed_array()
+    d = _exact_disp(arr, poses)
+    sig = 1e-5
+    ok = dead_reckon(_steps(t, d + rng.normal(0, sig, d.shape), sigma=sig), arr)
+    assert 0.5 < ok.chi2_ratio < 2 and not any(w.code == "inconsistent_data" for w in ok.warnings)
+    bad = dead_reckon(_steps(t, d + rng.normal(0, 4 * sig, d.shape), sigma=sig), arr)
+    assert bad.chi2_ratio > 8 and any(w.code == "inconsistent_data" and "sigma_px" in w.message for w in bad.warnings)
+
+
+def test_flow_sigma_follows_the_kernel_mode():
+    # the fusion weights come from the kernel's own accuracy, not a fixed 0.06 px
+    from robocal.rigs.flow.kernel import SIGMA_PX, FlowConfig
+    from robocal.rigs.flow.log import FlowRecords, steps_from_records
+
+    assert FlowConfig().sigma_px == 0.06
+    assert FlowConfig(subpixel="half").sigma_px == SIGMA_PX["half"] == 0.16
+    assert FlowConfig(subpixel="none").sigma_px == 0.32 and FlowConfig(refine="lk").sigma_px == 0.03
+    n, K = 3, 5
+    rec = FlowRecords(np.arange(K + 1) / 400.0, np.zeros((n, K, 2)), np.zeros((n, K, 3)), np.full((n, K), 0.1),
+                      np.full((n, K), 255.0), np.ones((n, K), bool))
+    s_eq = steps_from_records(rec, 166.7).sigma
+    assert np.allclose(steps_from_records(rec, 166.7, FlowConfig(subpixel="half")).sigma, s_eq * 0.16 / 0.06)
+    assert np.allclose(steps_from_records(rec, 166.7, sigma_px=0.2).sigma, s_eq * 0.2 / 0.06)

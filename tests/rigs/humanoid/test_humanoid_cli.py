@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from robocal.cli import DemoContext
 from robocal.cli.main import main
@@ -16,17 +17,35 @@ EXAMPLE = Path(__file__).resolve().parents[3] / "examples" / "humanoid" / "run.y
 
 
 def test_calibrate_example_and_report(tmp_path, capsys):
+    # the example is simulated with two independent HipYawPitch offsets: calibrated untied, every
+    # parameter is within 3 sigma of the truth (with --tie LHipPitch was off by 4.6 sigma)
     out = tmp_path / "cal"
-    assert main(["humanoid", "calibrate", str(EXAMPLE), "--out", str(out), "--tie"]) == 0
+    assert main(["humanoid", "calibrate", str(EXAMPLE), "--out", str(out)]) == 0
     d = json.loads((out / "result.json").read_text())
-    assert d["rig"] == "humanoid" and "RHipYawPitch" in d["diagnostics"]["tied"]
+    assert d["rig"] == "humanoid" and not d["diagnostics"]["tied"] and not d["warnings"]
+    truth = yaml.safe_load(EXAMPLE.with_name("truth.yaml").read_text())["truth"]
+    z = [(v - truth[k]) / d["std"][k] for k, v in d["estimate"].items()]
+    assert len(z) == 21 and max(abs(x) for x in z) < 3.0, z
     assert (out / "report.html").stat().st_size > 10_000
     urdf = next(out.glob("*_calibrated.urdf"))
     assert KinematicTree.from_urdf(urdf).n_joints == 14
     assert "joint_offsets" in (out / "offsets.yaml").read_text()
+    text = capsys.readouterr().out
+    assert "LM iterations: " in text and " from zero + " in text and "warning" not in text
+    # the rebuilt report has what the first one had: tables, histograms, per-view RMS, overlays
     assert main(["humanoid", "report", str(out / "result.json"), "--out", str(tmp_path / "rep")]) == 0
-    assert (tmp_path / "rep" / "report.html").is_file()
-    assert "LM iterations" in capsys.readouterr().out
+    first, again = ((p / "report.html").read_text() for p in (out, tmp_path / "rep"))
+    for html in (first, again):
+        assert html.count("<img") == 6  # histogram + cost, per-view RMS, 4 overlays
+        for title in ("Per-joint offsets and camera correction", "Residuals", "Reprojection overlays"):
+            assert f"<h2>{title}</h2>" in html
+    assert "grey canvas" not in again
+    # without the image files the overlays are still drawn, on a grey canvas, and the page says so
+    (tmp_path / "moved.json").write_text((out / "result.json").read_text().replace(
+        str(EXAMPLE.parent.resolve()), str(tmp_path / "nowhere")))
+    assert main(["humanoid", "report", str(tmp_path / "moved.json"), "--out", str(tmp_path / "rep2")]) == 0
+    moved = (tmp_path / "rep2" / "report.html").read_text()
+    assert moved.count("<img") == 6 and moved.count("(image file not available: grey canvas)</figcaption>") == 4
 
 
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
@@ -35,6 +54,20 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
     assert main(["humanoid", "calibrate", str(bad), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "nothere.png" in err[0]
+
+
+@pytest.mark.parametrize("value", ["0", "-1", "nan", "inf"])
+def test_corner_sigma_must_be_finite_and_positive(tmp_path, capsys, value):
+    # before: 0 -> LinAlgError traceback (exit 1), -1 accepted and written to result.json
+    assert main(["humanoid", "calibrate", str(EXAMPLE), "--corner-sigma", value, "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "corner_sigma must be a finite number > 0 px" in err[0] and value in err[0]
+
+
+def test_negative_offset_scale_is_refused(tmp_path, capsys):
+    assert main(["humanoid", "simulate", "--offset-scale", "-0.5", "--out", str(tmp_path / "s")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--offset-scale" in err[0]
 
 
 def test_plan_beats_random_order(model):
@@ -47,11 +80,27 @@ def test_plan_beats_random_order(model):
     # the uncertainty shrinks (never grows) as poses are added once everything is determined
     w = [r["worst joint std [deg]"] for r in rows if r["worst joint std [deg]"] is not None]
     assert np.all(np.diff(w) <= 1e-12)
+    # no condition number while some parameter is undetermined (was 8.8e15 next to '—' stds)
+    assert rows[0]["worst joint std [deg]"] is None and rows[0]["condition number"] is None
+    assert all(r["condition number"] is None for r in rows if r["worst joint std [deg]"] is None)
 
 
-def test_plan_command(tmp_path):
+def test_plan_command(tmp_path, capsys):
     assert main(["humanoid", "plan", "--poses", "6", "--candidates", "20", "--out", str(tmp_path)]) == 0
     assert (tmp_path / "plan.yaml").is_file() and (tmp_path / "report.html").is_file()
+    # plan for a data file's robot, a tied model and another corner noise (was: default model only)
+    worst = {}
+    for tag, extra in (("data", ["--data", str(EXAMPLE)]), ("tie", ["--tie"]),
+                       ("sharp", ["--data", str(EXAMPLE), "--corner-sigma", "0.1"])):
+        out = tmp_path / tag
+        assert main(["humanoid", "plan", "--poses", "6", "--candidates", "12", *extra, "--out", str(out)]) == 0
+        doc = yaml.safe_load((out / "plan.yaml").read_text())
+        worst[tag] = doc["predicted_std_deg_after_each_pose"][-1]
+        assert doc["assumed"]["tied"] == (tag == "tie")
+    assert doc["assumed"]["corner_sigma_px"] == 0.1 and worst["sharp"] < worst["data"]
+    capsys.readouterr()
+    assert main(["humanoid", "plan", "--corner-sigma", "0", "--out", str(tmp_path / "x")]) == 2
+    assert "--corner-sigma must be a finite number > 0" in capsys.readouterr().err
 
 
 def test_demo_passes(tmp_path):

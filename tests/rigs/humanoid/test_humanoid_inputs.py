@@ -110,3 +110,33 @@ def test_bad_fields(example):
     _edit(example, lambda d: (d["joints"].__setitem__("unit", "deg"), d.__setitem__("format", "other/1")))
     with pytest.raises(FileFormatError, match="format"):
         load_dataset(example)
+
+
+def test_mislabelled_foot_is_refused(example):
+    # before: exit 0 with LHipRoll +50 deg, LKneePitch -61 deg and a corrected URDF written
+    _edit(example, lambda d: d["feet"].__setitem__(4, "left" if d["feet"][4] == "right" else "right"))
+    model, data, _ = load_dataset(example)
+    with pytest.raises(InconsistentDataError, match="view 'view004'.*foot label does not match the image"):
+        calibrate(model, data)
+
+
+def test_swapped_joint_records_are_refused(example):
+    # before: exit 0 with LKneePitch -160.7 deg (outside its own limits)
+    _edit(example, lambda d: d["joints"]["records"].__setitem__(slice(0, 2), d["joints"]["records"][1::-1]))
+    model, data, _ = load_dataset(example)
+    with pytest.raises(InconsistentDataError, match="view 'view00[01]'.*joint record"):
+        calibrate(model, data)
+
+
+def test_implausible_offsets_are_a_warning(model, corner_data):
+    from robocal.rigs.humanoid.calibrate import plausibility_warnings
+
+    labels = model.parameter_labels()
+    x = np.zeros(len(labels))
+    x[labels.index("LKneePitch")] = np.radians(-61.0)
+    rms = np.full(8, 0.2)
+    rms[3] = 25.0
+    w = plausibility_warnings(model, model.seed_parameters(), x, rms, [f"v{i}" for i in range(8)], 1.0)
+    assert [d.code for d in w] == ["inconsistent_data"] * 2
+    assert "LKneePitch -61.0 deg" in w[0].message and "v3 25.0 px" in w[1].message
+    assert plausibility_warnings(model, model.seed_parameters(), x * 0, rms * 0 + 0.2, list("abcdefgh"), 1.0) == []

@@ -161,3 +161,71 @@ def test_planar_choice_is_reported_on_stdout_in_result_and_report(tmp_path, caps
     # the published scene has no ambiguity: no line
     assert main(["mirror", "calibrate", str(EXAMPLES / "published_single.yaml"), "--out", str(tmp_path / "d")]) == 0
     assert "planar choice" not in capsys.readouterr().out
+
+
+def test_image_paths_are_relative_to_the_result_and_missing_images_are_said(tmp_path):
+    import shutil
+
+    work = tmp_path / "a"
+    shutil.copytree(EXAMPLES, work / "inputs")
+    assert main(["mirror", "calibrate", str(work / "inputs" / "aruco_images.yaml"), "--out", str(work / "cal")]) == 0
+    images = json.loads((work / "cal" / "result.json").read_text())["diagnostics"]["images"]
+    assert images and all(not Path(p).is_absolute() and p.startswith("..") for p in images.values())
+    assert "not found" not in (work / "cal" / "report.html").read_text()
+    # the run moves as a whole: the report still finds the images; one that is gone is said,
+    # not silently replaced by grey
+    moved = tmp_path / "b"
+    shutil.move(str(work), str(moved))
+    (moved / "inputs" / "placement_1.png").unlink()
+    assert main(["mirror", "report", str(moved / "cal" / "result.json"), "--out", str(tmp_path / "r")]) == 0
+    html = (tmp_path / "r" / "report.html").read_text()
+    assert "placement_1.png (points drawn on grey)" in html and "placement_0.png (points drawn" not in html
+
+
+def test_report_says_when_overlays_are_capped(tmp_path):
+    assert main(["mirror", "simulate", "--placements", "5", "--seed", "1", "--out", str(tmp_path / "s")]) == 0
+    assert main(["mirror", "calibrate", str(tmp_path / "s" / "mirror_input.yaml"), "--out", str(tmp_path / "c")]) == 0
+    assert "Overlays for the first 4 of 5 images" in (tmp_path / "c" / "report.html").read_text()
+
+
+def test_aruco_path_with_rotated_tags_and_configured_mirror_tags(tmp_path):
+    # body tags need not be upright on +x_r faces; the mirror tags' ids and dictionary are input
+    import cv2
+
+    from robocal.errors import InputError
+    from robocal.geometry import transform_from
+    from robocal.rigs.mirror.files import write_input
+    from robocal.rigs.mirror.model import MirrorScene
+    from robocal.rigs.mirror.render import BodyTags, MirrorTags, default_body_tags, render_mirror_image, tag_rotation
+    from robocal.rigs.mirror.simulate import default_setup
+
+    cam, s0 = default_setup()
+    d = default_body_tags()
+    turned = tag_rotation([1.0, 0.0, 0.0], x_axis=[0.0, 0.0, 1.0])  # front face, tag turned 90 deg
+    T = np.stack([transform_from(turned, t[:3, 3]) if k >= 4 else t for k, t in enumerate(d.T_r_tag)])
+    tags = BodyTags(d.ids, T, d.size, "DICT_5X5_100")
+    mt = MirrorTags((10, 11, 12, 13), "DICT_5X5_100")
+    scene = MirrorScene(s0.T_c_r, s0.T_c_m, tags.body_points_r(), s0.rectangle)
+    img = render_mirror_image(cam, scene, tags, rng=np.random.default_rng(0), mirror_tags=mt)
+    cv2.imwrite(str(tmp_path / "shot.png"), img)
+
+    class _Obs:
+        name = "shot"
+
+    p = write_input(tmp_path / "in.yaml", cam, s0.rectangle, None, [_Obs()], tags=tags, image_files={0: "shot.png"},
+                    mirror_tags=mt)
+    inp = load_input(p)
+    assert inp.tags.dictionary == "DICT_5X5_100" and inp.mirror_tags == mt
+    assert np.allclose(inp.body_points_r, tags.body_points_r(), atol=1e-9)
+    o = inp.observations[0]
+    assert {4, 5} <= set(int(i) // 4 for i in o.body_ids)  # the turned tags are found
+    assert main(["mirror", "calibrate", str(p), "--out", str(tmp_path / "c")]) == 0
+    res = json.loads((tmp_path / "c" / "result.json").read_text())
+    err = np.array(res["estimate"]["t_r_c"]) - s0.T_r_c[:3, 3]
+    assert np.linalg.norm(err) < 4 * np.linalg.norm(res["std"]["t_r_c"])
+    # a body tag with a mirror tag's id (same dictionary) is refused, naming the field
+    text = p.read_text().replace("- id: 0\n", "- id: 12\n", 1)
+    assert text != p.read_text()
+    (tmp_path / "clash.yaml").write_text(text)
+    with pytest.raises(InputError, match=r"body_tags.tags: ids \[12\] are also mirror tag ids"):
+        load_input(tmp_path / "clash.yaml")

@@ -23,6 +23,7 @@ from robocal.rigs.flow.workflow import (
     array_yaml,
     calibration_result,
     calibration_run,
+    compare_text,
     default_sim,
     evaluation_run,
     odometry_result,
@@ -120,6 +121,7 @@ def cmd_odometry(args) -> int:
     sec = report.section("Velocity and sensor quality")
     sec.figure(velocity_figure(od), "vx, vy, omega with 3-sigma bands from the array geometry and per-frame quality")
     sec.figure(quality_figure(steps, spec.array.names), "per-sensor quality; 0 = frame without flow (low texture / ambiguous)")
+    sec.table(_frames_table(od), caption="frames without a valid flow per sensor, by reason (left out of the fusion)")
     sec.diagnostics(od.warnings)
     res = odometry_result(od, spec, errors)
     write_run(out, res, report)
@@ -127,7 +129,18 @@ def cmd_odometry(args) -> int:
     s = od.summary()
     print(f"distance {s['distance_m']:.3f} m, {s['bridged_steps']} bridged steps"
           + (f", ATE {errors['flow odometry'].ate_rmse * 1e3:.1f} mm" if errors else ""))
+    for row in _frames_table(od):
+        if row["frames without flow"]:
+            print(f"  sensor {row['sensor']}: {row['frames without flow']} frames without flow ({row['reasons']})")
     return 0
+
+
+def _frames_table(od):
+    n_steps = len(od.twists)
+    return [{"sensor": nm, "frames without flow": c, "of": n_steps,
+             "reasons": ", ".join(f"{r} {k}" for r, k in od.frames["invalid_by_reason"][nm].items()) or "-",
+             "left out as outlier": int(od.rejected[i].sum())}
+            for i, (nm, c) in enumerate(od.frames["invalid_frames"].items())]
 
 
 def cmd_calibrate(args) -> int:
@@ -203,13 +216,16 @@ def cmd_evaluate(args) -> int:
     _traj_section(report, "Trajectory errors", curves, errors)
     res = CalibrationResult(rig="flow", method="ate-rpe",
                             estimate={f"{k} ATE": v.ate_rmse for k, v in errors.items()},
-                            units={f"{k} ATE": "m" for k in errors}, warnings=list(od.warnings),
+                            units={f"{k} ATE": "m" for k in errors},
+                            warnings=list(od.warnings) + ([w for w in cal_od.warnings if w not in od.warnings] if cal_od else []),
                             diagnostics={k: v.to_dict() for k, v in errors.items()})
     write_run(out, res, report)
     for k, v in errors.items():
         r1 = v.rpe.get(0.5, {})
         print(f"  {k:28s} ATE {v.ate_rmse * 1e3:7.1f} mm   RPE@0.5m {r1.get('trans_per_m', np.nan) * 100:5.2f} %  "
-              f"{np.degrees(r1.get('rot_per_m', np.nan)):5.2f} deg/m")
+              f"{np.degrees(r1.get('rot_per_m', np.nan)):5.2f} deg/m (RMS)")
+    if cal_od is not None:
+        print(compare_text(errors["flow odometry"], errors["flow odometry (calibrated)"]))
     return 0
 
 
@@ -310,18 +326,20 @@ def demo(ctx: DemoContext) -> DemoOutcome:
                 "steps left out as outlier": int(od_cal.rejected[i].sum())} for i, nm in enumerate(simB.array_nominal.names)])
     sec.diagnostics(od_cal.warnings)
     sec = rep.section("Array calibration (calibration drive)")
-    res = CalibrationResult(rig="flow", method="windowed-lsq", estimate=cal.estimate_dict(),
-                            std={k: cal.std.get(k) for k in cal.estimate_dict()}, units=cal.units(),
-                            residual_rms=cal.residual_rms, residual_unit="m", warnings=list(cal.warnings),
-                            diagnostics={"evaluation": {k: v.to_dict() for k, v in ev.items()}})
+    res = calibration_result(cal)
+    res.diagnostics["evaluation"] = {k: v.to_dict() for k, v in ev.items()}
     sec.parameters(res.estimate, res.std, res.units)
     true = simA.array_true
     hs = np.asarray(simA.height_scale)
+    tot = cal.total_std()
     rows = [{"sensor": nm, "R err [mm]": (cal.array.R[i] - true.R[i]) * 1e3,
              "psi err [deg]": np.degrees(np.angle(np.exp(1j * (cal.array.psi[i] - true.psi[i])))),
-             "phi err [deg]": np.degrees(cal.array.phi[i] - true.phi[i]), "scale err [%]": (cal.array.scale[i] * hs[i] - 1) * 100}
+             "phi err [deg]": np.degrees(cal.array.phi[i] - true.phi[i]), "scale err [%]": (cal.array.scale[i] * hs[i] - 1) * 100,
+             "R err / total std": (cal.array.R[i] - true.R[i]) / tot[f"{nm}.R"],
+             "scale err / total std": (cal.array.scale[i] * hs[i] - 1) / hs[i] / tot[f"{nm}.scale"]}
             for i, nm in enumerate(true.names)]
-    sec.table(rows, digits=3, caption="calibrated minus simulated truth")
+    sec.table(rows, digits=3, caption="calibrated minus simulated truth; total std = statistical (segment jackknife) "
+              "and the flow kernel's systematic in quadrature")
     sec.text(f"texture: {runA.texture_note}")
     ate_n = ev["flow odometry (nominal array)"].ate_rmse
     ate_c = ev["flow odometry (calibrated)"].ate_rmse

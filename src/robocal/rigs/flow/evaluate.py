@@ -2,8 +2,8 @@
 
 - **ATE** (absolute trajectory error; Sturm et al., IROS 2012, TUM RGB-D
   benchmark): align the estimate to the reference with the least-squares
-  rigid transform (Umeyama 1991, :func:`robocal.geometry.rigid_fit`) and
-  take the RMS of the position differences.
+  rigid transform in the plane (Umeyama 1991 in 2D, :func:`align_trajectory`)
+  and take the RMS of the position differences.
 - **RPE per distance** (relative pose error; Sturm et al. 2012, with
   KITTI's segments of fixed path length, Geiger et al., CVPR 2012): for every
   start ``i`` and every length ``L``, the frame ``j`` where the reference has
@@ -20,8 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robocal.errors import DegenerateGeometryError, InputError, NotEnoughDataError
-from robocal.geometry import rigid_fit
+from robocal.errors import InputError, NotEnoughDataError
 
 __all__ = ["TrajectoryErrors", "align_trajectory", "ate", "rpe_per_distance", "evaluate_trajectory", "plot_trajectories"]
 
@@ -35,10 +34,16 @@ def _se2(p):
 
 
 def align_trajectory(est, ref):
-    """Rigid 2D alignment of ``est`` onto ``ref`` (Umeyama), poses ``(N, 3)``.
+    """Least-squares rigid 2D alignment (SE(2)) of ``est`` onto ``ref``, poses ``(N, 3)``.
 
-    Falls back to aligning the first poses when the positions are collinear
-    (a straight drive), and says so.
+    Umeyama's (1991) closed form in the plane, as Sturm et al. (IROS 2012) and
+    Zhang & Scaramuzza (IROS 2018) align for the ATE: with the centred
+    positions and ``H = sum e_i r_i^T`` (2x2), the rotation is
+    ``atan2(H_01 - H_10, H_00 + H_11)`` (the planar Kabsch solution, a proper
+    rotation by construction) and the translation matches the centroids. It is
+    well defined for collinear positions (a straight drive); only when every
+    estimated position coincides (no motion) is the rotation free, and the
+    first poses are aligned instead.
 
     Returns
     -------
@@ -47,22 +52,21 @@ def align_trajectory(est, ref):
     """
     est = np.asarray(est, float)
     ref = np.asarray(ref, float)
-    pe = np.concatenate([est[:, :2], np.zeros((len(est), 1))], 1)
-    pr = np.concatenate([ref[:, :2], np.zeros((len(ref), 1))], 1)
-    try:
-        fit = rigid_fit(pe, pr)
-        R = fit.R
-        # keep the alignment planar: the z rows/cols of a planar fit are (0, 0, 1)
-        yaw = np.arctan2(R[1, 0], R[0, 0])
-        t = fit.t[:2]
+    me, mr = est[:, :2].mean(axis=0), ref[:, :2].mean(axis=0)
+    e, r = est[:, :2] - me, ref[:, :2] - mr
+    H = e.T @ r
+    a, b = H[0, 0] + H[1, 1], H[0, 1] - H[1, 0]
+    scale = np.sqrt(np.sum(e**2) * np.sum(r**2))
+    if np.hypot(a, b) > 1e-12 * max(scale, 1e-300):
+        yaw = float(np.arctan2(b, a))
+        c, s = np.cos(yaw), np.sin(yaw)
+        t = mr - np.array([[c, -s], [s, c]]) @ me
         method = "umeyama"
-        if abs(R[2, 2] - 1) > 1e-6:
-            raise DegenerateGeometryError("the fit left the plane")
-    except DegenerateGeometryError:
+    else:
         yaw = ref[0, 2] - est[0, 2]
         c, s = np.cos(yaw), np.sin(yaw)
         t = ref[0, :2] - np.array([[c, -s], [s, c]]) @ est[0, :2]
-        method = "first-pose (positions collinear)"
+        method = "first-pose (the estimate does not move)"
     c, s = np.cos(yaw), np.sin(yaw)
     xy = est[:, :2] @ np.array([[c, -s], [s, c]]).T + t
     return np.concatenate([xy, (est[:, 2:] + yaw)], 1), method
@@ -81,6 +85,8 @@ def rpe_per_distance(est, ref, lengths=(0.5, 1.0)):
     Returns
     -------
     dict: length -> {"trans_rmse": m, "trans_per_m": 1, "rot_per_m": rad/m, "n": int}
+        ``trans_per_m``/``rot_per_m`` are RMS over all segment starts; ``*_mean``
+        (KITTI) and ``*_median`` (Zhang & Scaramuzza 2018) are also given.
     """
     est = np.asarray(est, float)
     ref = np.asarray(ref, float)
@@ -105,6 +111,9 @@ def rpe_per_distance(est, ref, lengths=(0.5, 1.0)):
             "trans_rmse": float(np.sqrt(np.mean(te**2))),
             "trans_per_m": float(np.sqrt(np.mean((te / seg) ** 2))),
             "rot_per_m": float(np.sqrt(np.mean((re / seg) ** 2))),
+            # KITTI averages, Zhang & Scaramuzza report medians: both alongside the RMS
+            "trans_per_m_mean": float(np.mean(te / seg)), "trans_per_m_median": float(np.median(te / seg)),
+            "rot_per_m_mean": float(np.mean(re / seg)), "rot_per_m_median": float(np.median(re / seg)),
             "n": int(i.size),
         }
     return out

@@ -36,11 +36,12 @@ is invalid there).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from robocal.diagnostics import Diagnostic
 from robocal.errors import FileFormatError, InputError, ShapeError
 from robocal.io import atomic_write_text, load_csv, load_document
 from robocal.rigs.flow.kernel import FlowConfig, compensate_rotation, compute_flow_sequence, metric_displacement
@@ -74,6 +75,8 @@ class FlowRecords:
     height: np.ndarray   # (n, K) m
     quality: np.ndarray  # (n, K)
     present: np.ndarray  # (n, K) bool
+    gaps: np.ndarray = field(default_factory=lambda: np.zeros(0))         # start times of dropped stretches, s
+    gap_lengths: np.ndarray = field(default_factory=lambda: np.zeros(0))  # their lengths, s
 
 
 def write_flow_csv(path, t, flow, gyro, height, quality, *, comment: str = "") -> Path:
@@ -114,6 +117,11 @@ def read_flow_csv(path, n_sensors: int, *, allow_missing: bool = False) -> FlowR
     if np.any(dt <= 0):
         r = int(np.flatnonzero(dt <= 0)[0])
         raise FileFormatError(f"row {r + 1}: dt must be > 0 s, got {dt[r]:g}", source=src)
+    q = tab.column("quality")
+    if np.any((q < 0) | (q > 255)):
+        r = int(np.flatnonzero((q < 0) | (q > 255))[0])
+        raise FileFormatError(f"row {r + 1} (t = {t[r]:.6f} s, sensor {sensor[r]}): quality must be in 0..255, got {q[r]:g}",
+                              source=src)
     # timestamps must not go back; rows of one interval share a timestamp
     back = np.flatnonzero(np.diff(t) < 0)
     if back.size:
@@ -141,11 +149,48 @@ def read_flow_csv(path, n_sensors: int, *, allow_missing: bool = False) -> FlowR
     for a, nm in enumerate(("gyro_x", "gyro_y", "gyro_z")):
         gyro[sensor, inv, a] = tab.column(nm, kind="angular_rate") if tab.units.get(nm) else tab.column(nm)
     height[sensor, inv] = h
-    quality[sensor, inv] = tab.column("quality")
+    quality[sensor, inv] = q
+    # dt: every row of an interval gives the same one, and each interval starts where the
+    # previous one ended; a later start is a dropped stretch of records (motion lost)
     dts = np.zeros(K)
     dts[inv] = dt
-    t0 = times[0] - dts[0]
-    return FlowRecords(np.concatenate([[t0], times]), flow, gyro, height, quality, present)
+    row_of = np.zeros(K, int)
+    row_of[inv[::-1]] = np.arange(len(t))[::-1]            # first row of each interval
+    tol = 0.1 * dts
+    bad = np.abs(dt - dts[inv]) > tol[inv]
+    if np.any(bad):
+        r = int(np.flatnonzero(bad)[0])
+        raise FileFormatError(f"row {r + 1} (t = {t[r]:.6f} s): dt = {dt[r]:g} s disagrees with dt = {dts[inv[r]]:g} s "
+                              "of the other rows of that interval", source=src)
+    start = times - dts
+    lag = start[1:] - times[:-1]                            # > 0: a gap before interval k+1
+    over = np.flatnonzero(lag < -tol[1:])
+    if over.size:
+        k = int(over[0]) + 1
+        raise FileFormatError(f"row {row_of[k] + 1} (t = {times[k]:.6f} s): dt = {dts[k]:g} s reaches back to "
+                              f"{start[k]:.6f} s, before the previous interval's end {times[k - 1]:.6f} s", source=src)
+    gaps = np.flatnonzero(lag > tol[1:]) + 1
+    if gaps.size and not allow_missing:
+        k = int(gaps[0])
+        raise FileFormatError(
+            f"row {row_of[k] + 1} (t = {times[k]:.6f} s): the interval starts at {start[k]:.6f} s but the previous one "
+            f"ended at {times[k - 1]:.6f} s: {lag[k - 1]:.6f} s of records are missing ({gaps.size} such gaps, "
+            f"{lag[gaps - 1].sum():.4f} s in all); allow missing records to bridge them", source=src)
+    t_all = np.concatenate([[start[0]], times])
+    if gaps.size:
+        # each gap becomes an interval without any sensor (fusion bridges it at the last velocity)
+        new_t = np.sort(np.concatenate([t_all, start[gaps]]))
+        pos = np.searchsorted(new_t, times) - 1             # new index of each original interval
+        K2 = new_t.size - 1
+
+        def spread(a, fill):
+            out = np.full((a.shape[0], K2) + a.shape[2:], fill, dtype=a.dtype)
+            out[:, pos] = a
+            return out
+
+        return FlowRecords(new_t, spread(flow, np.nan), spread(gyro, 0.0), spread(height, np.nan),
+                           spread(quality, 0.0), spread(present, False), gaps=times[gaps - 1], gap_lengths=lag[gaps - 1])
+    return FlowRecords(t_all, flow, gyro, height, quality, present)
 
 
 def steps_from_records(rec: FlowRecords, focal_px: float, config: FlowConfig = FlowConfig(), *,
@@ -168,7 +213,23 @@ def steps_from_records(rec: FlowRecords, focal_px: float, config: FlowConfig = F
     disp = np.where(valid[..., None], disp, np.nan)
     n_used = np.maximum(rec.quality / 255.0 * config.n_blocks, 1.0)
     sigma = flow_sigma(n_used, np.nan_to_num(rec.height, nan=1.0), focal_px, sigma_px=sigma_px, n_blocks=config.n_blocks)
-    return SensorSteps(rec.t, disp, valid, sigma, rec.quality)
+    in_gap = np.zeros(K, bool)
+    if rec.gaps.size:
+        in_gap[np.searchsorted(rec.t, rec.gaps)] = True
+    reasons = []
+    for i in range(n):
+        why = {"dropped interval": int((in_gap & ~rec.present[i]).sum()),
+               "no record": int((~in_gap & ~rec.present[i]).sum()),
+               "quality 0 in the log": int((rec.present[i] & (rec.quality[i] <= 0)).sum()),
+               "non-finite flow": int((rec.present[i] & (rec.quality[i] > 0) & ~np.all(np.isfinite(rec.flow[i]), axis=1)).sum())}
+        reasons.append({k: v for k, v in why.items() if v})
+    warnings = []
+    if rec.gaps.size:
+        warnings.append(Diagnostic("dropped", f"{rec.gaps.size} stretch(es) of the flow log are missing, "
+                                   f"{rec.gap_lengths.sum():.4f} s in all (first at t = {rec.gaps[0]:.6f} s, "
+                                   f"{rec.gap_lengths[0]:.4f} s): bridged at the last velocity over their real length",
+                                   indices=tuple(int(k) for k in np.flatnonzero(in_gap)[:200])))
+    return SensorSteps(rec.t, disp, valid, sigma, rec.quality, reasons=reasons, warnings=warnings)
 
 
 def steps_from_frames(frames, t, gyro, height, focal_px: float, config: FlowConfig = FlowConfig(), *,
@@ -230,7 +291,11 @@ def steps_from_frames(frames, t, gyro, height, focal_px: float, config: FlowConf
         quality[i] = ff.quality
         sigma[i] = flow_sigma(np.maximum(ff.quality / 255.0 * config.n_blocks, 1.0), height[i], focal_px,
                               sigma_px=sigma_px, n_blocks=config.n_blocks)
-    return SensorSteps(t, disp, valid, sigma, quality), flows
+    reasons = []
+    for ff in flows:
+        r = [x for x in ff.reason if x]
+        reasons.append({k: r.count(k) for k in sorted(set(r))})
+    return SensorSteps(t, disp, valid, sigma, quality, reasons=reasons), flows
 
 
 def read_frames_npz(path):

@@ -32,7 +32,13 @@ from robocal.diagnostics import Diagnostic
 from robocal.errors import InputError, NotEnoughDataError
 from robocal.rigs.flow.model import SensorArray, integrate_twists, rot2
 
-__all__ = ["SensorSteps", "Odometry", "fuse_steps", "dead_reckon", "flow_sigma"]
+__all__ = ["SensorSteps", "Odometry", "fuse_steps", "dead_reckon", "flow_sigma", "CHI2_RATIO_WARN"]
+
+#: A median chi-square ratio (see :func:`dead_reckon`) above this means the flow noise is
+#: understated (by more than 1.7x) or the array geometry is off: on the rendered loop with
+#: the true array it is 0.34 (equiangular, sigma 0.06 px), 2.6 for half-pixel flow weighted
+#: with 0.06 px, 1.8 with the nominal array (mounting errors of 6-9 mm and 2-3 deg).
+CHI2_RATIO_WARN = 3.0
 
 
 @dataclass
@@ -50,6 +56,13 @@ class SensorSteps:
         Standard deviation of each displacement component, m.
     quality : ndarray, shape (n, K)
         0..255.
+    reasons : list of dict, optional
+        Per sensor, ``{reason: count}`` of the frames without a valid flow
+        (the kernel's "low texture" / "ambiguous" / "poor match", or a flow
+        log's "quality 0 in the log" / "no record" / "dropped interval").
+    warnings : list of Diagnostic
+        Found while reading the input (dropped stretches, ...); passed on by
+        :func:`dead_reckon`.
     """
 
     t: np.ndarray
@@ -57,6 +70,8 @@ class SensorSteps:
     valid: np.ndarray
     sigma: np.ndarray
     quality: np.ndarray
+    reasons: list | None = None
+    warnings: list = field(default_factory=list)
 
     def __post_init__(self):
         t = np.asarray(self.t, float)
@@ -113,6 +128,11 @@ class Odometry:
     chi2 : ndarray, shape (K,)
         Normalised residual sum of squares of each step (NaN without redundancy).
     warnings : list of Diagnostic
+    frames : dict
+        ``invalid_frames`` (per sensor) and ``invalid_by_reason`` (per sensor, reason -> count).
+    chi2_ratio : float
+        Median over redundant steps of ``chi2`` divided by the median of its
+        chi-square distribution: about 1 when the stated flow noise is right.
     """
 
     t: np.ndarray
@@ -126,9 +146,13 @@ class Odometry:
     bridged: np.ndarray
     chi2: np.ndarray
     warnings: list = field(default_factory=list)
+    chi2_ratio: float = float("nan")
+    frames: dict = field(default_factory=dict)
 
     def summary(self) -> dict:
         return {
+            **self.frames,
+            "chi2_median_ratio": self.chi2_ratio,
             "steps": int(len(self.twists)),
             "bridged_steps": int(self.bridged.sum()),
             "sensor_rejections": self.rejected.sum(axis=1).tolist(),
@@ -164,7 +188,7 @@ def _solve_weighted(A, b, w):
 
 
 def fuse_steps(steps: SensorSteps, array: SensorArray, *, robust: bool = True, outlier_p: float = 1e-3,
-               half_step: bool = True):
+               half_step: bool = True, return_raw_chi2: bool = False):
     """Solve the seed's ``A u = b`` for every step (weighted, outlier-robust).
 
     Parameters
@@ -180,9 +204,15 @@ def fuse_steps(steps: SensorSteps, array: SensorArray, *, robust: bool = True, o
     half_step : bool
         Rotate each displacement by half the step's rotation (see module doc).
 
+    return_raw_chi2 : bool
+        Also return each step's chi-square and its degrees of freedom with all
+        valid sensors, before any outlier rejection (rejection removes the
+        largest ones and would hide an understated noise).
+
     Returns
     -------
     twists (K, 3), cov (K, 3, 3), used (n, K), rejected (n, K), bridged (K,), chi2 (K,)
+    [, raw_chi2 (K,), raw_dof (K,)]
     """
     n, K = steps.valid.shape
     if n != array.n:
@@ -210,6 +240,8 @@ def fuse_steps(steps: SensorSteps, array: SensorArray, *, robust: bool = True, o
         b = build_b(dth)
         u, Ninv, rss, r = _solve_weighted(A, b, np.where(used, w0, 0.0))
         dth = np.where(enough, np.nan_to_num(u[:, 2]), 0.0)
+    raw_dof = 2 * used.sum(axis=1) - 3
+    raw_chi2 = np.where(raw_dof > 0, rss, np.nan)
     rejected = np.zeros_like(used)
     if robust:
         for _ in range(max(0, n - 2)):
@@ -249,6 +281,8 @@ def fuse_steps(steps: SensorSteps, array: SensorArray, *, robust: bool = True, o
         dt = steps.dt
         u = u[fill] * (dt / dt[fill])[:, None]
         Ninv = np.where(bridged[:, None, None], np.nan, Ninv)
+    if return_raw_chi2:
+        return u, Ninv, used.T, rejected.T, bridged, chi2, raw_chi2, raw_dof
     return u, Ninv, used.T, rejected.T, bridged, chi2
 
 
@@ -268,7 +302,7 @@ def dead_reckon(steps: SensorSteps, array: SensorArray, *, pose0=(0.0, 0.0, 0.0)
     """
     if method not in ("exact", "euler"):
         raise InputError(f"method must be 'exact' or 'euler', got {method!r}")
-    u, cov, used, rejected, bridged, chi2 = fuse_steps(steps, array, robust=robust)
+    u, cov, used, rejected, bridged, chi2, raw_chi2, dof = fuse_steps(steps, array, robust=robust, return_raw_chi2=True)
     if not np.all(np.isfinite(u)):  # pragma: no cover - fuse_steps bridges singular steps
         raise NotEnoughDataError("the array gave no finite twist for some steps")
     poses = integrate_twists(u, pose0, method=method)
@@ -276,19 +310,43 @@ def dead_reckon(steps: SensorSteps, array: SensorArray, *, pose0=(0.0, 0.0, 0.0)
     vel = u / dt[:, None]
     vstd = np.sqrt(np.abs(np.diagonal(cov, axis1=1, axis2=2))) / dt[:, None]
     warnings = []
+    # consistency of the stated flow noise: each redundant step's chi-square over the median of
+    # its chi-square distribution (about 1 when sigma is right; 0.3-0.4 with the kernel's own
+    # sigma_px on rendered drives, which is conservative); far above 1, the noise is understated
+    # and the covariance and the outlier test are wrong with it
+    red = (dof > 0) & np.isfinite(raw_chi2)
+    chi2_ratio = float(np.median(raw_chi2[red] / chdtri(dof[red], 0.5))) if red.sum() >= 10 else float("nan")
+    if chi2_ratio > CHI2_RATIO_WARN:
+        warnings.append(Diagnostic("inconsistent_data", f"the sensors disagree {np.sqrt(chi2_ratio):.1f}x more than their "
+                                   f"stated noise (median chi-square ratio {chi2_ratio:.2f}, expected <= 1): the flow "
+                                   "sigma is too small for this log (set camera: sigma_px in run.yaml) or the array "
+                                   "geometry is off (calibrate it); the covariance is too small and the outlier test "
+                                   "drops good sensors"))
     if bridged.any():
         idx = np.flatnonzero(bridged)
         warnings.append(Diagnostic("low_quality", f"{idx.size} of {len(u)} intervals had fewer than 2 valid sensors "
                                    "(or only sensors at one point); the previous velocity was held", indices=tuple(int(i) for i in idx[:200])))
+    warnings = list(steps.warnings) + warnings
     for i in range(array.n):
         inval = ~steps.valid[i]
-        if inval.mean() > 0.05:
+        # any excluded frame is reported, with its reasons: a sensor that loses a few percent of
+        # its frames in one place (a texture gap) loses motion there even if the rest is fine
+        if inval.any():
+            why = (steps.reasons[i] if steps.reasons is not None else {}) or {"invalid": int(inval.sum())}
+            text = ", ".join(f"{r} {c}" for r, c in sorted(why.items(), key=lambda x: -x[1]))
             warnings.append(Diagnostic("low_quality", f"sensor {array.names[i]}: {inval.sum()} of {len(inval)} frames "
-                                       "without a valid flow (low texture or ambiguous match)", params=(array.names[i],)))
+                                       f"({100 * inval.mean():.1f} %) without a valid flow ({text}); left out of the "
+                                       "fusion there", params=(array.names[i],),
+                                       indices=tuple(int(k) for k in np.flatnonzero(inval)[:200])))
         if rejected[i].sum() > 0:
             idx = np.flatnonzero(rejected[i])
             warnings.append(Diagnostic("outliers", f"sensor {array.names[i]} disagreed with the others in {idx.size} "
                                        "intervals and was left out there", params=(array.names[i],),
                                        indices=tuple(int(k) for k in idx[:200])))
-    return Odometry(t=steps.t, poses=poses, twists=u, twist_cov=cov, velocity=vel, velocity_std=vstd, used=used,
-                    rejected=rejected, bridged=bridged, chi2=chi2, warnings=warnings)
+    inv = ~steps.valid
+    frames = {"invalid_frames": {nm: int(inv[i].sum()) for i, nm in enumerate(array.names)},
+              "invalid_by_reason": {nm: dict(steps.reasons[i]) if steps.reasons is not None else
+                                    ({"invalid": int(inv[i].sum())} if inv[i].any() else {})
+                                    for i, nm in enumerate(array.names)}}
+    return Odometry(frames=frames, t=steps.t, poses=poses, twists=u, twist_cov=cov, velocity=vel, velocity_std=vstd, used=used,
+                    rejected=rejected, bridged=bridged, chi2=chi2, warnings=warnings, chi2_ratio=chi2_ratio)

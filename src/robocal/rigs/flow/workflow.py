@@ -110,8 +110,25 @@ def _traj_section(report: Report, title: str, curves: dict, errors: dict) -> Non
         rows.append({"trajectory": name, "ATE [mm]": ev.ate_rmse * 1e3, "final error [mm]": ev.final_error * 1e3,
                      "final heading [deg]": np.degrees(ev.heading_error_final),
                      "RPE@0.5m [%]": r1.get("trans_per_m", np.nan) * 100, "RPE rot [deg/m]": np.degrees(r1.get("rot_per_m", np.nan))})
-    sec.table(rows, digits=4, caption="ATE after rigid alignment (Umeyama); RPE over 0.5 m of travelled path "
-              "(translation error per metre of path, rotation error per metre).")
+    sec.table(rows, digits=4, caption="ATE: RMS position error after least-squares rigid 2D alignment (Umeyama); "
+              "RPE: RMS over all segment starts of the relative pose error over 0.5 m of travelled path "
+              "(translation error per metre of path, rotation error per metre; mean and median in result.json).")
+    cal, nom = errors.get("flow odometry (calibrated)"), errors.get("flow odometry")
+    if cal is not None and nom is not None:
+        sec.text(compare_text(nom, cal))
+
+
+def compare_text(nom, cal) -> str:
+    """One line: calibrated vs nominal array in ATE and RPE@0.5 m, saying which got worse."""
+    def word(a, b):
+        return "better" if b < a else "WORSE" if b > a else "same"
+
+    rn, rc = nom.rpe.get(0.5, {}), cal.rpe.get(0.5, {})
+    tn, tc = rn.get("trans_per_m", np.nan), rc.get("trans_per_m", np.nan)
+    on, oc = np.degrees(rn.get("rot_per_m", np.nan)), np.degrees(rc.get("rot_per_m", np.nan))
+    return (f"calibrated vs nominal array: ATE {nom.ate_rmse * 1e3:.1f} -> {cal.ate_rmse * 1e3:.1f} mm "
+            f"({word(nom.ate_rmse, cal.ate_rmse)}); RPE@0.5m {tn * 100:.2f} -> {tc * 100:.2f} % ({word(tn, tc)}), "
+            f"{on:.2f} -> {oc:.2f} deg/m ({word(on, oc)})")
 
 
 def evaluation_run(spec: RunSpec, od: Odometry, *, calibrated: Odometry | None = None):

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -211,6 +212,15 @@ class HumanoidCalibration:
         ``(view name, corner index)`` of > 3 sigma corners.
     messages : list of str
         Dropped views and other notes.
+    held : list of str
+        The gauge: one parameter per null-space direction, held at its start value.
+    undetermined : list of str
+        Parameters with a null-space component (no value or std reported; ``held`` among them).
+    rank, n_params : int
+        Rank of the column-scaled Jacobian of the selected problem at the start, and its number
+        of free parameters (tied ones counted once), before the gauge is held.
+    two_pass : bool
+        True when the corner noise was measured and a second LM pass run (``lsq`` is that pass).
     """
 
     model: HumanoidModel
@@ -358,6 +368,17 @@ class HumanoidCalibration:
             "n_views": self.data.n_views,
             "n_corners": int(self.residuals.shape[0] * self.residuals.shape[1]),
             "joint_offsets_deg": {r["joint"]: r["offset [deg]"] for r in self.offsets_table() if r["estimated"]},
+            "offsets_table": [{k: v for k, v in r.items() if k != "offset [rad]"} for r in self.offsets_table()],
+            # enough to redraw the residual histograms and overlays (`robocal humanoid report`):
+            # detected corners and residuals (predicted - detected) per view and corner [px], and
+            # the image files (None for in-memory images)
+            "corners_px": np.round(self.data.corners, 4).tolist(),
+            "residuals_px": np.round(self.residuals, 5).tolist(),
+            "images": [str(Path(im).resolve()) if isinstance(im, (str, Path)) else None
+                       for im in self.data.images],
+            "image_size": [self.model.camera.width, self.model.camera.height],
+            "corner_sigma_measured": self.two_pass,
+            "iterations_from_zero": self.first_iterations,
             "camera_correction": self.camera_correction(),
             "tied": {k: list(v) for k, v in lsq.tied.items()},
             "messages": self.messages,
@@ -427,9 +448,9 @@ def check_views_consistent(model: HumanoidModel, data: HumanoidDataset, x0=None)
     if bad.size:
         v = int(bad[np.argmax(dist[bad])])
         raise InconsistentDataError(
-            f"view {data.names[v]!r} ({data.feet[v]} board): detected corners are {dist[v]:.0f} px (median) from "
-            f"where its joint record puts them, expected < {tol:.0f} px (median view {typical:.0f} px): the joint "
-            f"record or the foot label does not match the image"
+            f"view {data.names[v]!r} (feet: {data.feet[v]!r}, and its joints record): detected corners are "
+            f"{dist[v]:.0f} px (median) from where the record puts them, expected < {tol:.0f} px (median view "
+            f"{typical:.0f} px): the joint record or the foot label does not match the image"
             + (f" ({bad.size} such views: {[data.names[i] for i in bad]})" if bad.size > 1 else ""))
     return dist
 
@@ -539,8 +560,10 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
     # with a null-space component are gauge-dependent and get no value. Holding every such
     # parameter instead (k' > k) removes directions the data do determine and biases the rest.
     pre = analyze_jacobian(prob.jacobian_at(), prob.free_labels)
-    gauge = choose_gauge(pre)
     undetermined = list(pre.unidentifiable)
+    # (a null direction spread so thinly that no parameter reaches the 0.1 component of
+    # analyze_jacobian is left to LM, as before: nothing is held or withheld for it)
+    gauge = choose_gauge(pre) if undetermined else []
     warn_held = None
     if undetermined:
         tied_to = {lab: prob.ties[lab][0] for lab in prob.ties} if prob.ties else {}

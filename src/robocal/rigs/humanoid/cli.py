@@ -51,12 +51,15 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
                                    "Parameter sets: seed (21, default), seed+camera_xy, legs, all, or a "
                                    "comma list of names (LKneePitch, camera.roll, board.left.x, ...).",
                        epilog=examples_epilog(f"robocal humanoid calibrate {EXAMPLES}/run.yaml --out cal",
-                                              f"robocal humanoid calibrate {EXAMPLES}/run.yaml --tie --out cal",
+                                              "robocal humanoid calibrate sim/run.yaml --tie --out cal   "
+                                              "# data from one HipYawPitch motor",
                                               f"robocal humanoid calibrate {EXAMPLES}/run.yaml "
                                               "--params seed+camera_xy --out cal"))
     p.add_argument("input", type=Path, help="data-set file (YAML/JSON)")
     p.add_argument("--params", default="seed", help="parameters to estimate")
-    p.add_argument("--tie", action="store_true", help="one offset for both HipYawPitch joints (one motor)")
+    p.add_argument("--tie", action="store_true",
+                   help="one offset for both HipYawPitch joints (one motor); wrong for data whose two "
+                        "offsets differ, such as examples/humanoid (simulated untied)")
     p.add_argument("--fd", action="store_true", help="finite-difference Jacobian instead of the analytic one")
     p.add_argument("--corner-sigma", type=float, default=None,
                    help="corner noise [px] (default: measured from the data)")
@@ -66,10 +69,19 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
     p = sub.add_parser("plan", help="choose leg poses that make the calibration well conditioned",
                        formatter_class=RawHelp,
                        epilog=examples_epilog("robocal humanoid plan --poses 12 --out plan",
-                                              "robocal humanoid plan --poses 20 --candidates 100 --out plan"))
+                                              "robocal humanoid plan --poses 20 --candidates 100 --out plan",
+                                              f"robocal humanoid plan --data {EXAMPLES}/run.yaml --corner-sigma 0.1 "
+                                              "--out plan"))
     p.add_argument("--poses", type=int, default=12, help="poses to choose")
     p.add_argument("--candidates", type=int, default=60, help="random candidate poses per foot")
     p.add_argument("--params", default="seed", help="parameters to plan for")
+    p.add_argument("--data", type=Path, default=None,
+                   help="plan for the robot of this data-set file (URDF, camera, board, tie, joint resolution; "
+                        "its images are not read)")
+    p.add_argument("--tie", action="store_true",
+                   help="one HipYawPitch motor (tied joints) in the default model (with --data, the file's "
+                        "tie_hip_yaw_pitch decides)")
+    p.add_argument("--corner-sigma", type=float, default=0.3, help="expected corner noise [px]")
     add_seed_argument(p)
     add_out_argument(p)
     p.set_defaults(func=_cmd_plan)
@@ -94,6 +106,9 @@ def simulate_files(out_dir, rng: np.random.Generator, *, views: int = 8, blur: f
 
     if views < 1:
         raise InputError(f"--views must be >= 1, got {views}")
+    for name, val in (("--offset-scale", offset_scale), ("--blur", blur), ("--image-noise", image_noise)):
+        if not (np.isfinite(val) and val >= 0):
+            raise InputError(f"{name} must be a finite number >= 0, got {val}")
     model = default_model(tie_hip_yaw_pitch=tie)
     truth = draw_truth(model, rng, joint_deg=offset_scale, camera_deg=offset_scale, board_deg=offset_scale)
     data = simulate_dataset(model, rng, n_per_foot=views, truth=truth, render=True, blur_sigma=blur,
@@ -151,18 +166,31 @@ def _cmd_calibrate(args) -> int:
 def _cmd_plan(args) -> int:
     from robocal.rigs.humanoid.model import default_model
     from robocal.rigs.humanoid.plan import plan_poses
+    from robocal.rigs.humanoid.simulate import JOINT_RESOLUTION
 
     if args.poses < 1 or args.candidates < 1:
         raise InputError("--poses and --candidates must be >= 1")
-    model = default_model()
+    if not (np.isfinite(args.corner_sigma) and args.corner_sigma > 0):
+        raise InputError(f"--corner-sigma must be a finite number > 0 px, got {args.corner_sigma}")
+    resolution = JOINT_RESOLUTION
+    if args.data is not None:
+        from robocal.rigs.humanoid.dataset import load_dataset
+
+        model, _, info = load_dataset(args.data, detect=False)
+        resolution = info["joint_resolution"]
+    else:
+        model = default_model(tie_hip_yaw_pitch=args.tie)
     plan = plan_poses(model, args.poses, np.random.default_rng(args.seed), parameters=args.params,
-                      n_candidates=args.candidates)
+                      n_candidates=args.candidates, corner_sigma=args.corner_sigma, joint_resolution=resolution)
     out = prepare_out_dir(args.out, "humanoid-plan")
     doc = {"description": "leg poses chosen greedily for D-optimality (joint angles to command)",
            "feet": plan.feet,
            "joints": {"unit": "deg", "names": list(model.joint_names),
                       "records": [[round(float(np.degrees(v)), 2) for v in row] for row in plan.theta]},
-           "predicted_std_deg_after_each_pose": [r["worst joint std [deg]"] for r in plan.table()]}
+           "predicted_std_deg_after_each_pose": [r["worst joint std [deg]"] for r in plan.table()],
+           "assumed": {"model": str(args.data) if args.data else "default", "tied": bool(model.tied),
+                       "corner_sigma_px": args.corner_sigma,
+                       "joint_resolution_deg": round(float(np.degrees(resolution)), 6)}}
     atomic_write_text(out / "plan.yaml", yaml.safe_dump(doc, sort_keys=False, width=200))
     rep = Report("NAO calibration pose plan", subtitle=f"{args.poses} poses from {2 * args.candidates} candidates")
     sec = rep.section("Predicted uncertainty as poses are added")

@@ -68,7 +68,8 @@ class PosePlan:
             s = self.std_history[k]
             row = {"poses": k + 1, "foot added": self.feet[k],
                    "worst joint std [deg]": _worst(s[joint]), "worst camera std [deg]": _worst(s[cam]),
-                   "condition number": self.condition[k]}
+                   # a rank-deficient step has no meaningful condition number (it printed 8.8e15)
+                   "condition number": float(self.condition[k]) if np.all(np.isfinite(s)) else None}
             if self.random_std is not None:
                 row["random order: worst joint std [deg]"] = _worst(self.random_std[k][joint])
             rows.append(row)

@@ -25,6 +25,8 @@ from robocal.rigs.humanoid.calibrate import HumanoidCalibration
 
 __all__ = [
     "overlay_image",
+    "draw_overlay",
+    "overlay_picks",
     "plot_residual_histograms",
     "plot_view_rms",
     "plot_cost",
@@ -38,24 +40,39 @@ __all__ = [
 def overlay_image(cal: HumanoidCalibration, view: int, *, magnify: float = 20.0) -> np.ndarray:
     """RGB image of one view: detected corners (green), reprojected ones (red), and
     the residual vectors magnified ``magnify`` times (yellow)."""
+    det = cal.data.corners[view]
+    return draw_overlay(cal.data.images[view], det, det + cal.residuals[view],
+                        (cal.model.camera.width, cal.model.camera.height), magnify=magnify)
+
+
+def draw_overlay(img, det, pred, size, *, magnify: float = 20.0) -> np.ndarray:
+    """RGB overlay on ``img`` (array, image path, or None: a grey canvas of ``size`` = (w, h)):
+    detected corners ``det`` (green circles), predicted ``pred`` (red crosses), both (N, 2) [px],
+    and the residual magnified ``magnify`` times (yellow)."""
     import cv2
 
     from robocal.rigs.humanoid.detect import load_image
 
-    img = cal.data.images[view]
     if img is None:
-        img = np.full((cal.model.camera.height, cal.model.camera.width), 128, np.uint8)
+        img = np.full((size[1], size[0]), 128, np.uint8)
     elif not isinstance(img, np.ndarray):
         img = load_image(img)
     rgb = cv2.cvtColor(np.asarray(img, np.uint8), cv2.COLOR_GRAY2RGB) if np.ndim(img) == 2 else np.array(img)
-    det = cal.data.corners[view]
-    pred = det + cal.residuals[view]
-    for d, p in zip(det, pred):
+    for d, p in zip(np.asarray(det, float), np.asarray(pred, float)):
         end = d + magnify * (p - d)
         cv2.line(rgb, _pt(d), _pt(end), (240, 200, 0), 1, cv2.LINE_AA)
         cv2.circle(rgb, _pt(d), 4, (0, 200, 0), 1, cv2.LINE_AA)
         cv2.drawMarker(rgb, _pt(p), (230, 0, 0), cv2.MARKER_CROSS, 7, 1, cv2.LINE_AA)
     return rgb
+
+
+def overlay_picks(feet, rms, n: int) -> list[int]:
+    """Views to overlay: the worst of each board first, then the best view, then the next worst."""
+    rms = np.asarray(rms, float)
+    order = [int(i) for i in np.argsort(-rms)]
+    picks = [next(i for i in order if feet[i] == f) for f in dict.fromkeys(feet)]
+    picks += [order[-1]] + order
+    return list(dict.fromkeys(picks))[:n]
 
 
 def _pt(p):
@@ -186,9 +203,7 @@ def build_report(cal: HumanoidCalibration, *, title: str = "NAO leg and camera c
     r.table([{"view": nm, "foot": f, "RMS [px]": float(v)} for nm, f, v in
              zip(cal.data.names, cal.data.feet, cal.view_rms)])
     ov = rep.section("Reprojection overlays")
-    order = np.argsort(-cal.view_rms)
-    picks = list(dict.fromkeys([int(order[0]), int(order[-1])] + list(range(cal.data.n_views))))[:n_overlays]
-    for v in picks:
+    for v in overlay_picks(cal.data.feet, cal.view_rms, n_overlays):
         ov.image(overlay_image(cal, v), f"{cal.data.names[v]} ({cal.data.feet[v]} board, RMS "
                                         f"{cal.view_rms[v]:.3f} px): green detected, red reprojected, "
                                         f"yellow residual x20")
@@ -197,14 +212,34 @@ def build_report(cal: HumanoidCalibration, *, title: str = "NAO leg and camera c
     return rep
 
 
-def report_from_result(result: CalibrationResult, *, title: str = "NAO leg and camera calibration") -> Report:
-    """A report rebuilt from a saved ``result.json`` (tables and per-view RMS; no images)."""
+def report_from_result(result: CalibrationResult, *, title: str = "NAO leg and camera calibration",
+                       n_overlays: int = 4) -> Report:
+    """A report rebuilt from a saved ``result.json``: summary, parameter and offset tables,
+    identifiability, residual histograms, cost and per-view RMS plots, and reprojection overlays
+    of the views whose image files still exist (a grey canvas otherwise, said in the caption).
+    A result written before the corners and residuals were saved gets the tables and the
+    per-view RMS only."""
     d = result.diagnostics
     rep = Report(title, subtitle=f"from {result.command or 'a saved result'} ({result.created})")
     s = rep.section("Summary")
-    s.table([{"quantity": k, "value": d.get(k)} for k in
-             ("n_views", "rms_x_px", "rms_y_px", "iterations", "rank", "n_free", "condition_number")])
+    nm = d.get("noise_model") or {}
+    rank = d.get("rank"), d.get("n_free")
+    s.table([
+        {"quantity": "views used", "value": d.get("n_views")},
+        {"quantity": "residual RMS x [px]", "value": d.get("rms_x_px")},
+        {"quantity": "residual RMS y [px]", "value": d.get("rms_y_px")},
+        {"quantity": "corner noise used [px]", "value": nm.get("corner_sigma_px")},
+        {"quantity": "residual variance / model", "value": nm.get("residual_variance_ratio")},
+        {"quantity": "LM iterations (from zero)", "value": d.get("iterations")},
+        {"quantity": "LM iterations (measured corner noise)",
+         "value": d.get("iterations_reweighted_pass") if d.get("corner_sigma_measured") else "—"},
+        {"quantity": "Jacobian rank", "value": f"{rank[0]} of {rank[1]}"},
+        {"quantity": "condition number (scaled)", "value": d.get("condition_number")},
+        {"quantity": "outlier corners (> 3 sigma)", "value": len(d.get("outlier_corners") or [])},
+    ])
     s.diagnostics(result.warnings)
+    for msg in d.get("messages") or []:
+        s.text(msg, cls="warn")
     rows = []
     for k, v in result.estimate.items():
         unit = result.units.get(k)
@@ -212,17 +247,55 @@ def report_from_result(result: CalibrationResult, *, title: str = "NAO leg and c
         sd = result.std.get(k)
         rows.append({"parameter": k, "value": None if v is None else v * f,
                      "std": None if sd is None else sd * f, "unit": "deg" if unit == "rad" else "mm"})
-    rep.section("Parameters").table(rows)
+    rep.section("Parameters").table(rows, caption="estimate and 1-sigma uncertainty; '—' = not identifiable")
+    if d.get("offsets_table"):
+        o = rep.section("Per-joint offsets and camera correction")
+        o.table(d["offsets_table"])
+        cam = d.get("camera_correction") or {}
+        o.table([{"correction": k, "value": None if v is None else v * (np.degrees(1.0) if k in
+                  ("roll", "pitch", "yaw") else 1e3), "unit": "deg" if k in ("roll", "pitch", "yaw") else "mm"}
+                 for k, v in cam.items()], caption="camera mounting correction")
+    i = rep.section("Identifiability")
+    i.text(f"Jacobian rank {rank[0]} of {rank[1]} free parameters; condition number "
+           f"{d.get('condition_number', float('nan')):.3g}.")
+    if d.get("unidentifiable"):
+        i.text("Not determined by these poses (no value reported): " + ", ".join(d["unidentifiable"])
+               + (f"; gauge held: {', '.join(d['gauge_held'])}" if d.get("gauge_held") else ""), cls="warn")
+    corr = d.get("correlations") or []
+    if corr:
+        i.table([{"parameter a": a, "parameter b": b, "correlation": c} for a, b, c in corr],
+                caption="strongest correlations")
     views = d.get("views") or []
+    resid = np.asarray(d["residuals_px"], float) if d.get("residuals_px") else None
+    sec = rep.section("Residuals")
+    if resid is not None and resid.size:
+        fig, ax = new_figure(1, 2, size=(11, 3.6))
+        plot_residual_histograms(resid, ax=ax[0])
+        hist = d.get("cost_history") or []
+        first = d.get("cost_history_first_pass")
+        plot_cost(np.asarray(hist, float), ax=ax[1],
+                  first=np.asarray(first, float) if first and d.get("corner_sigma_measured") else None)
+        sec.figure(fig, "corner residual histograms; cost per LM iterate")
     if views:
-        sec = rep.section("Residuals per view")
         fig, ax = new_figure(size=(9, 3.2))
         plot_view_rms([v["name"] for v in views], [v["foot"] for v in views], [v["rms_px"] for v in views], ax=ax)
         sec.figure(fig, "per-view residual RMS")
-    corr = d.get("correlations") or []
-    if corr:
-        rep.section("Identifiability").table([{"parameter a": a, "parameter b": b, "correlation": c}
-                                              for a, b, c in corr])
+        sec.table([{"view": v["name"], "foot": v["foot"], "RMS [px]": v["rms_px"]} for v in views])
+    if resid is not None and d.get("corners_px") and views:
+        det = np.asarray(d["corners_px"], float)
+        images = d.get("images") or [None] * len(views)
+        size = tuple(d.get("image_size") or (int(np.nanmax(det[..., 0])) + 40, int(np.nanmax(det[..., 1])) + 40))
+        ov = rep.section("Reprojection overlays")
+        for v in overlay_picks([x["foot"] for x in views], [x["rms_px"] for x in views], n_overlays):
+            img = images[v] if images[v] and Path(images[v]).is_file() else None
+            if img is not None:
+                from robocal.rigs.humanoid.detect import load_image
+
+                img = load_image(img)
+            note = "" if img is not None else " (image file not available: grey canvas)"
+            ov.image(draw_overlay(img, det[v], det[v] + resid[v], size),
+                     f"{views[v]['name']} ({views[v]['foot']} board, RMS {views[v]['rms_px']:.3f} px): green "
+                     f"detected, red reprojected, yellow residual x20{note}")
     return rep
 
 

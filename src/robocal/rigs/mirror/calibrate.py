@@ -65,6 +65,7 @@ __all__ = [
     "SingleImageResult",
     "MirrorCalibration",
     "check_observation",
+    "check_in_image",
     "choose_planar_solution",
     "calibrate_single",
     "calibrate",
@@ -173,6 +174,30 @@ def check_observation(obs: MirrorObservation, body_points_r: np.ndarray, rectang
         )
     # contiguous copies: cv2.solvePnP rejects strided views (core PnP passes them through)
     return np.ascontiguousarray(m), np.ascontiguousarray(q), ids, np.ascontiguousarray(P[ids])
+
+
+#: Image points farther than this fraction of the image size outside it are rejected as wrong input.
+OUTSIDE_IMAGE_FRACTION = 0.5
+
+
+def check_in_image(camera: CameraModel, uv, what: str) -> None:
+    """Reject image points far outside the camera's ``width x height`` [px].
+
+    A detector cannot report such points, so they are a unit or column mix-up
+    (or a different camera); without this check PnP fails later with a
+    misleading "behind the camera". The margin (``OUTSIDE_IMAGE_FRACTION`` of
+    the image size) leaves room for hand-picked points near the border.
+    """
+    uv = np.asarray(uv, dtype=float)
+    size = np.array([camera.width, camera.height], dtype=float)
+    lo, hi = -OUTSIDE_IMAGE_FRACTION * size, (1.0 + OUTSIDE_IMAGE_FRACTION) * size
+    bad = np.flatnonzero(np.any((uv < lo) | (uv > hi), axis=1))
+    if bad.size:
+        i = int(bad[0])
+        raise InconsistentDataError(
+            f"{what}: row {i} = ({uv[i, 0]:.4g}, {uv[i, 1]:.4g}) px lies outside the {camera.width} x "
+            f"{camera.height} px image{f' ({bad.size} such rows)' if bad.size > 1 else ''}; check the camera "
+            "width/height and that the points are pixels of this camera")
 
 
 @dataclass
@@ -452,11 +477,14 @@ def calibrate_single(camera: CameraModel, rectangle: MarkerRectangle, body_point
     """
     m_uv, b_uv, ids, P = check_observation(obs, body_points_r, rectangle)
     src = obs.name
+    check_in_image(camera, m_uv, f"{src}: marker_uv")
+    check_in_image(camera, b_uv, f"{src}: body_uv")
     try:
         T_c_ri_sol = solve_pnp(camera, ri_from_r_points(P), b_uv)  # eq. [2]
     except ConvergenceError as exc:
-        raise InconsistentDataError(f"{src}: body points: {exc.message} (points behind the camera: check the "
-                                    "correspondences and that the model is in the robot frame r)") from None
+        # the core message already says what to check about the correspondences; add only the frame
+        raise InconsistentDataError(f"{src}: body_uv / body_points: {exc.message} (body_points must be in the "
+                                    "robot frame r)") from None
     except DegenerateGeometryError as exc:
         raise DegenerateGeometryError(f"{src}: body_points_r: {exc.message}") from None
     try:

@@ -67,7 +67,8 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
                                f"robocal mirror calibrate {EXAMPLES}/published_single.yaml --no-refine --out cal"))
     p.add_argument("input", type=Path, help="calibration input (YAML/JSON)")
     p.add_argument("--no-refine", action="store_true",
-                   help="patent's single-image estimates only (averaged over images), no joint least squares")
+                   help="patent's single-image estimates only (averaged over images), no joint least squares; "
+                        "the std is that of the average")
     add_out_argument(p)
     p.set_defaults(func=_cmd_calibrate)
 
@@ -90,7 +91,7 @@ def _cmd_simulate(args) -> int:
 
 def _cmd_calibrate(args) -> int:
     out = prepare_out_dir(args.out, "mirror-calibrate")
-    cal, result, report = workflow.calibrate_file(args.input, refine=not args.no_refine)
+    cal, result, report = workflow.calibrate_file(args.input, refine=not args.no_refine, out_dir=out)
     write_run(out, result, report)
     t = cal.T_r_c[:3, 3] * 1e3
     s = cal.std_translation * 1e3
@@ -109,7 +110,7 @@ def _cmd_report(args) -> int:
     if result.rig != "mirror":
         raise InputError(f"{args.result}: a result of rig {result.rig!r}, not 'mirror'")
     try:
-        report = build_report(result)
+        report = build_report(result, base_dir=Path(args.result).parent)
     except RobocalError as exc:
         raise exc.with_source(str(args.result)) from None
     out = prepare_out_dir(args.out, "mirror-report")

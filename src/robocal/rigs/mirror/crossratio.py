@@ -8,10 +8,12 @@ points as one likes.
 
 Read this before using it: **the generated points carry no information
 beyond the four corners.** They are a deterministic function of the four
-imaged corners (the function's Jacobian has rank <= 8), so a PnP fed with them
-is still a four-point PnP whose corner noise has been copied into every extra
-point; treating them as independent observations makes the reported
-covariance over-confident. They are useful for drawing, for checking a
+imaged corners, so a PnP fed with them is still a four-point PnP whose corner
+noise has been copied into every extra point: its Monte Carlo scatter is that
+of the corners alone (ratio 0.97-1.03 over 200 trials at 0.5 px on the
+published scene, 24 extra points), while treating them as independent
+observations shrinks the reported std to 0.4-0.6 of the true scatter
+(``test_cross_ratio_points_add_no_information_to_the_marker_pose``). They are useful for drawing, for checking a
 detector, or for seeding a search for extra physical marks — not for
 improving the estimate. The calibration in this rig uses the corners only.
 

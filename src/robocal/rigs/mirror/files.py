@@ -26,11 +26,19 @@ Layout (lengths in the unit given by ``units.length`` or inline
         image: shot2.png           # or a photo: ArUco tags are detected (needs body_tags)
     body_tags:                   # only with image entries; replaces body_points
       size: 100                  # black-square side
-      tags:                      # tags on faces facing +x_r, upright
+      dictionary: DICT_4X4_50    # optional (default)
+      tags:                      # default: upright on a face facing +x_r
         - {id: 0, centre: [450, -190, 100]}
+        - {id: 1, centre: [300, 260, 150], normal: [0, 1, 0]}              # upright on a +y_r face
+        - {id: 2, centre: [500, 0, 300], normal: [0, 0, 1], x_axis: [0, 1, 0]}  # on the top, x_tag = +y_r
+    mirror_tags: {dictionary: DICT_4X4_50, ids: [40, 41, 42, 43]}   # optional (default): tags at A..D
 
 With ``body_tags`` the body points are the tag corners (4 per tag, in
-OpenCV's corner order, tag ``k`` -> rows ``4k..4k+3``).
+OpenCV's corner order, tag ``k`` -> rows ``4k..4k+3``). A tag's ``normal``
+is the outward normal of its face in ``r``; ``x_axis`` is the printed tag's
+right (needed on horizontal faces, where "upright" is undefined). Image paths
+are relative to the input file. Body tag ids must differ from the mirror tag
+ids when both use one dictionary.
 """
 
 from __future__ import annotations
@@ -46,7 +54,14 @@ from robocal.errors import RobocalError
 from robocal.geometry import transform_from
 from robocal.io import atomic_write_text, load_document
 from robocal.rigs.mirror.calibrate import MirrorObservation
-from robocal.rigs.mirror.render import _R_R_TAG_FRONT, BodyTags, detect_mirror_image
+from robocal.rigs.mirror.render import (
+    _R_R_TAG_FRONT,
+    ARUCO_DICT,
+    BodyTags,
+    MirrorTags,
+    detect_mirror_image,
+    tag_rotation,
+)
 
 __all__ = ["MirrorInput", "load_input", "write_input"]
 
@@ -63,6 +78,7 @@ class MirrorInput:
     tags: BodyTags | None = None
     image_paths: dict = field(default_factory=dict)  # observation name -> image path
     source: str = "<input>"
+    mirror_tags: MirrorTags | None = None
 
 
 def _uv(doc, key, n=None):
@@ -102,12 +118,38 @@ def load_input(path) -> MirrorInput:
         if len(set(ids)) != len(ids):
             raise t.error("tags", f"tag ids must be unique, got {list(ids)}")
         centres = np.stack([e.array("centre", kind="length", shape=(3,)) for e in entries])
-        tags = BodyTags(ids, np.stack([transform_from(_R_R_TAG_FRONT, c) for c in centres]), size)
+        rots = []
+        for e in entries:
+            if "x_axis" in e and "normal" not in e:
+                raise e.error("x_axis", "needs 'normal' (the face's outward normal) too")
+            try:
+                rots.append(tag_rotation(e.array("normal", shape=(3,)),
+                                         e.array("x_axis", shape=(3,)) if "x_axis" in e else None)
+                            if "normal" in e else _R_R_TAG_FRONT)
+            except RobocalError as exc:
+                raise exc.with_source(f"{src}: {e.prefix}") from None
+        dictionary = t.str("dictionary", default=ARUCO_DICT)
+        tags = BodyTags(ids, np.stack([transform_from(R, c) for R, c in zip(rots, centres)]), size, dictionary)
         body = tags.body_points_r()
     else:
         body = doc.array("body_points", kind="length", shape=(None, 3))
         if body.ndim != 2:
             raise doc.error("body_points", f"must be a list of [x, y, z] points, got shape {body.shape}")
+    mirror_tags = None
+    if "mirror_tags" in doc:
+        mdoc = doc.sub("mirror_tags")
+        raw_ids = mdoc.raw("ids", default=list(MirrorTags().ids))
+        if not isinstance(raw_ids, list) or not all(isinstance(v, int) and not isinstance(v, bool) for v in raw_ids):
+            raise mdoc.error("ids", f"must be a list of 4 integers (tags at A, B, C, D), got {raw_ids!r}")
+        try:
+            mirror_tags = MirrorTags(tuple(raw_ids), mdoc.str("dictionary", default=ARUCO_DICT))
+        except RobocalError as exc:
+            raise (exc if exc.source else exc.with_source(src)) from None
+    if tags is not None:
+        try:
+            (mirror_tags or MirrorTags()).check_body(tags)
+        except RobocalError as exc:
+            raise exc.with_source(src) from None
     obs, images = [], {}
     entries = doc.items_list("images")
     if not entries:
@@ -127,7 +169,7 @@ def load_input(path) -> MirrorInput:
             if img is None:
                 raise e.error("image", f"{p} is not a readable image")
             try:
-                obs.append(detect_mirror_image(img, cam, tags, name=name))
+                obs.append(detect_mirror_image(img, cam, tags, name=name, mirror_tags=mirror_tags))
             except RobocalError as exc:
                 raise exc.with_source(f"{src}: {e.prefix}") from None
             images[name] = str(p)
@@ -139,12 +181,12 @@ def load_input(path) -> MirrorInput:
                 raise e.error("body_ids", "must be a list of integers")
             ids = np.array(raw, dtype=int)
         obs.append(MirrorObservation(_uv(e, "marker_uv", 4), _uv(e, "body_uv"), ids, name))
-    return MirrorInput(cam, rect, body, obs, sigma, tags, images, src)
+    return MirrorInput(cam, rect, body, obs, sigma, tags, images, src, mirror_tags)
 
 
 def write_input(path, camera: CameraModel, rectangle: MarkerRectangle, body_points_r, observations, *,
                 sigma_px: float | None = None, tags: BodyTags | None = None, image_files=None,
-                comment: str = "") -> Path:
+                comment: str = "", mirror_tags: MirrorTags | None = None) -> Path:
     """Write an input file (lengths in mm) that :func:`load_input` reads back.
 
     ``image_files``: optional ``{observation index: relative image path}``;
@@ -162,8 +204,18 @@ def write_input(path, camera: CameraModel, rectangle: MarkerRectangle, body_poin
     if sigma_px is not None:
         doc["sigma_px"] = float(sigma_px)
     if tags is not None:
-        doc["body_tags"] = {"size": tags.size * 1e3, "tags": [
-            {"id": int(i), "centre": np.round(T[:3, 3] * 1e3, 6).tolist()} for i, T in zip(tags.ids, tags.T_r_tag)]}
+        entries = []
+        for i, T in zip(tags.ids, tags.T_r_tag):
+            e = {"id": int(i), "centre": np.round(T[:3, 3] * 1e3, 6).tolist()}
+            if not np.allclose(T[:3, :3], _R_R_TAG_FRONT, atol=1e-12):
+                e["normal"] = np.round(-T[:3, 2], 12).tolist()
+                e["x_axis"] = np.round(T[:3, 0], 12).tolist()
+            entries.append(e)
+        doc["body_tags"] = {"size": tags.size * 1e3, "tags": entries}
+        if tags.dictionary != ARUCO_DICT:
+            doc["body_tags"]["dictionary"] = tags.dictionary
+    if mirror_tags is not None:
+        doc["mirror_tags"] = {"dictionary": mirror_tags.dictionary, "ids": [int(i) for i in mirror_tags.ids]}
     else:
         doc["body_points"] = np.round(np.asarray(body_points_r) * 1e3, 6).tolist()
     imgs = []

@@ -33,6 +33,9 @@ __all__ = [
     "ARUCO_DICT",
     "MIRROR_TAG_IDS",
     "BodyTags",
+    "MirrorTags",
+    "aruco_dictionary",
+    "tag_rotation",
     "default_body_tags",
     "render_mirror_image",
     "detect_mirror_image",
@@ -50,12 +53,48 @@ MIRROR_TAG_SIZE = 0.06
 _R_R_TAG_FRONT = np.array([[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
 
-def _dictionary():
-    return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, ARUCO_DICT))
+def aruco_dictionary(name: str = ARUCO_DICT):
+    """OpenCV predefined ArUco dictionary by name (e.g. ``"DICT_4X4_50"``); InputError if unknown."""
+    if not (isinstance(name, str) and name.startswith("DICT_") and hasattr(cv2.aruco, name)):
+        raise InputError(f"dictionary: expected an OpenCV ArUco dictionary name such as {ARUCO_DICT!r}, got {name!r}")
+    return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name))
 
 
-def _tag_bitmap(tag_id: int, cells: int = 6, px_per_cell: int = 10) -> np.ndarray:
-    img = cv2.aruco.generateImageMarker(_dictionary(), int(tag_id), cells * px_per_cell)
+def _dictionary(name: str = ARUCO_DICT):
+    return aruco_dictionary(name)
+
+
+def tag_rotation(normal, x_axis=None) -> np.ndarray:
+    """Rotation ``R_r_tag`` (3, 3) of a tag on a face with outward ``normal`` (in ``r``).
+
+    Tag frame: x to the right and y down on the printed tag, z into the face
+    (``z_tag = -normal``). ``x_axis`` (in ``r``) is the tag's right; without it
+    the tag is upright (y_tag along ``-z_r`` projected onto the face), which
+    needs a face that is not horizontal.
+    """
+    n = np.asarray(normal, dtype=float).reshape(3)
+    if not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-9:
+        raise InputError(f"normal: expected a non-zero 3-vector, got {n.tolist()}")
+    z = -n / np.linalg.norm(n)
+    if x_axis is None:
+        y = np.array([0.0, 0.0, -1.0])
+        y = y - (y @ z) * z
+        if np.linalg.norm(y) < 1e-6:
+            raise InputError("normal: the face is horizontal, so 'upright' is undefined; give x_axis too")
+        y /= np.linalg.norm(y)
+        x = np.cross(y, z)
+    else:
+        x = np.asarray(x_axis, dtype=float).reshape(3)
+        x = x - (x @ z) * z
+        if not np.all(np.isfinite(x)) or np.linalg.norm(x) < 1e-6:
+            raise InputError(f"x_axis: must not be parallel to the normal, got {np.asarray(x_axis).tolist()}")
+        x /= np.linalg.norm(x)
+        y = np.cross(z, x)
+    return np.column_stack([x, y, z])
+
+
+def _tag_bitmap(tag_id: int, cells: int = 6, px_per_cell: int = 10, dictionary: str = ARUCO_DICT) -> np.ndarray:
+    img = cv2.aruco.generateImageMarker(_dictionary(dictionary), int(tag_id), cells * px_per_cell)
     # a white quiet zone of one cell around the tag so that it reads on any background
     return cv2.copyMakeBorder(img, px_per_cell, px_per_cell, px_per_cell, px_per_cell, cv2.BORDER_CONSTANT,
                               value=255)
@@ -73,11 +112,14 @@ class BodyTags:
         the printed tag, z into the face) [m].
     size : float
         Black-square side [m].
+    dictionary : str
+        OpenCV ArUco dictionary of the body tags.
     """
 
     ids: tuple
     T_r_tag: np.ndarray
     size: float
+    dictionary: str = ARUCO_DICT
 
     def corners_tag(self) -> np.ndarray:
         """Corners in the tag frame in OpenCV's order (TL, TR, BR, BL), (4, 3)."""
@@ -87,6 +129,40 @@ class BodyTags:
     def body_points_r(self) -> np.ndarray:
         """All corners in ``r``, (4 T, 3): tag ``k`` corner ``j`` is row ``4 k + j``."""
         return apply_transform(self.T_r_tag[:, None], self.corners_tag()[None]).reshape(-1, 3)
+
+
+@dataclass(frozen=True)
+class MirrorTags:
+    """The four ArUco tags on the mirror, centred at markers A, B, C, D.
+
+    Attributes
+    ----------
+    ids : tuple of 4 int
+        Tag ids at A, B, C, D.
+    dictionary : str
+        OpenCV ArUco dictionary name.
+    """
+
+    ids: tuple = MIRROR_TAG_IDS
+    dictionary: str = ARUCO_DICT
+
+    def __post_init__(self):
+        ids = tuple(int(i) for i in self.ids)
+        if len(ids) != 4 or len(set(ids)) != 4:
+            raise InputError(f"mirror_tags.ids: expected 4 distinct ids (A, B, C, D), got {list(self.ids)}")
+        n = aruco_dictionary(self.dictionary).bytesList.shape[0]
+        if min(ids) < 0 or max(ids) >= n:
+            raise InputError(f"mirror_tags.ids: {self.dictionary} has ids 0..{n - 1}, got {list(ids)}")
+        object.__setattr__(self, "ids", ids)
+
+    def check_body(self, tags: "BodyTags") -> None:
+        """Body tag ids must differ from the mirror's when both use one dictionary."""
+        if tags.dictionary != self.dictionary:
+            return
+        clash = sorted(set(int(i) for i in tags.ids) & set(self.ids))
+        if clash:
+            raise InputError(f"body_tags.tags: ids {clash} are also mirror tag ids {list(self.ids)} "
+                             f"({self.dictionary}); a body tag seen directly would be taken for a mirror marker")
 
 
 def default_body_tags() -> BodyTags:
@@ -99,7 +175,7 @@ def default_body_tags() -> BodyTags:
 
 def render_mirror_image(camera: CameraModel, scene: MirrorScene, tags: BodyTags, *, placement: int = 0,
                         rng: np.random.Generator | None = None, blur_sigma: float = 0.6,
-                        noise_sigma: float = 2.0) -> np.ndarray:
+                        noise_sigma: float = 2.0, mirror_tags: MirrorTags | None = None) -> np.ndarray:
     """A grey image of mirror placement ``placement``: reflected body tags and the mirror's tags.
 
     ``scene.body_points_r`` is ignored; the body points are ``tags``' corners.
@@ -112,22 +188,23 @@ def render_mirror_image(camera: CameraModel, scene: MirrorScene, tags: BodyTags,
     for tag_id, T_r_tag in zip(tags.ids, tags.T_r_tag):
         T_c_tag = scene.T_c_r @ T_r_tag
         T_c_vtag = virtual_transform(T_c_tag, n, d)
-        bmp = np.fliplr(_tag_bitmap(tag_id, cells))
+        bmp = np.fliplr(_tag_bitmap(tag_id, cells, dictionary=tags.dictionary))
         full = tags.size * (cells + 2) / cells
         img = render_plane_texture(camera, T_c_vtag, bmp, full, origin=(-full / 2, -full / 2), image=img)
     w, h = scene.rectangle.width, scene.rectangle.height
     full = MIRROR_TAG_SIZE * (cells + 2) / cells
-    for tag_id, (x, y) in zip(MIRROR_TAG_IDS, [(0, 0), (w, 0), (w, h), (0, h)]):
-        img = render_plane_texture(camera, T_c_m, _tag_bitmap(tag_id, cells), full,
+    mt = mirror_tags or MirrorTags()
+    for tag_id, (x, y) in zip(mt.ids, [(0, 0), (w, 0), (w, h), (0, h)]):
+        img = render_plane_texture(camera, T_c_m, _tag_bitmap(tag_id, cells, dictionary=mt.dictionary), full,
                                    origin=(x - full / 2, y - full / 2), image=img)
     return add_blur_and_noise(img, blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng)
 
 
-def _detect(gray: np.ndarray):
+def _detect(gray: np.ndarray, dictionary: str = ARUCO_DICT):
     params = cv2.aruco.DetectorParameters()
     params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
     params.cornerRefinementWinSize = 3
-    det = cv2.aruco.ArucoDetector(_dictionary(), params)
+    det = cv2.aruco.ArucoDetector(_dictionary(dictionary), params)
     corners, ids, _ = det.detectMarkers(gray)
     if ids is None:
         return {}
@@ -142,11 +219,13 @@ def _centre(camera: CameraModel, corners_uv: np.ndarray) -> np.ndarray:
     return camera.pixel_from_normalized(x[:2] / x[2])
 
 
-def detect_mirror_image(image, camera: CameraModel, tags: BodyTags, *, name: str = "image") -> MirrorObservation:
+def detect_mirror_image(image, camera: CameraModel, tags: BodyTags, *, name: str = "image",
+                        mirror_tags: MirrorTags | None = None) -> MirrorObservation:
     """Find the mirror tags (direct) and the body tags (in the flipped image).
 
     Returns a :class:`MirrorObservation` whose ``body_ids`` index
-    ``tags.body_points_r()`` (tags not found are left out).
+    ``tags.body_points_r()`` (tags not found are left out). ``mirror_tags``:
+    ids and dictionary of the mirror's tags (default ids 40-43, DICT_4X4_50).
 
     Raises
     ------
@@ -161,12 +240,15 @@ def detect_mirror_image(image, camera: CameraModel, tags: BodyTags, *, name: str
     if img.shape != (camera.height, camera.width):
         raise InputError(f"{name}: image is {img.shape[1]} x {img.shape[0]} px, camera is "
                          f"{camera.width} x {camera.height}")
-    direct = _detect(img)
-    missing = [i for i in MIRROR_TAG_IDS if i not in direct]
+    mt = mirror_tags or MirrorTags()
+    mt.check_body(tags)
+    direct = _detect(img, mt.dictionary)
+    missing = [i for i in mt.ids if i not in direct]
     if missing:
-        raise DetectionError(f"{name}: mirror tag(s) {missing} not found (ids {list(MIRROR_TAG_IDS)} at A, B, C, D)")
-    marker_uv = np.stack([_centre(camera, direct[i]) for i in MIRROR_TAG_IDS])
-    flipped = _detect(np.ascontiguousarray(img[:, ::-1]))
+        raise DetectionError(f"{name}: mirror tag(s) {missing} not found (ids {list(mt.ids)} at A, B, C, D, "
+                             f"{mt.dictionary})")
+    marker_uv = np.stack([_centre(camera, direct[i]) for i in mt.ids])
+    flipped = _detect(np.ascontiguousarray(img[:, ::-1]), tags.dictionary)
     W = img.shape[1]
     uv, ids = [], []
     for k, tag_id in enumerate(tags.ids):

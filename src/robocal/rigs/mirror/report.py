@@ -10,6 +10,7 @@ other file.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +23,7 @@ from robocal.report import Report, new_figure
 from robocal.rigs.mirror.calibrate import MirrorCalibration, MirrorObservation, residual_model, _layout
 from robocal.rigs.mirror.model import mirror_plane, virtual_transform
 
-__all__ = ["result_from_calibration", "build_report", "draw_image_overlay"]
+__all__ = ["result_from_calibration", "build_report", "draw_image_overlay", "relative_image_paths"]
 
 
 def result_from_calibration(cal: MirrorCalibration, *, inputs=None, image_paths=None, truth=None) -> CalibrationResult:
@@ -61,7 +62,7 @@ def result_from_calibration(cal: MirrorCalibration, *, inputs=None, image_paths=
         "rectangle": {"width": cal.rectangle.width, "height": cal.rectangle.height},
         "body_points_r": cal.body_points_r.tolist(),
         "observations": [o.to_dict() for o in cal.observations],
-        "images": dict(image_paths or {}),
+        "images": dict(image_paths or {}),  # name -> image file, relative to the folder of result.json
         "single_image": singles,
         "cov_rot_t": cal.cov.tolist(),
         "n_images": len(cal.observations),
@@ -163,9 +164,49 @@ def _frames_3d(T_r_c, T_c_m, body_points_r, ax=None):
     return ax
 
 
+#: Image overlays drawn in a report (the rest are listed, not drawn: a report stays a few MB).
+MAX_OVERLAYS = 4
+
+
+def relative_image_paths(image_paths: dict, base_dir) -> dict:
+    """``{name: path}`` with each path relative to ``base_dir`` (the folder of result.json).
+
+    Relative paths keep a run portable: moving the output folder together with
+    the inputs keeps the report's images. Paths that cannot be made relative
+    (another drive) stay absolute.
+    """
+    out = {}
+    for name, p in (image_paths or {}).items():
+        try:
+            out[name] = os.path.relpath(Path(p).resolve(), Path(base_dir).resolve())
+        except ValueError:
+            out[name] = str(Path(p).resolve())
+    return out
+
+
+#: Rows of the worst-observations table.
+WORST_SHOWN = 5
+
+
+def _worst_observations(marker_res, body_res, obs, layout) -> list[dict]:
+    """The ``WORST_SHOWN`` largest residuals [px], named by image and marker letter / body point row."""
+    K = len(obs)
+    names = [(obs[k].name, f"marker {'ABCD'[i]}") for k in range(K) for i in range(4)]
+    names += [(obs[k].name, f"body point {int(j)}") for k in range(K) for j in layout.ids[k]]
+    r = np.vstack([np.asarray(marker_res).reshape(-1, 2), np.asarray(body_res).reshape(-1, 2)])
+    norm = np.linalg.norm(r, axis=1)
+    return [{"image": names[i][0], "point": names[i][1], "du [px]": r[i, 0], "dv [px]": r[i, 1],
+             "|r| [px]": norm[i]} for i in np.argsort(-norm)[:WORST_SHOWN]]
+
+
 def build_report(result: CalibrationResult, *, title: str = "robocal mirror — camera-to-robot calibration",
-                 images=None) -> Report:
+                 images=None, base_dir=None) -> Report:
     """HTML report from a result record (see :func:`result_from_calibration`).
+
+    ``images``: optional ``{observation name: image array}`` drawn under the
+    overlays; otherwise the files of ``diagnostics.images`` are read, relative
+    paths from ``base_dir`` (the folder of result.json; default: the current
+    directory).
 
     Raises :class:`~robocal.errors.FileFormatError` naming the first missing
     field when the record lacks what the report is drawn from.
@@ -217,16 +258,26 @@ def build_report(result: CalibrationResult, *, title: str = "robocal mirror — 
                                      "'other pose's t_r_c' is the equally likely alternative answer).")
     s3 = rep.section("Images: detected and reprojected points, frames m and ri")
     images = images or {}
-    for k, o in enumerate(obs[:4]):
+    if len(obs) > MAX_OVERLAYS:
+        s3.text(f"Overlays for the first {MAX_OVERLAYS} of {len(obs)} images; the per-image table above "
+                "covers all of them.")
+    for k, o in enumerate(obs[:MAX_OVERLAYS]):
         img = images.get(o.name)
-        if img is None and o.name in d.get("images", {}) and Path(d["images"][o.name]).exists():
-            import cv2
+        note = ""
+        if img is None and o.name in d.get("images", {}):
+            p = Path(d["images"][o.name])
+            if not p.is_absolute() and base_dir is not None:
+                p = Path(base_dir) / p
+            if p.exists():
+                import cv2
 
-            img = cv2.imread(d["images"][o.name], cv2.IMREAD_GRAYSCALE)
+                img = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
+            if img is None:
+                note = f" Image file not found or unreadable: {p} (points drawn on grey)."
         fig, ax = new_figure(size=(7.0, 5.4))
         draw_image_overlay(cam, rect, body, o, T_r_c, T_c_m[k], image=img, ax=ax)
         s3.figure(fig, caption=f"{o.name}: circles/plus = detected, crosses = reprojected from the estimate; "
-                               "axes x red, y green, z blue")
+                               f"axes x red, y green, z blue.{note}")
     s4 = rep.section("Geometry")
     ax = _frames_3d(T_r_c, T_c_m, body)
     s4.figure(ax.figure, caption="robot frame r, camera c and mirror frames m_k (in r)")
@@ -238,6 +289,9 @@ def build_report(result: CalibrationResult, *, title: str = "robocal mirror — 
     ax.set_xlabel("reprojection residual [px]")
     ax.set_ylabel("count")
     s4.figure(fig, caption="residuals of markers and reflected body points (u and v)")
+    s4.table(_worst_observations(mk(p), bd(p), obs, layout), digits=3,
+             caption=f"worst {WORST_SHOWN} observations by residual norm (projected - observed), for finding bad "
+                     "points; 'point' is the marker letter or the body_points row")
     if "solver" in d and len(d["solver"]["cost_history"]) > 1:
         fig, ax = new_figure()
         ax.semilogy(d["solver"]["cost_history"], "o-")

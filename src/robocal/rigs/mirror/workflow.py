@@ -15,7 +15,7 @@ from robocal.rigs.mirror.files import load_input, write_input
 from robocal.rigs.mirror.model import MirrorScene
 from robocal.rigs.mirror.montecarlo import pose_error
 from robocal.rigs.mirror.render import default_body_tags, detect_mirror_image, render_mirror_image
-from robocal.rigs.mirror.report import build_report, result_from_calibration
+from robocal.rigs.mirror.report import build_report, relative_image_paths, result_from_calibration
 from robocal.rigs.mirror.simulate import default_setup, simulate_observations
 
 __all__ = ["simulate_files", "calibrate_file", "planar_summary", "demo"]
@@ -97,8 +97,12 @@ def planar_summary(cal: MirrorCalibration) -> str:
     return text + "; reasons and the other pose's answer in report.html"
 
 
-def calibrate_file(path, *, refine: bool = True, progress: bool = False):
-    """Calibrate from an input file: ``(MirrorCalibration, CalibrationResult, Report)``."""
+def calibrate_file(path, *, refine: bool = True, progress: bool = False, out_dir=None):
+    """Calibrate from an input file: ``(MirrorCalibration, CalibrationResult, Report)``.
+
+    ``out_dir``: folder the result will be written to; image paths are then
+    stored relative to it (else relative to the current directory).
+    """
     inp = load_input(path)
     try:
         cal = calibrate(inp.camera, inp.rectangle, inp.body_points_r, inp.observations, sigma_px=inp.sigma_px,
@@ -107,8 +111,10 @@ def calibrate_file(path, *, refine: bool = True, progress: bool = False):
         raise (exc if exc.source else exc.with_source(str(path))) from None
     truth = _read_truth(path)
     inputs = hash_inputs([path, *inp.image_paths.values()])
-    result = result_from_calibration(cal, inputs=inputs, image_paths=inp.image_paths, truth=truth)
-    return cal, result, build_report(result)
+    base = Path(out_dir) if out_dir is not None else Path.cwd()
+    result = result_from_calibration(cal, inputs=inputs, image_paths=relative_image_paths(inp.image_paths, base),
+                                     truth=truth)
+    return cal, result, build_report(result, base_dir=base)
 
 
 def demo(out_dir, rng: np.random.Generator, *, progress: bool = False):

@@ -140,3 +140,106 @@ def published_table2_errors() -> dict:
         out[name] = dict(error=e, norm=n, rms=float(np.sqrt(np.mean(n**2))), max=float(n.max()),
                          mean=e.mean(axis=0))
     return out
+
+
+#: Parameters whose covariance :func:`spot_error_covariance` propagates (labels of the calibrate estimates).
+MAP_PARAMS = ("yaw", "t_x", "t_y", "h", "pan_offset", "tilt_offset")
+
+
+def floor_prediction_jacobian(model: ProjectorModel, theta, labels=MAP_PARAMS) -> np.ndarray:
+    """``d pred / d p`` (M, 2, P): world floor spot ``pred = Rz(-yaw) (f(theta) - t)_xy`` (seed eqs. 1, 6).
+
+    ``p`` are the parameters named in ``labels`` (yaw, pan/tilt offsets in rad;
+    ``t_x, t_y, h`` in m), evaluated at ``model`` (its yaw, ``t_0_W``, ``h = H -
+    d1`` and offsets). The same derivatives as the residual Jacobian of
+    :func:`robocal.rigs.projector.calibrate.nonlinear`, with the opposite sign.
+    """
+    th = np.atleast_2d(np.asarray(theta, dtype=float))
+    yaw = float(np.arctan2(model.R_0_W[1, 0], model.R_0_W[0, 0]))
+    c, s = np.cos(yaw), np.sin(yaw)
+    a1 = th[:, 0] + model.offsets[0]
+    a2 = th[:, 1] + model.offsets[1]
+    ta = np.tan(a2)
+    rho = model.h * ta
+    s1, c1 = np.sin(a1), np.cos(a1)
+    d = np.column_stack([rho * s1, rho * c1]) - model.t_0_W[:2]
+
+    def rot(v):  # Rz(-yaw) applied to floor vectors
+        return np.column_stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1]])
+
+    cols = {
+        "yaw": np.column_stack([-s * d[:, 0] + c * d[:, 1], -c * d[:, 0] - s * d[:, 1]]),
+        "t_x": np.tile([-c, s], (len(th), 1)),
+        "t_y": np.tile([-s, -c], (len(th), 1)),
+        "h": rot(np.column_stack([ta * s1, ta * c1])),
+        "pan_offset": rot(np.column_stack([rho * c1, -rho * s1])),
+        "tilt_offset": rot((model.h / np.cos(a2) ** 2)[:, None] * np.column_stack([s1, c1])),
+    }
+    unknown = [lab for lab in labels if lab not in cols]
+    if unknown:
+        raise InputError(f"labels: unknown parameter(s) {unknown} (known: {', '.join(MAP_PARAMS)})")
+    return np.stack([cols[lab] for lab in labels], axis=-1)
+
+
+def spot_error_covariance(model: ProjectorModel, cov, labels, points_W) -> np.ndarray:
+    """Predicted covariance (M, 2, 2) (m^2) of the spot error at desired world floor points.
+
+    First-order propagation (seed eqs. 1, 6, 8): the calibrated ``model``
+    commands ``theta = IK(w)``; the real rig, whose parameters differ from the
+    estimate by ``dp ~ N(0, cov)``, lands the spot at ``w + G dp`` with ``G =
+    d pred / d p`` at ``theta`` (:func:`floor_prediction_jacobian`). Returns
+    ``G cov G^T``. Points must be reachable by ``model``.
+    """
+    w = check_array(points_W, "points_W", shape=("M", 2))
+    C = check_array(cov, "cov")
+    labels = list(labels)
+    if C.shape != (len(labels), len(labels)):
+        raise InputError(f"cov must be ({len(labels)}, {len(labels)}) for labels {labels}, got {C.shape}")
+    theta = model.ik_world(w, on_nadir="ignore")
+    G = floor_prediction_jacobian(model, theta, labels)
+    return np.einsum("mip,pq,mjq->mij", G, C, G)
+
+
+def predicted_error_map(model: ProjectorModel, cov, labels, x_range, y_range, n: int = 41):
+    """Predicted 1-sigma spot error (m) over a floor grid, NaN outside the reachable floor.
+
+    The value is ``sqrt(trace(Sigma_e))``, the RMS length of the error vector
+    (:func:`spot_error_covariance`). Returns ``(xs, ys, err)`` like :func:`error_map`.
+    """
+    xs = np.linspace(*x_range, n)
+    ys = np.linspace(*y_range, n)
+    X, Y = np.meshgrid(xs, ys)
+    pts = np.column_stack([X.ravel(), Y.ravel()])
+    ok = model.reachable(model.to_projector(pts))
+    err = np.full(len(pts), np.nan)
+    if np.any(ok):
+        S = spot_error_covariance(model, cov, labels, pts[ok])
+        err[ok] = np.sqrt(np.maximum(np.trace(S, axis1=1, axis2=2), 0.0))
+    return xs, ys, err.reshape(n, n)
+
+
+def estimate_covariance(run):
+    """``(model, cov, labels, note)`` of a calibration run's primary estimate, for :func:`predicted_error_map`.
+
+    ``model`` is the calibrated projector. ``cov`` is the estimate's parameter
+    covariance; where it is not finite (rank deficiency: the pan offset is not
+    identifiable) it is rebuilt as ``s^2 (G^T G)^+`` from the calibration points,
+    the unobservable direction moving no spot. ``cov`` is None (with ``note``
+    saying why) when the estimate has none (the seed's method).
+    """
+    est = run.best
+    model = run.calibrated_model()
+    labels = [lab for lab in (est.labels or []) if lab in MAP_PARAMS]
+    if est.cov is None or not labels:
+        return model, None, [], f"the {run.primary} estimate has no covariance"
+    C = np.asarray(est.cov, dtype=float)
+    if np.all(np.isfinite(C)):
+        return model, C, labels, ""
+    theta = run.theta if run.theta is not None else model.ik_world(run.points_W[:, :2], on_nadir="ignore",
+                                                                   check_reach=False)
+    G = floor_prediction_jacobian(model, theta, labels).reshape(-1, len(labels))
+    dof = G.shape[0] - np.linalg.matrix_rank(G)
+    s2 = run.sigma**2 if run.sigma else (float(np.sum(est.residuals**2)) / dof if dof > 0 else None)
+    if s2 is None:
+        return model, None, [], "no noise level: give 'noise' or more points"
+    return model, s2 * np.linalg.pinv(G.T @ G), labels, "covariance rebuilt with a pseudo-inverse (rank-deficient fit)"
