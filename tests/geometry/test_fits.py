@@ -258,8 +258,26 @@ def test_degenerate_inputs_raise_named_errors():
         fit_sphere(np.eye(3))
     with pytest.raises(InputError, match="radius must be > 0"):
         fit_sphere(np.vstack([np.eye(3), np.ones(3)]), radius=-1.0)
-    with pytest.raises(InputError, match=r"shape \(N, 2\) or \(N, 3\)"):
+    with pytest.raises(InputError, match=r"shape \(\.\.\., N, 2\) or \(\.\.\., N, 3\)"):
         fit_line(np.zeros((5, 4)))
+
+
+def test_line_and_plane_fits_are_batched():
+    # one call over 5 x 7 point sets equals 35 separate fits, field by field
+    rng = np.random.default_rng(21)
+    P = rng.normal(size=(5, 7, 20, 3)) * [1.0, 0.1, 0.01]
+    L, Pl = fit_line(P), fit_plane(P)
+    assert L.rms.shape == (5, 7) and Pl.normal_cov.shape == (5, 7, 3, 3)
+    for i, j in ((0, 1), (3, 6), (4, 0)):
+        one, pl = fit_line(P[i, j]), fit_plane(P[i, j])
+        assert isinstance(one.rms, float) and isinstance(pl.d, float)
+        for a, b in ((one.direction, L.direction[i, j]), (one.direction_cov, L.direction_cov[i, j]),
+                     (one.residuals, L.residuals[i, j]), (pl.normal, Pl.normal[i, j]), (pl.d, Pl.d[i, j]),
+                     (pl.normal_cov, Pl.normal_cov[i, j]), (pl.d_std, Pl.d_std[i, j])):
+            assert np.allclose(a, b, rtol=1e-12, atol=1e-15)
+    P[2, 4, :, 1:] = 0.0  # one collinear set among 35: the error names it
+    with pytest.raises(DegenerateGeometryError, match=r"collinear \(point set \(2, 4\)\)"):
+        fit_plane(P)
 
 
 FITS = {

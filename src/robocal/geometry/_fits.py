@@ -141,38 +141,52 @@ class SphereFit:
 # ----------------------------------------------------------------------------- helpers
 
 
-def _points(points, dims: tuple[int, ...], min_count: int, what: str) -> np.ndarray:
+def _points(points, dims: tuple[int, ...], min_count: int, what: str, *, batched: bool = False) -> np.ndarray:
     arr = check_array(points, "points", shape=("N", None), min_ndim=2)
-    if arr.ndim != 2 or arr.shape[1] not in dims:
-        want = " or ".join(f"(N, {d})" for d in dims)
+    if (arr.ndim != 2 and not batched) or arr.shape[-1] not in dims:
+        want = " or ".join(f"({'..., ' if batched else ''}N, {d})" for d in dims)
         raise ShapeError(f"points must have shape {want}, got {tuple(arr.shape)}")
-    if arr.shape[0] < min_count:
-        raise NotEnoughDataError(f"{what} needs at least {min_count} points, got {arr.shape[0]}")
+    if arr.shape[-2] < min_count:
+        raise NotEnoughDataError(f"{what} needs at least {min_count} points, got {arr.shape[-2]}")
     return arr
 
 
+def _first_bad(mask: np.ndarray) -> str:
+    """' (set (i, j))' naming the first flagged batch entry, '' when unbatched."""
+    if mask.ndim == 0:
+        return ""
+    return f" (point set {tuple(int(i) for i in np.argwhere(mask)[0])})"
+
+
 def _spread(p: np.ndarray, rank: int, shape: str, rtol: float):
-    """Centroid and SVD of the centred points; raise if rank < ``rank``."""
-    c = p.mean(axis=0)
-    _, s, Vt = np.linalg.svd(p - c, full_matrices=False)
-    if s[0] == 0:
-        raise DegenerateGeometryError(f"points all coincide: cannot fit a {shape}")
-    if rank >= 2 and s[1] <= rtol * s[0]:
-        raise DegenerateGeometryError(
-            f"points are collinear (second singular value {s[1] / s[0]:.3g} of the first, tolerance {rtol:.1g}): "
-            f"cannot fit a {shape}"
-        )
-    if rank >= 3 and s[2] <= rtol * s[0]:
-        raise DegenerateGeometryError(
-            f"points are coplanar (third singular value {s[2] / s[0]:.3g} of the first, tolerance {rtol:.1g}): "
-            f"cannot fit a {shape}"
-        )
+    """Centroid and SVD of the centred points, batched over leading axes; raise if rank < ``rank``."""
+    c = p.mean(axis=-2)
+    _, s, Vt = np.linalg.svd(p - c[..., None, :], full_matrices=False)
+    bad = s[..., 0] == 0
+    if np.any(bad):
+        raise DegenerateGeometryError(f"points all coincide{_first_bad(bad)}: cannot fit a {shape}")
+    for k, word in ((1, "collinear"), (2, "coplanar")):
+        if rank > k:
+            ratio = s[..., k] / s[..., 0]
+            bad = ratio <= rtol
+            if np.any(bad):
+                r = float(ratio[tuple(np.argwhere(bad)[0])] if bad.ndim else ratio)
+                raise DegenerateGeometryError(
+                    f"points are {word}{_first_bad(bad)} ({'second' if k == 1 else 'third'} singular value "
+                    f"{r:.3g} of the first, tolerance {rtol:.1g}): cannot fit a {shape}"
+                )
     return c, s, Vt
 
 
 def _orient(v: np.ndarray) -> np.ndarray:
-    """Deterministic sign: largest-magnitude component positive."""
-    return v if v[np.argmax(np.abs(v))] >= 0 else -v
+    """Deterministic sign, batched over leading axes: largest-magnitude component positive."""
+    big = np.take_along_axis(v, np.argmax(np.abs(v), axis=-1)[..., None], axis=-1)
+    return np.where(big >= 0, v, -v)
+
+
+def _scalar(x):
+    """A 0-d result as a Python float (unbatched fits keep their float fields)."""
+    return float(x) if np.ndim(x) == 0 else x
 
 
 def _lsq_cov(J: np.ndarray, r: np.ndarray, n_params: int) -> np.ndarray:
@@ -232,32 +246,36 @@ def fit_line(points, *, rtol: float = RTOL) -> LineFit:
 
     Parameters
     ----------
-    points : array_like, shape (N, 2) or (N, 3)
-        N >= 2 points, not all coincident.
+    points : array_like, shape (..., N, 2) or (..., N, 3)
+        N >= 2 points, not all coincident; leading axes are independent point
+        sets (Monte Carlo studies fit them in one call).
     rtol : float
         Relative tolerance for "all points coincide".
 
     Returns
     -------
     LineFit
-        ``direction`` is oriented with its largest-magnitude component positive.
+        ``direction`` is oriented with its largest-magnitude component positive;
+        with leading axes every field gains them (``rms`` becomes an array).
     """
-    p = _points(points, (2, 3), 2, "fit_line")
+    p = _points(points, (2, 3), 2, "fit_line", batched=True)
     c, s, Vt = _spread(p, 1, "line", rtol)
-    d = _orient(Vt[0])
-    off = (p - c) - np.outer((p - c) @ d, d)
-    dist = np.linalg.norm(off, axis=1)
-    n, D = p.shape
+    d = _orient(Vt[..., 0, :])
+    q = p - c[..., None, :]
+    off = q - np.einsum("...n,...d->...nd", np.einsum("...nd,...d->...n", q, d), d)
+    dist = np.linalg.norm(off, axis=-1)
+    n, D = p.shape[-2:]
     dof = (D - 1) * (n - 2)
-    s2 = float(dist @ dist) / dof if dof > 0 else np.nan
-    P = np.eye(D) - np.outer(d, d)
+    s2 = np.sum(dist**2, axis=-1) / dof if dof > 0 else np.full(p.shape[:-2], np.nan)
+    P = np.eye(D) - d[..., :, None] * d[..., None, :]
+    s0 = s[..., 0][..., None, None]
     return LineFit(
         point=c,
         direction=d,
-        rms=float(np.sqrt(np.mean(dist**2))),
+        rms=_scalar(np.sqrt(np.mean(dist**2, axis=-1))),
         residuals=dist,
-        direction_cov=s2 / s[0] / s[0] * P,  # (two divisions: s[0]**2 may underflow)
-        point_cov=s2 / n * P,
+        direction_cov=(s2[..., None, None] / s0) / s0 * P,  # (two divisions: s0**2 may underflow)
+        point_cov=s2[..., None, None] / n * P,
     )
 
 
@@ -266,32 +284,36 @@ def fit_plane(points, *, rtol: float = RTOL) -> PlaneFit:
 
     Parameters
     ----------
-    points : array_like, shape (N, 3)
-        N >= 3 points, not collinear.
+    points : array_like, shape (..., N, 3)
+        N >= 3 points, not collinear; leading axes are independent point sets.
 
     Returns
     -------
     PlaneFit
+        With leading axes every field gains them (``d``, ``rms``, ``d_std`` become arrays).
     """
-    p = _points(points, (3,), 3, "fit_plane")
+    p = _points(points, (3,), 3, "fit_plane", batched=True)
     c, s, Vt = _spread(p, 2, "plane", rtol)
-    nrm = Vt[2]
-    d = float(nrm @ c)
-    if d < 0 or (d == 0 and not np.array_equal(_orient(nrm), nrm)):
-        nrm, d = -nrm, -d
-    r = (p - c) @ nrm
-    n = p.shape[0]
-    s2 = float(r @ r) / (n - 3) if n > 3 else np.nan
+    nrm = Vt[..., 2, :]
+    d = np.einsum("...i,...i->...", nrm, c)
+    flip = (d < 0) | ((d == 0) & np.any(_orient(nrm) != nrm, axis=-1))
+    nrm = np.where(flip[..., None], -nrm, nrm)
+    d = np.where(flip, -d, d)
+    r = np.einsum("...ni,...i->...n", p - c[..., None, :], nrm)
+    n = p.shape[-2]
+    s2 = np.sum(r**2, axis=-1) / (n - 3) if n > 3 else np.full(p.shape[:-2], np.nan)
     # A tilt of the normal towards in-plane direction v_k is resisted by the spread s_k along it.
-    ncov = s2 * (np.outer(Vt[0] / s[0], Vt[0] / s[0]) + np.outer(Vt[1] / s[1], Vt[1] / s[1]))
+    v0 = Vt[..., 0, :] / s[..., 0, None]
+    v1 = Vt[..., 1, :] / s[..., 1, None]
+    ncov = s2[..., None, None] * (v0[..., :, None] * v0[..., None, :] + v1[..., :, None] * v1[..., None, :])
     return PlaneFit(
         normal=nrm,
-        d=d,
+        d=_scalar(d),
         centroid=c,
-        rms=float(np.sqrt(np.mean(r**2))),
+        rms=_scalar(np.sqrt(np.mean(r**2, axis=-1))),
         residuals=r,
         normal_cov=ncov,
-        d_std=float(np.sqrt(s2 / n + c @ ncov @ c)),
+        d_std=_scalar(np.sqrt(s2 / n + np.einsum("...i,...ij,...j->...", c, ncov, c))),
     )
 
 
