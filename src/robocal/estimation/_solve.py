@@ -393,7 +393,9 @@ def _analyse(problem, ev, x, f, J, history, status, message, *, method, loss, f_
             "outliers",
             f"{len(outliers)} of {ev.n_obs} observations ({100.0 * len(outliers) / ev.n_obs:.1f} %) lie beyond "
             f"{outlier_sigma:g} sigma (sigma = {scale:.4g} in units of the weighted residuals): "
-            + "; ".join(parts),
+            + "; ".join(parts)
+            + (" (numbered within each term; `indices` holds the global observation numbers)"
+               if len(ev.term_info) > 1 else ""),
             indices=tuple(outliers)))
 
     std = {lab: (None if not np.isfinite(v) else float(v)) for lab, v in zip(free_labels, ident.std)}
