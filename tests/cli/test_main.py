@@ -152,3 +152,18 @@ def test_results_record_the_cli_command_and_api_results_none(tmp_path, monkeypat
     res = json.loads((tmp_path / "d d" / "toy" / "result.json").read_text())
     assert res["command"] == f"robocal demo --out '{tmp_path / 'd d'}' --no-progress"  # quoted, re-runnable
     assert CalibrationResult(rig="toy", method="m", estimate={}).command == ""  # not pytest's argv
+
+
+def test_a_rig_that_fails_to_import_is_skipped_with_a_warning(capsys, monkeypatch):
+    from importlib.metadata import EntryPoint
+
+    import robocal.cli._rig as r
+
+    good = [ep for ep in r.entry_points(group="robocal.rigs") if ep.name == "projector"]
+    broken = EntryPoint("broken", "robocal.cli._common:NO_SUCH_RIG", "robocal.rigs")  # AttributeError on load
+    absent = EntryPoint("absent", "robocal_absent_rig.cli:RIG", "robocal.rigs")  # not in this build: silent
+    monkeypatch.setattr(r, "entry_points", lambda group: [*good, broken, absent])
+    rigs = r.discover_rigs()
+    assert [x.name for x in rigs] == ["projector"]
+    err = capsys.readouterr().err
+    assert err.startswith("robocal: warning: rig 'broken' could not be loaded (") and err.count("\n") == 1

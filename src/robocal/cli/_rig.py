@@ -13,6 +13,7 @@ Command convention, the same for every rig::
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
@@ -100,7 +101,10 @@ def discover_rigs() -> list[Rig]:
     """Load every rig registered in the ``robocal.rigs`` entry-point group.
 
     A registered rig whose package is absent from this build (the module is
-    not found) is skipped; any other import error is a bug and propagates.
+    not found) is skipped silently. A rig that fails to import for any other
+    reason is skipped with one warning line on stderr naming it and the
+    error: one broken plugin must not take every other command down with it
+    (the test suite asserts that all five rigs load, so a bug still fails CI).
     """
     rigs = []
     for ep in sorted(entry_points(group="robocal.rigs"), key=lambda e: e.name):
@@ -110,8 +114,18 @@ def discover_rigs() -> list[Rig]:
         except ModuleNotFoundError as exc:
             if exc.name and module.startswith(exc.name):
                 continue
-            raise
+            _warn_broken(ep, exc)
+            continue
+        except Exception as exc:  # noqa: BLE001 - any plugin failure is reported, not fatal
+            _warn_broken(ep, exc)
+            continue
         if not isinstance(rig, Rig):
             raise TypeError(f"entry point {ep.name} -> {ep.value} is not a robocal.cli.Rig")
         rigs.append(rig)
     return rigs
+
+
+def _warn_broken(ep, exc: Exception) -> None:
+    msg = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    print(f"robocal: warning: rig '{ep.name}' could not be loaded ({type(exc).__name__}: {msg}); "
+          "its commands are unavailable", file=sys.stderr)
