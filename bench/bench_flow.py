@@ -3,6 +3,8 @@
 log-processing rate relative to real time for 3 sensors at 400 Hz.
 
     python bench/bench_flow.py            # prints a Markdown table
+    python bench/bench_flow.py --seeds    # calibration accuracy and fresh-run ATE/RPE over
+                                          # seeds 100-103 (docs/rigs/flow.md; about 2 min)
 
 Times are CPU seconds of this process (``time.process_time``, best of several
 repeats): the machine is shared, and wall time would measure the neighbours.
@@ -120,5 +122,42 @@ def main():
           f"{per_run:.3f} s CPU (best of 7) = {realtime:.0f}x real time ({3 * 400 * realtime:,.0f} pairs/s end to end)")
 
 
+def seeds(seed_list=(100, 101, 102, 103)):
+    """Calibration error / total std and fresh-run ATE and RPE (nominal / calibrated / true / wheels)."""
+    from robocal.rigs.flow.calibrate import calibrate_array
+    from robocal.rigs.flow.evaluate import evaluate_trajectory
+    from robocal.rigs.flow.workflow import mounted_array
+
+    print("| seed | max abs(err)/total std | s270.R err [mm] (stat std, sys) | ATE nom / cal / true / wheels [mm] "
+          "| RPE trans nom / cal / true [%] | RPE rot nom / cal / true [deg/m] |")
+    print("|---|---:|---|---|---|---|")
+    for seed in seed_list:
+        rng = np.random.default_rng(seed)
+        sa = default_sim("calibration", 6.0, supersample=2)
+        ra = simulate_run(sa, rng)
+        st, _ = steps_from_frames(ra.frames, ra.t, ra.gyro, ra.height, sa.camera.focal_px)
+        cal = calibrate_array(st, ra.t, ra.poses, sa.array_nominal)
+        tr = mounted_array().copy(scale=1 / np.asarray(sa.height_scale))
+        tot = cal.total_std()
+        z = []
+        for i, nm in enumerate(tr.names):
+            for p in ("R", "psi", "phi", "scale"):
+                e = getattr(cal.array, p)[i] - getattr(tr, p)[i]
+                z.append(abs(np.angle(np.exp(1j * e)) if p in ("psi", "phi") else e) / tot[f"{nm}.{p}"])
+        sb = default_sim("loop", 8.0, supersample=2)
+        rb = simulate_run(sb, rng)
+        stb, _ = steps_from_frames(rb.frames, rb.t, rb.gyro, rb.height, sb.camera.focal_px)
+        ev = [evaluate_trajectory(dead_reckon(stb, a).poses, rb.poses) for a in (sb.array_nominal, cal.array, tr)]
+        ew = evaluate_trajectory(rb.wheel_poses, rb.poses)
+        ate = " / ".join(f"{e.ate_rmse * 1e3:.1f}" for e in ev + [ew])
+        rt = " / ".join(f"{e.rpe[0.5]['trans_per_m'] * 100:.2f}" for e in ev)
+        rr = " / ".join(f"{np.degrees(e.rpe[0.5]['rot_per_m']):.2f}" for e in ev)
+        e270 = (cal.array.R[2] - tr.R[2]) * 1e3
+        print(f"| {seed} | {max(z):.2f} | {e270:.1f} ({cal.std['s270.R'] * 1e3:.2f}, {cal.systematic['s270.R'] * 1e3:.0f}) "
+              f"| {ate} | {rt} | {rr} |", flush=True)
+
+
 if __name__ == "__main__":
-    main()
+    import sys
+
+    seeds() if "--seeds" in sys.argv[1:] else main()

@@ -29,6 +29,10 @@ def test_examples_run(tmp_path, capsys):
     cal = json.loads((tmp_path / "cal" / "result.json").read_text())
     assert cal["units"]["s60.R"] == "m" and cal["std"]["s60.R"] > 0
     assert abs(cal["estimate"]["s60.R"] - 0.356) < 0.01
+    # statistical and systematic parts, and a residual figure in the report
+    assert cal["diagnostics"]["std_systematic_kernel"]["s60.R"] > 0 and cal["diagnostics"]["std_total"]["s60.R"] > cal["std"]["s60.R"]
+    assert "<img" in (tmp_path / "cal" / "report.html").read_text()
+    assert "psi: 271." in (tmp_path / "cal" / "array_calibrated.yaml").read_text()   # near the nominal 270, not -89
     code, out, _ = _run(["flow", "evaluate", str(EX / "loop" / "run.yaml"), "--array", str(tmp_path / "cal" / "array_calibrated.yaml"),
                          "--out", str(tmp_path / "ev"), "--no-progress"], capsys)
     assert code == 0
@@ -217,3 +221,13 @@ def test_degenerate_array_file_is_a_clear_error(tmp_path, capsys):
     (d / "run.yaml").write_text(text.replace("R: 350.0", "R: 0.0"))
     code, _, err = _run(["flow", "odometry", str(d / "run.yaml"), "--out", str(tmp_path / "o"), "--no-progress"], capsys)
     assert code == 2 and "run.yaml" in err and "rank < 3" in err and err.count("\n") == 1
+
+
+def test_simulate_rate_and_short_reference(tmp_path, capsys):
+    code, out, err = _run(["flow", "simulate", "--rate", "0", "--out", str(tmp_path / "s"), "--no-progress"], capsys)
+    assert code == 2 and "--rate must be > 0 Hz" in err and "ceiling" not in out
+    d = _copy_loop(tmp_path)
+    lines = (d / "truth.csv").read_text().splitlines()
+    (d / "truth.csv").write_text("\n".join(lines[:200]) + "\n")
+    code, _, err = _run(["flow", "evaluate", str(d / "run.yaml"), "--out", str(tmp_path / "e"), "--no-progress"], capsys)
+    assert code == 2 and "truth.csv" in err and "reference covers" in err

@@ -339,6 +339,9 @@ def test_implausible_answers_are_flagged(setup):
     r = calibrate(cam, scene.rectangle, scene.body_points_r * [-1.0, 1.0, 1.0], [o], sigma_px=0.5)
     msgs = [w.message for w in r.warnings if w.code == "inconsistent_data"]
     assert any("chi2" in m and "x not flipped" in m for m in msgs), msgs
+    # (c) body model in m where mm were meant: the whole scene scales, the camera stays "near" the body
+    r = calibrate_single(cam, scene.rectangle, scene.body_points_r * 1e3, o)
+    assert any("span" in w.message and "unit of body_points" in w.message for w in r.warnings)
     # without a declared sigma the chi-square test has nothing to test against
     r = calibrate_single(cam, scene.rectangle, scene.body_points_r * [-1.0, 1.0, 1.0], o)
     assert not any("chi2" in w.message for w in r.warnings)

@@ -219,10 +219,17 @@ def test_aruco_path_with_rotated_tags_and_configured_mirror_tags(tmp_path):
     assert np.allclose(inp.body_points_r, tags.body_points_r(), atol=1e-9)
     o = inp.observations[0]
     assert {4, 5} <= set(int(i) // 4 for i in o.body_ids)  # the turned tags are found
-    assert main(["mirror", "calibrate", str(p), "--out", str(tmp_path / "c")]) == 0
-    res = json.loads((tmp_path / "c" / "result.json").read_text())
-    err = np.array(res["estimate"]["t_r_c"]) - s0.T_r_c[:3, 3]
-    assert np.linalg.norm(err) < 4 * np.linalg.norm(res["std"]["t_r_c"])
+    from robocal.rigs.mirror.calibrate import calibrate
+
+    cal = calibrate(inp.camera, inp.rectangle, inp.body_points_r, inp.observations)
+    assert np.linalg.norm(cal.T_r_c[:3, 3] - s0.T_r_c[:3, 3]) < 4 * np.linalg.norm(cal.std_translation)
+    # default tags and mirror tags round-trip too (no mirror_tags block, no dictionary key)
+    d_scene = MirrorScene(s0.T_c_r, s0.T_c_m, d.body_points_r(), s0.rectangle)
+    cv2.imwrite(str(tmp_path / "plain.png"), render_mirror_image(cam, d_scene, d, rng=np.random.default_rng(0)))
+    p2 = write_input(tmp_path / "plain.yaml", cam, s0.rectangle, None, [_Obs()], tags=d, image_files={0: "plain.png"})
+    assert "mirror_tags" not in p2.read_text() and "dictionary" not in p2.read_text()
+    plain = load_input(p2)
+    assert plain.mirror_tags is None and np.allclose(plain.body_points_r, d.body_points_r(), atol=1e-9)
     # a body tag with a mirror tag's id (same dictionary) is refused, naming the field
     text = p.read_text().replace("- id: 0\n", "- id: 12\n", 1)
     assert text != p.read_text()

@@ -135,6 +135,9 @@ class ArrayCalibration:
         see :data:`KERNEL_SYSTEMATIC`. Combine as ``hypot(std, systematic)``.
     undetermined : list of str
         Parameters the drive does not determine (kept at nominal).
+    window_times : dict
+        Per sensor, the start times (s) of the windows it entered with, in
+        the order of its residuals.
     residual_rms : float
         RMS of the window residuals, m.
     n_windows : ndarray of int, shape (n,)
@@ -153,6 +156,7 @@ class ArrayCalibration:
     std_jackknife: dict = field(default_factory=dict)
     systematic: dict = field(default_factory=dict)
     undetermined: list = field(default_factory=list)
+    window_times: dict = field(default_factory=dict)
 
     def total_std(self) -> dict:
         """``hypot(std, systematic)`` per parameter (None where undetermined)."""
@@ -226,6 +230,7 @@ def calibrate_array(steps: SensorSteps, t_ref, poses_ref, nominal: SensorArray, 
     poses = interpolate_poses(t_ref, poses_ref, steps.t)
     M, dP, dth = window_observations(steps, poses, window)
     J = dP.shape[0]
+    t_win = steps.t[np.arange(J) * int(round(window / float(np.median(steps.dt))))]
     starts = []
     keep = np.all(np.isfinite(M), axis=2)                          # (n, J)
     n_win = keep.sum(axis=1)
@@ -295,4 +300,5 @@ def calibrate_array(steps: SensorSteps, t_ref, poses_ref, nominal: SensorArray, 
                                    params=tuple(undetermined)))
     return ArrayCalibration(array=arr, std=std, residual_rms=float(res.rms), n_windows=n_win, lsq=res,
                             warnings=warnings, std_model=std_model, std_jackknife=std_jk, systematic=systematic,
-                            undetermined=undetermined)
+                            undetermined=undetermined,
+                            window_times={nm: t_win[keep[i]] for i, nm in enumerate(nominal.names)})

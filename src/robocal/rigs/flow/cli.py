@@ -78,6 +78,8 @@ def _add_flow_args(p):
 def cmd_simulate(args) -> int:
     if args.duration <= 0:
         raise InputError(f"--duration must be > 0 s, got {args.duration}")
+    if not args.rate > 0:
+        raise InputError(f"--rate must be > 0 Hz, got {args.rate}")
     gaps = ()
     if args.gap:
         try:
@@ -169,6 +171,8 @@ def cmd_calibrate(args) -> int:
               "are correlated in time); systematic: the flow kernel's pixel-locking bias, measured on rendered drives "
               "(docs/rigs/flow.md); total = both in quadrature. Use the total to judge the values.")
     sec.text(f"Residual RMS {cal.residual_rms * 1e3:.3f} mm per {args.window} s window; the reference is taken as exact.")
+    sec.figure(_window_residual_figure(cal), "Per-window residual of each sensor over the drive: outlying windows "
+               "(turns, texture gaps) stand out; a slow trend is the time-correlated flow error the jackknife accounts for.")
     sec.diagnostics(cal.warnings)
     cam = {"focal_px": spec.focal_px, "window": spec.window}
     if spec.rate is not None:
@@ -185,6 +189,19 @@ def cmd_calibrate(args) -> int:
         else:
             print(f"  {k:14s} {conv(v):10.4f} {u:5s} +/- {conv(res.std[k]):<12.4f} +/- {conv(cal.systematic[k]):.4f}")
     return 0
+
+
+def _window_residual_figure(cal):
+    from robocal.report import new_figure
+
+    fig, ax = new_figure(size=(6.4, 3.2))
+    for nm in cal.array.names:
+        r = cal.lsq.obs_residuals(nm)
+        ax.plot(cal.window_times[nm], np.linalg.norm(r, axis=1) * 1e3, ".", ms=3, label=nm)
+    ax.set_xlabel("window start t [s]")
+    ax.set_ylabel("|residual| [mm]")
+    ax.legend(fontsize=8)
+    return fig
 
 
 def _display(unit):

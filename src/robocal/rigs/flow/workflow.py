@@ -131,6 +131,16 @@ def compare_text(nom, cal) -> str:
             f"{on:.2f} -> {oc:.2f} deg/m ({word(on, oc)})")
 
 
+def _interp(path, t_ref, p_ref, t):
+    """:func:`interpolate_poses` with errors naming the file."""
+    from robocal.errors import InputError
+
+    try:
+        return interpolate_poses(t_ref, p_ref, t)
+    except InputError as exc:
+        raise InputError(f"{path}: {exc}") from None
+
+
 def evaluation_run(spec: RunSpec, od: Odometry, *, calibrated: Odometry | None = None):
     """Errors of flow odometry (and wheel odometry, when logged) against the run's reference."""
     if spec.reference is None:
@@ -138,7 +148,7 @@ def evaluation_run(spec: RunSpec, od: Odometry, *, calibrated: Odometry | None =
 
         raise InputError(f"{spec.path}: evaluation needs a 'reference' trajectory file")
     t_ref, p_ref = read_poses_csv(spec.reference)
-    ref = interpolate_poses(t_ref, p_ref, od.t)
+    ref = _interp(spec.reference, t_ref, p_ref, od.t)
     curves = {"true": ref, "flow odometry": od.poses}
     errors = {"flow odometry": evaluate_trajectory(od.poses, ref)}
     if calibrated is not None:
@@ -146,7 +156,7 @@ def evaluation_run(spec: RunSpec, od: Odometry, *, calibrated: Odometry | None =
         errors["flow odometry (calibrated)"] = evaluate_trajectory(calibrated.poses, ref)
     if spec.wheel is not None:
         t_w, p_w = read_poses_csv(spec.wheel)
-        wheel = interpolate_poses(t_w, p_w, od.t)
+        wheel = _interp(spec.wheel, t_w, p_w, od.t)
         curves["wheel odometry"] = wheel
         errors["wheel odometry"] = evaluate_trajectory(wheel, ref)
     return curves, errors
@@ -163,6 +173,7 @@ def calibration_run(spec: RunSpec, *, config: FlowConfig | None = None, window: 
     nominal = spec.array.copy(scale=np.ones(spec.array.n))
     steps, flows = load_steps(spec, config, progress=progress)
     t_ref, p_ref = read_poses_csv(spec.reference)
+    _interp(spec.reference, t_ref, p_ref, steps.t)          # coverage, with the file named
     cal = calibrate_array(steps, t_ref, p_ref, nominal, window=window, loss=loss)
     return cal, steps
 

@@ -83,6 +83,8 @@ FLAT_RATIO = 0.05
 PARALLEL_DEG = 20.0
 #: Camera-to-nearest-body-point distance [m] always accepted as plausible (see plausibility_warnings).
 CAMERA_BODY_MAX_M = 1.0
+#: Plausible span [m] of the body points (bounding-box diagonal): outside it the unit is suspect.
+BODY_EXTENT_RANGE_M = (0.01, 20.0)
 #: Chi-square tail probability of the body-point fit below which a known sigma_px is contradicted.
 CHI2_P_MIN = 1e-3
 
@@ -362,6 +364,10 @@ def plausibility_warnings(body_points_r, T_r_c, body_residuals, sigma_px: float 
       scale) and moves the camera metres away: warned when the camera is
       farther than ``max(CAMERA_BODY_MAX_M, 2 x body extent)`` from the nearest
       body point (extent = diagonal of the points' bounding box).
+    * A body model in the wrong unit (mm read as m) scales the whole scene
+      behind the mirror, camera included, so the first test cannot see it:
+      warned when the body points span less than 1 cm or more than 20 m
+      (``BODY_EXTENT_RANGE_M``).
     * With a known ``sigma_px`` the body-point PnP residual must be chi-square
       with ``2N - 6`` dof: ``sum(r^2) / sigma^2``. A body model in the wrong
       frame (e.g. x not flipped, points given in ``ri``) can still be fitted
@@ -384,6 +390,10 @@ def plausibility_warnings(body_points_r, T_r_c, body_residuals, sigma_px: float 
     extent = float(np.linalg.norm(np.ptp(P, axis=0)))
     dist = float(np.min(np.linalg.norm(P - np.asarray(T_r_c)[:3, 3], axis=1)))
     limit = max(CAMERA_BODY_MAX_M, 2.0 * extent)
+    lo, hi = BODY_EXTENT_RANGE_M
+    if not lo <= extent <= hi:
+        out.append(Diagnostic("inconsistent_data", f"{name}: the body points span {extent:.4g} m (plausible "
+                              f"{lo:g}-{hi:g} m): check the unit of body_points", params=("T_r_c",)))
     if dist > limit:
         out.append(Diagnostic("inconsistent_data", f"{name}: the estimate puts the camera {dist:.3g} m from the "
                               f"nearest body point (body extent {extent:.3g} m, limit {limit:.3g} m), but it is "

@@ -214,10 +214,10 @@ def write_input(path, camera: CameraModel, rectangle: MarkerRectangle, body_poin
         doc["body_tags"] = {"size": tags.size * 1e3, "tags": entries}
         if tags.dictionary != ARUCO_DICT:
             doc["body_tags"]["dictionary"] = tags.dictionary
-    if mirror_tags is not None:
-        doc["mirror_tags"] = {"dictionary": mirror_tags.dictionary, "ids": [int(i) for i in mirror_tags.ids]}
     else:
         doc["body_points"] = np.round(np.asarray(body_points_r) * 1e3, 6).tolist()
+    if mirror_tags is not None:
+        doc["mirror_tags"] = {"dictionary": mirror_tags.dictionary, "ids": [int(i) for i in mirror_tags.ids]}
     imgs = []
     for k, o in enumerate(observations):
         if k in image_files:

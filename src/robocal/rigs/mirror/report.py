@@ -250,12 +250,15 @@ def build_report(result: CalibrationResult, *, title: str = "robocal mirror — 
         rows.append({"image": si["name"], "t_r_c [mm]": np.round(Ts[:3, 3] * 1e3, 1).tolist(),
                      "marker rms [px]": si["marker_rms_px"], "body rms [px]": si["body_rms_px"],
                      "|Householder - patent|": si["householder_minus_patent"],
-                     "IPPE pose": pc["chosen"], "decisive": "yes" if pc.get("decisive", True) else "NO (guess)",
+                     "IPPE pose": pc["chosen"],
+                     "decisive": ("-" if pc.get("ambiguous") is False else
+                                  "yes" if pc.get("decisive", True) else "NO (guess)"),
                      "other pose's t_r_c [mm]": alt, "why": pc["reason"]})
     s2.table(rows, digits=4, caption="rms per coordinate (u, v). IPPE returns two poses of the four coplanar "
                                      "markers; pose 0 is the one with the lower marker reprojection error. "
                                      "'decisive' = a test separated them (else the pick is a guess, and "
-                                     "'other pose's t_r_c' is the equally likely alternative answer).")
+                                     "'other pose's t_r_c' is the equally likely alternative answer); "
+                                     "'-' = both poses coincide, nothing to choose.")
     s3 = rep.section("Images: detected and reprojected points, frames m and ri")
     images = images or {}
     if len(obs) > MAX_OVERLAYS:
