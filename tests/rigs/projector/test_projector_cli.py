@@ -43,7 +43,8 @@ def test_seed_example_reproduces_published_R(tmp_path, capsys):
     assert [w.code for w in res.warnings][0] == "inconsistent_data" and res.warnings[0].indices == (2,)
     assert len(seed["cost_history"]) == seed["iterations"] + 1
     html = (tmp_path / "report.html").read_text()
-    assert "cost per iteration" in html or "Cost curves" in html
+    assert "Cost curves" in html and "Error map: predicted spot error" in html and html.count("<img") >= 2
+    assert res.diagnostics["std_basis"].startswith("residual-scaled")  # the seed's data state no noise
     # strict mode turns the inconsistency into a one-line error
     code, _, err = run(["projector", "calibrate", EXAMPLES / "seed_projector_A.yaml", "--strict", "--out",
                         tmp_path / "s"], capsys)
@@ -58,6 +59,11 @@ def test_room_examples_calibrate(tmp_path, capsys, name):
     assert res.estimate["h"] == pytest.approx(2.78, abs=4 * res.std["h"])
     assert res.residual_unit == "m" and res.residual_rms < 0.02
     assert set(res.inputs)  # input hashes recorded
+    assert res.diagnostics["std_basis"].startswith("absolute")  # the file states noise: 5 mm
+    html = (tmp_path / "report.html").read_text()
+    assert "Error map: predicted spot error" in html
+    assert ("the actual error against the simulated truth" in html) == (name == "room_A.yaml")  # has 'truth'
+    assert html.count("<img") >= 2
 
 
 def test_simulate_then_evaluate_and_evaluate_with_result(tmp_path, capsys):
@@ -68,7 +74,10 @@ def test_simulate_then_evaluate_and_evaluate_with_result(tmp_path, capsys):
     assert code == 0 and "spot error RMS" in out
     d = json.loads((tmp_path / "ev" / "result.json").read_text())
     assert len(d["diagnostics"]["evaluation"]["desired"]) == 9
-    assert "floor error" in (tmp_path / "ev" / "report.html").read_text() or "error map" in out or True
+    html = (tmp_path / "ev" / "report.html").read_text()
+    # calibration figures + predicted/true error map + the Table 2 heat map
+    assert "Error map: predicted spot error" in html and "spot error over the reachable floor" in html
+    assert html.count("<img") >= 3
     code, out, _ = run(["projector", "evaluate", sim, "--result", tmp_path / "ev" / "result.json", "--spacing", "1",
                         "--out", tmp_path / "ev2"], capsys)
     assert code == 0 and (tmp_path / "ev2" / "evaluation.json").exists()
@@ -134,9 +143,10 @@ def test_unreachable_waypoints_are_reported(tmp_path, capsys):
     f = tmp_path / "far.yaml"
     f.write_text("units: {length: m, angle: deg, speed: m/s, time: s}\nprojectors: [{name: A, H: 2.9, t_0_W: [0, 0, -2.9]}]\n"
                  "path: {waypoints: [[1, 0], [30, 0]], speed: 1.0, dt: 0.5}\n")
-    code, out, _ = run(["projector", "path", f, "--out", tmp_path / "o"], capsys)
-    plan = json.loads((tmp_path / "o" / "plan.json").read_text())
-    assert code == 1 and "outside the reachable floor" in plan["infeasible"][0]["reasons"]["A"]
+    code, out, err = run(["projector", "path", f, "--out", tmp_path / "o"], capsys)
+    # a point no projector can ever reach is wrong input (exit 2, one line), not a failed plan (exit 1)
+    assert code == 2 and err.count("\n") == 1 and "outside every projector's reachable floor" in err, err
+    assert "far.yaml" in err and not (tmp_path / "o" / "plan.json").exists()
 
 
 def test_demo_passes(tmp_path):
@@ -144,3 +154,80 @@ def test_demo_passes(tmp_path):
     assert out.passed, out.summary
     assert out.summary["published R"] == "reproduced" and out.result is not None
     assert any("Table 2" in s.title for s in out.sections)
+
+
+BEYOND = ("units: {length: m, angle: deg}\nprojector: {H: 2.9, d1: 0.12}\npoints:\n"
+          "  world: [[2.738, 15.527], [19.480, -3.435], [-9.046, -24.855], [-1.39, 0.8025]]\n"
+          "  joint_angles: [[10, 80], [100, 82], [200, 84], [300, 30]]\n")
+
+
+def test_calibrate_points_beyond_the_tilt_limit_warn_and_strict_is_exit_2(tmp_path, capsys):
+    f = tmp_path / "beyond.yaml"
+    f.write_text(BEYOND)
+    code, _, err = run(["projector", "calibrate", f, "--out", tmp_path / "o"], capsys)
+    assert code == 0 and "[near_singularity] joint_angles: point(s) [0, 1, 2] lie beyond the tilt limit" in err, err
+    res = load_result(tmp_path / "o" / "result.json")
+    assert [w.indices for w in res.warnings if w.code == "near_singularity"] == [(0, 1, 2)]
+    code, _, err = run(["projector", "calibrate", f, "--strict", "--out", tmp_path / "s"], capsys)
+    assert code == 2 and err.count("\n") == 1 and "tilt limit of 75 deg" in err, err
+
+
+def test_joint_angles_in_the_wrong_unit_get_a_unit_hint(tmp_path, capsys):
+    f = tmp_path / "rad.yaml"
+    f.write_text((EXAMPLES / "room_A.yaml").read_text().replace("angle: deg}", "angle: rad}", 1))
+    code, _, err = run(["projector", "calibrate", f, "--out", tmp_path / "o"], capsys)
+    assert code == 2 and err.count("\n") == 1, err
+    assert "'points.joint_angles': row 2" in err and "degrees declared as rad?" in err
+
+
+def test_evaluate_with_no_reachable_grid_point_is_exit_2_and_partial_grid_warns(tmp_path, capsys):
+    room = EXAMPLES / "room_A.yaml"
+    code, out, err = run(["projector", "evaluate", room, "--center", "100", "100", "--out", tmp_path / "a"], capsys)
+    assert code == 2 and err.count("\n") == 1 and "no Table 2 grid point is on the reachable floor" in err, err
+    assert "nan" not in out + err
+    code, out, err = run(["projector", "evaluate", room, "--center", "8", "0", "--out", tmp_path / "b"], capsys)
+    assert code == 0 and "3/9 reached" in out and "grid point(s) [4, 5, 6, 7, 8, 9]" in err, (out, err)
+
+
+PATH_BAD = {
+    "tz.yaml": ("units: {length: m, angle: deg, speed: m/s}\nprojectors: [{name: A, H: 2.9, t_0_W: [0, 0, -2.5]}]\n"
+                "path: {waypoints: [[1, 0], [2, 0]], speed: 0.3}\n", "must equal -H"),
+    "both.yaml": ("units: {length: m, angle: deg, speed: m/s}\nprojectors: [{name: A, H: 2.9, t_0_W: [0, 0, -2.9], "
+                  "result: r.json}]\npath: {waypoints: [[1, 0], [2, 0]], speed: 0.3}\n", "not both"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(PATH_BAD))
+def test_path_projector_extrinsics_are_checked(tmp_path, capsys, name):
+    text, needle = PATH_BAD[name]
+    f = tmp_path / name
+    f.write_text(text)
+    code, _, err = run(["projector", "path", f, "--out", tmp_path / "o"], capsys)
+    assert code == 2 and err.count("\n") == 1 and needle in err and "projectors[0]" in err, err
+
+
+def test_simulate_caps_the_number_of_points(tmp_path, capsys):
+    code, _, err = run(["projector", "simulate", "--points", "100000000", "--out", tmp_path], capsys)
+    assert code == 2 and "--points must be in [3, 10000]" in err and err.count("\n") == 1
+
+
+def test_path_room_writes_one_stream_per_projector(tmp_path, capsys):
+    code, out, _ = run(["projector", "path", EXAMPLES / "path_room.yaml", "--out", tmp_path], capsys)
+    assert code == 0 and "commands_A.csv" in out and "commands_B.csv" in out
+    a = (tmp_path / "commands_A.csv").read_text().splitlines()
+    b = (tmp_path / "commands_B.csv").read_text().splitlines()
+    assert a[0].endswith("laser_on,mode") and len(a) == len(b) > 100
+    on = [int(ra.split(",")[5]) + int(rb.split(",")[5]) for ra, rb in zip(a[1:], b[1:])]
+    assert set(on) == {1}  # one laser on at a time
+    # B is aimed at its hand-over pose before it takes over (it used to jump there at t = 28.5 s)
+    first_on = next(i for i, r in enumerate(b[1:]) if r.split(",")[5] == "1")
+    assert b[1].split(",")[1:3] == b[1 + first_on].split(",")[1:3]
+
+
+def test_path_retime_slows_the_fast_stretch_down_instead_of_blank_rows(tmp_path, capsys):
+    code, out, _ = run(["projector", "path", EXAMPLES / "path_timed.yaml", "--retime", "--out", tmp_path], capsys)
+    assert code == 0 and "all feasible" in out and "retimed: 20.000 s -> 20.389 s" in out, out
+    rows = [r.split(",") for r in (tmp_path / "commands.csv").read_text().splitlines()[1:]]
+    assert all(r[-1] == "ok" for r in rows)
+    rates = np.array([[float(r[6]), float(r[7])] for r in rows])
+    assert np.degrees(np.abs(rates).max()) <= 60.0 + 1e-6  # the example's 60 deg/s limit, peak 95 deg/s before

@@ -28,6 +28,7 @@ violate the model's level-floor assumption, seed §2.1).
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -54,7 +55,7 @@ from robocal.geometry import (
     rotz,
     skew,
 )
-from robocal.rigs.projector.model import ProjectorModel
+from robocal.rigs.projector.model import NearSingularityWarning, ProjectorModel, UnreachablePointError
 from robocal.validation import check_array
 
 __all__ = [
@@ -71,6 +72,7 @@ __all__ = [
     "yaw_of",
     "floor_pose_jacobian",
     "rotation_error",
+    "beyond_tilt_limit",
 ]
 
 METHODS = ("seed", "closed_form", "nonlinear")
@@ -162,6 +164,7 @@ class ConsistencyReport:
     suspects: list
     threshold: str
     warnings: list = field(default_factory=list)
+    scale: float | None = None  # relative distance error shared by all pairs, when it explains the bad pairs
 
     @property
     def consistent(self) -> bool:
@@ -173,12 +176,18 @@ class ConsistencyReport:
 
 
 def distance_consistency(points_W, points_0, *, sigma: float | None = None, n_sigma: float = 4.0,
-                         rel_tol: float = 0.02) -> ConsistencyReport:
+                         rel_tol: float = 0.02, scale_hint: str = "the model's scale is wrong") -> ConsistencyReport:
     """Compare pairwise distances in ``{W}`` and ``{0}`` and name inconsistent points.
 
     Threshold per pair: ``n_sigma * sqrt(2) * sigma`` when the world noise
     ``sigma`` (m) is known, else ``rel_tol`` of the distance. Suspects are found
     greedily: the point in most bad pairs is removed until no bad pair is left.
+
+    A model error (``H - d1`` or the tilt offset wrong) scales every ``{0}``
+    distance alike, which would make most points "suspects". So with N >= 4,
+    when removing one relative scale ``d_0 ~ (1 + s) d_W`` (the median ratio) leaves
+    at most a third of the bad pairs, the warning reports the scale ``s`` and
+    ``scale_hint`` instead, and names only the points still inconsistent after it.
     """
     pw, p0 = check_correspondences(points_W, points_0)
     n = pw.shape[0]
@@ -191,15 +200,30 @@ def distance_consistency(points_W, points_0, *, sigma: float | None = None, n_si
     bad = [pr for pr, b in zip(pairs, np.abs(diff) > limit) if b]
     threshold = (f"{n_sigma:g} sqrt(2) sigma = {n_sigma * math.sqrt(2) * sigma * 1e3:.3g} mm" if sigma
                  else f"{100 * rel_tol:g} % of the distance")
+    scale = None
+    blamed = bad
+    if n >= 4 and len(bad) >= 3:
+        sc = float(np.median(diff / dW))  # the median: one bad point must not drag the scale
+        after = [pr for pr, b in zip(pairs, np.abs(diff - sc * dW) > limit) if b]
+        if len(after) <= len(bad) / 3:
+            scale, blamed = sc, after
     suspects: list[int] = []
-    left = [(b[0], b[1]) for b in bad]
+    left = [(b[0], b[1]) for b in blamed]
     while left:
         counts = np.bincount(np.array(left).reshape(-1), minlength=n)
         k = int(np.argmax(counts))
         suspects.append(k)
         left = [p for p in left if k not in p]
     warns = []
-    if bad:
+    if scale is not None:
+        warns.append(Diagnostic(
+            "inconsistent_data",
+            f"pairwise distances in {{0}} are uniformly {100 * scale:+.2f} % of those in {{W}} ({len(bad)} of "
+            f"{len(pairs)} pairs beyond {threshold}): a scale error of the model, not of single points: {scale_hint}"
+            + (f"; after removing the scale, suspect point(s) {suspects}" if suspects else
+               "; after removing the scale every pair agrees"),
+            indices=tuple(suspects)))
+    elif bad:
         worst = max(bad, key=lambda b: abs(b[5]))
         desc = "; ".join(f"{b[0]}-{b[1]}: {100 * b[5]:+.1f} % ({b[4] * 1e3:+.1f} mm)" for b in bad[:6])
         warns.append(Diagnostic(
@@ -207,7 +231,38 @@ def distance_consistency(points_W, points_0, *, sigma: float | None = None, n_si
             f"pairwise distances in {{W}} and {{0}} disagree beyond {threshold} ({desc}); a rigid transform cannot "
             f"fit them: suspect point(s) {suspects} (worst pair {worst[0]}-{worst[1]}, {100 * worst[5]:+.1f} %)",
             indices=tuple(suspects)))
-    return ConsistencyReport(pairs, bad, suspects, threshold, warns)
+    return ConsistencyReport(pairs, bad, suspects, threshold, warns, scale)
+
+
+def _spots(model: ProjectorModel, th: np.ndarray) -> np.ndarray:
+    """``f(theta)`` (seed eq. 6) of measured spots, without the beyond-the-tilt-limit Python warning:
+    :func:`calibrate` reports those points as a ``near_singularity`` diagnostic instead."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NearSingularityWarning)
+        return model.spot(th)
+
+
+def beyond_tilt_limit(model: ProjectorModel, points_0, what: str) -> Diagnostic | None:
+    """A ``near_singularity`` diagnostic naming the calibration spots beyond ``model.tilt_limit``, else None.
+
+    Such a spot was aimed where the head should not go (the tilt limit keeps the
+    beam away from the horizon singularity, seed §2.1, where the spot error grows
+    as ``1 / cos^2(theta2)``); usually ``tilt_limit`` or the joint angles (their
+    unit) are wrong. ``points_0`` (N, 3) in ``{0}`` (m).
+    """
+    p0 = np.asarray(points_0, dtype=float)
+    ok = model.reachable(p0, floor_tol=1e-6 * max(1.0, model.H))
+    if np.all(ok):
+        return None
+    idx = [int(i) for i in np.flatnonzero(~ok)]
+    r = np.hypot(p0[idx, 0], p0[idx, 1])
+    tilt = np.degrees(np.arctan2(r, model.h))
+    return Diagnostic(
+        "near_singularity",
+        f"{what}: point(s) {idx[:10]}{' ...' if len(idx) > 10 else ''} lie beyond the tilt limit of "
+        f"{math.degrees(model.tilt_limit):g} deg (tilt up to {tilt.max():.1f} deg, {r.max():.3g} m from the nadir; "
+        f"reachable radius {model.floor_radius:.3g} m): check projector.tilt_limit, the points and the angle unit",
+        indices=tuple(idx))
 
 
 # ------------------------------------------------------------------ estimates
@@ -511,7 +566,7 @@ def nonlinear(points_W, *, theta=None, points_0=None, model: ProjectorModel | No
         th = check_array(theta, "theta", shape=("N", 2))
         if th.ndim != 2:
             raise ShapeError(f"theta must have shape (N, 2), got {tuple(th.shape)}")
-        p0 = model.spot(th)
+        p0 = _spots(model, th)
         pw, p0 = check_correspondences(points_W, p0)
     H = model.H
     start = x0 or closed_form(pw, p0, sigma=sigma)
@@ -608,6 +663,7 @@ class CalibrationRun:
     sigma: float | None
     primary: str
     consistency_prefit: ConsistencyReport | None = None
+    input_warnings: list = field(default_factory=list)
 
     @property
     def best(self) -> ExtrinsicEstimate:
@@ -615,7 +671,7 @@ class CalibrationRun:
 
     @property
     def warnings(self) -> list:
-        return list(self.consistency.warnings) + [w for w in self.best.warnings]
+        return list(self.input_warnings) + list(self.consistency.warnings) + [w for w in self.best.warnings]
 
     def calibrated_model(self, method: str | None = None) -> ProjectorModel:
         """The projector model with the estimated extrinsics (and h / offsets when estimated)."""
@@ -643,12 +699,16 @@ def calibrate(points_W, *, theta=None, points_0=None, model: ProjectorModel | No
     methods : sequence of {'seed', 'closed_form', 'nonlinear'}
     estimate : extra parameters for the nonlinear solver, see :func:`nonlinear`
     sigma : float, optional
-        World measurement noise (m).
+        World measurement noise (m). When given, every standard deviation uses
+        it as known (absolute sigma); without it the covariances are scaled by
+        the residual variance (needs N > number of parameters / 2).
     seed_alpha, seed_order
         Step factor and point order of :func:`seed_method`.
     strict : bool
         Raise :class:`~robocal.errors.InconsistentDataError` when the distance
-        check fails instead of warning.
+        check fails, and :class:`~robocal.rigs.projector.model.UnreachablePointError`
+        for spots beyond the tilt limit, instead of warning (``inconsistent_data``,
+        ``near_singularity``).
 
     Returns
     -------
@@ -665,7 +725,7 @@ def calibrate(points_W, *, theta=None, points_0=None, model: ProjectorModel | No
         th = check_array(theta, "theta", shape=("N", 2))
         if th.ndim != 2:
             raise ShapeError(f"theta must have shape (N, 2), got {tuple(th.shape)}")
-        p0 = model.spot(th)
+        p0 = _spots(model, th)
     elif points_0 is not None:
         th = None
         p0 = check_array(points_0, "points_0")
@@ -681,10 +741,29 @@ def calibrate(points_W, *, theta=None, points_0=None, model: ProjectorModel | No
                              f"{p0[:, 2].tolist()}")
     else:
         raise InputError("calibrate: give joint angles (theta) or projector-frame points (points_0)")
-    pw, p0 = check_correspondences(points_W, p0)
+    try:
+        pw, p0 = check_correspondences(points_W, p0)
+    except UnitError as exc:
+        if th is None:
+            raise
+        # the {0} points come from the joint angles: a wrong angle unit scales the distances too
+        raise UnitError(exc.message.rstrip("?") + ", and are the joint angles in their declared angle unit (deg, rad)?",
+                        source=exc.source) from None
     if np.abs(pw[:, 2]).max() > 1e-9:
         raise InputError("points_W: world points must lie on the floor (z_W = 0)")
-    cons = distance_consistency(pw, p0, sigma=sigma)
+    input_warnings = []
+    reach = beyond_tilt_limit(model, p0, "joint_angles" if th is not None else "points_0")
+    if reach is not None:
+        if strict:
+            raise UnreachablePointError(reach.message)
+        input_warnings.append(reach)
+    estimate = tuple(estimate)
+    if estimate and "nonlinear" not in methods:
+        raise InputError(f"estimate: {list(estimate)} is estimated only by the 'nonlinear' method, which is not among "
+                         f"methods {list(methods)}: add it or drop estimate")
+    hint = ("H - d1 or the tilt offset is probably wrong (estimate: [h, tilt_offset] with the nonlinear method)"
+            if th is not None else "H or the units of the {0} points are probably wrong")
+    cons = distance_consistency(pw, p0, sigma=sigma, scale_hint=hint)
     refine_model = th is not None and any(e in ("h", "tilt_offset") for e in estimate) and "nonlinear" in methods
     # With h or the tilt offset unknown, the nominal f(theta) carries a model error that the
     # distances show too; the check is then repeated with the refined model before judging.
@@ -696,20 +775,24 @@ def calibrate(points_W, *, theta=None, points_0=None, model: ProjectorModel | No
     if "closed_form" in methods or "nonlinear" in methods:
         ests["closed_form"] = closed_form(pw, p0, sigma=sigma)
     if "nonlinear" in methods:
+        # A stated noise is the measurement sigma: with few points (N = 3, h and the tilt offset free
+        # leaves 1 dof) the residual-scaled covariance is far too small, so the stated sigma is used as is.
         ests["nonlinear"] = nonlinear(pw, theta=th, points_0=None if th is not None else p0, model=model,
-                                      estimate=estimate, sigma=sigma, x0=ests["closed_form"])
+                                      estimate=estimate, sigma=sigma, x0=ests["closed_form"],
+                                      absolute_sigma=sigma is not None)
     if "closed_form" not in methods:
         ests.pop("closed_form", None)
     prefit = cons
     if refine_model and not cons.consistent:
         nl = ests["nonlinear"]
         refined = model.with_(d1=model.H - nl.extra["h"], offsets=tuple(nl.extra["offsets"]))
-        cons = distance_consistency(pw, refined.spot(th), sigma=sigma)
+        cons = distance_consistency(pw, _spots(refined, th), sigma=sigma, scale_hint=hint)
         if strict and not cons.consistent:
             raise InconsistentDataError(cons.warnings[0].message)
     primary = "nonlinear" if "nonlinear" in ests else ("closed_form" if "closed_form" in ests else "seed")
     run = CalibrationRun(pw, p0, th, model, cons, ests, sigma, primary)
     run.consistency_prefit = prefit
+    run.input_warnings = input_warnings
     return run
 
 

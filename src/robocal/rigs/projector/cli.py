@@ -10,6 +10,7 @@ import csv
 import io
 import json
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -17,13 +18,15 @@ import yaml
 
 from robocal.cli import DemoContext, DemoOutcome, Rig
 from robocal.cli._common import RawHelp, add_out_argument, add_seed_argument, examples_epilog, prepare_out_dir, write_run
-from robocal.errors import FileFormatError, InputError
+from robocal.errors import FileFormatError, InputError, RobocalError
 from robocal.io import atomic_write_text, load_result
 from robocal.report import Section
 
 __all__ = ["RIG"]
 
 EXAMPLES = Path("examples/projector")
+#: ``simulate --points`` cap: the pairwise-distance check is O(N^2) in memory (1e8 points were killed, OOM).
+MAX_SIM_POINTS = 10_000
 
 
 def _add_commands(parser: argparse.ArgumentParser) -> None:
@@ -68,10 +71,13 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
     p = sub.add_parser("path", help="world path -> timed joint commands over one or more projectors",
                        formatter_class=RawHelp,
                        epilog=examples_epilog(f"robocal projector path {EXAMPLES}/path_room.yaml --out path",
-                                              f"robocal projector path {EXAMPLES}/path_timed.yaml --out path"))
+                                              f"robocal projector path {EXAMPLES}/path_timed.yaml --out path",
+                                              f"robocal projector path {EXAMPLES}/path_timed.yaml --retime --out path"))
     p.add_argument("input", type=Path, help="path input (YAML/JSON)")
     p.add_argument("--nadir-margin", type=float, default=2.0, help="keep this far from the nadir [deg]")
     p.add_argument("--limit-margin", type=float, default=2.0, help="keep this far below the tilt limit [deg]")
+    p.add_argument("--retime", action="store_true",
+                   help="slow the spot down where the joint rate limits require it (instead of infeasible rows)")
     add_out_argument(p)
     p.set_defaults(func=_cmd_path)
 
@@ -81,8 +87,8 @@ def _cmd_simulate(args) -> int:
     from robocal.rigs.projector.simulate import simulate_calibration
     from robocal.rigs.projector.workflow import scenario_document
 
-    if args.points < 3:
-        raise InputError(f"--points must be >= 3, got {args.points}")
+    if not 3 <= args.points <= MAX_SIM_POINTS:
+        raise InputError(f"--points must be in [3, {MAX_SIM_POINTS}], got {args.points}")
     if args.noise <= 0 or args.theta_noise < 0:
         raise InputError(f"--noise must be > 0 and --theta-noise >= 0, got {args.noise}, {args.theta_noise}")
     rng = np.random.default_rng(args.seed)
@@ -148,6 +154,12 @@ def _cmd_evaluate(args) -> int:
         run = run_calibration(inp)
         calibrated = run.calibrated_model()
     ev = run_evaluation(inp.truth, calibrated, center=tuple(args.center), spacing=args.spacing)
+    e = ev.evaluation
+    if not np.any(e.reached):
+        n0 = calibrated.nadir_world
+        raise InputError(f"--center {args.center[0]:g} {args.center[1]:g} --spacing {args.spacing:g}: no Table 2 grid "
+                         f"point is on the reachable floor (nadir ({n0[0]:.3g}, {n0[1]:.3g}) m, radius "
+                         f"{calibrated.floor_radius:.3g} m)")
     out = prepare_out_dir(args.out, "projector-evaluate")
     if run is not None:
         result = calibration_result(run, inputs=inp.files, truth=inp.truth)
@@ -160,12 +172,20 @@ def _cmd_evaluate(args) -> int:
         result = None
         report = Report(f"projector evaluation: {args.input.name}", subtitle=f"calibration {args.result}")
         report.sections.extend(ev.sections())
-        atomic_write_text(out / "evaluation.json", json.dumps(_jsonable(ev.evaluation.to_dict()), indent=2) + "\n")
+        text = json.dumps(_jsonable(e.to_dict()), indent=2) + "\n"
+        print(f"wrote {atomic_write_text(out / 'evaluation.json', text)}")
     write_run(out, result, report)
-    e = ev.evaluation
+    if not np.all(e.reached):
+        print(f"warning: Table 2 grid point(s) {[int(i) + 1 for i in np.flatnonzero(~e.reached)]} (numbered as in the "
+              f"table) are outside the reachable floor and not evaluated", file=sys.stderr)
     print(f"Table 2 grid: {int(e.reached.sum())}/{len(e.reached)} reached, spot error RMS {1000 * e.rms:.2f} mm, "
           f"max {1000 * e.max:.2f} mm")
     return 0
+
+
+def _safe(name: str) -> str:
+    """A projector name usable in a file name."""
+    return "".join(c if c.isalnum() or c in "-_" else "_" for c in str(name)) or "projector"
 
 
 def _jsonable(d):
@@ -176,27 +196,51 @@ def _jsonable(d):
 
 def _cmd_path(args) -> int:
     from robocal.rigs.projector.files import load_path_input
-    from robocal.rigs.projector.path import plan_multi
+    from robocal.rigs.projector.path import plan_multi, require_reachable_path, retime
     from robocal.rigs.projector.workflow import path_report
 
     inp = load_path_input(args.input)
-    plan = plan_multi(inp.projectors, inp.t, inp.points, inp.velocity, walls=inp.walls,
-                      nadir_margin=math.radians(args.nadir_margin), limit_margin=math.radians(args.limit_margin))
+    try:  # exit 2: a point no projector reaches is wrong input; exit 1 is kept for a plan that fails its checks
+        require_reachable_path(inp.projectors, inp.t, inp.points)
+    except RobocalError as exc:
+        raise type(exc)(exc.message, source=str(args.input)) from None
+    kw = dict(walls=inp.walls, nadir_margin=math.radians(args.nadir_margin),
+              limit_margin=math.radians(args.limit_margin))
+    if args.retime:
+        t_new, _, plan = retime(inp.projectors, inp.t, inp.points, inp.velocity, **kw)
+        print(f"retimed: {inp.t[-1] - inp.t[0]:.3f} s -> {t_new[-1] - t_new[0]:.3f} s")
+    else:
+        plan = plan_multi(inp.projectors, inp.t, inp.points, inp.velocity, **kw)
     out = prepare_out_dir(args.out, "projector-path")
     cmd = plan.commands()
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["t [s]", "x [m]", "y [m]", "projector", "theta1 [rad]", "theta2 [rad]", "theta1_dot [rad/s]",
-                "theta2_dot [rad/s]"])
+                "theta2_dot [rad/s]", "status"])
     for i in range(len(cmd["t"])):
         k = int(cmd["projector"][i])
         w.writerow([f"{cmd['t'][i]:.6f}", f"{cmd['x'][i]:.6f}", f"{cmd['y'][i]:.6f}", plan.names[k] if k >= 0 else "",
-                    *(f"{v:.9f}" if np.isfinite(v) else "" for v in (*cmd["theta"][i], *cmd["theta_dot"][i]))])
+                    *(f"{v:.9f}" if np.isfinite(v) else "" for v in (*cmd["theta"][i], *cmd["theta_dot"][i])),
+                    cmd["status"][i]])
     print(f"wrote {atomic_write_text(out / 'commands.csv', buf.getvalue())}")
+    streams, _ = plan.projector_commands()
+    for st in streams:  # one stream per head: the idle ones pre-aim at their next hand-over pose
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow(["t [s]", "theta1 [rad]", "theta2 [rad]", "theta1_dot [rad/s]", "theta2_dot [rad/s]", "laser_on",
+                    "mode"])
+        for i in range(len(st["t"])):
+            w.writerow([f"{st['t'][i]:.6f}", *(f"{v:.9f}" for v in (*st["theta"][i], *st["theta_dot"][i])),
+                        int(st["laser_on"][i]), st["mode"][i]])
+        fname = f"commands_{_safe(st['name'])}.csv"
+        print(f"wrote {atomic_write_text(out / fname, buf.getvalue())}")
     print(f"wrote {atomic_write_text(out / 'plan.json', json.dumps(_jsonable(plan.to_dict()), indent=2) + chr(10))}")
     write_run(out, None, path_report(plan, inp.projectors, inp.walls, title=f"projector path: {args.input.name}"))
     print(f"{len(plan.t)} samples, {len(plan.handovers)} hand-over(s), "
           + ("all feasible" if plan.ok else f"{len(plan.infeasible)} infeasible stretch(es)"))
+    for bad in plan.infeasible[:10]:
+        print(f"  infeasible t = {bad['t0']:.2f} .. {bad['t1']:.2f} s: "
+              + "; ".join(f"{k}: {v}" for k, v in bad["reasons"].items()))
     return 0 if plan.ok else 1
 
 

@@ -7,16 +7,18 @@ For each desired world point the *calibrated* model commands joint angles
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
 from robocal.errors import InputError, RobocalError
-from robocal.rigs.projector.model import ProjectorModel
+from robocal.rigs.projector.model import NearSingularityWarning, ProjectorModel
 from robocal.rigs.projector.published import TABLE2_DESIRED, TABLE2_MEASURED_A, TABLE2_MEASURED_B
 from robocal.validation import check_array
 
-__all__ = ["Evaluation", "evaluate_points", "table2_grid", "error_map", "published_table2_errors"]
+__all__ = ["Evaluation", "evaluate_points", "table2_grid", "error_map", "published_table2_errors",
+           "floor_prediction_jacobian", "spot_error_covariance", "predicted_error_map", "estimate_covariance"]
 
 
 @dataclass
@@ -105,14 +107,16 @@ def evaluate_points(truth: ProjectorModel, calibrated: ProjectorModel, desired_W
     landed = np.full(d.shape, np.nan)
     if np.any(ok):
         theta[ok] = calibrated.ik_world(d[ok], on_nadir="ignore")
-        try:
-            landed[ok] = truth.spot_world(theta[ok])[:, :2]
-        except RobocalError:  # a wildly wrong calibration can aim above the horizon
-            for i in np.flatnonzero(ok):
-                try:
-                    landed[i] = truth.spot_world(theta[i])[:2]
-                except RobocalError:
-                    ok[i] = False
+        with warnings.catch_warnings():  # the true head may sit just past its tilt limit at the disc's rim
+            warnings.simplefilter("ignore", NearSingularityWarning)
+            try:
+                landed[ok] = truth.spot_world(theta[ok])[:, :2]
+            except RobocalError:  # a wildly wrong calibration can aim above the horizon
+                for i in np.flatnonzero(ok):
+                    try:
+                        landed[i] = truth.spot_world(theta[i])[:2]
+                    except RobocalError:
+                        ok[i] = False
     if measure_sigma and rng is not None:
         landed[ok] += rng.normal(0.0, measure_sigma, (int(ok.sum()), 2))
     return Evaluation(d, theta, landed, landed - d, ok)

@@ -11,6 +11,7 @@ Calibration input (``robocal projector calibrate INPUT``)::
       offsets: [0, 0]                        # joint zero offsets, optional
       tilt_limit: 75                         # optional (angle)
       rate_limits: {value: [90, 90], unit: deg/s}   # optional
+      pan_range: [-270, 270]                 # optional: unwrapped pan stops (angle); default endless
     points:
       world: [[0, 0], [60, 60], [0, 90]]     # ^W P_i, (N, 2) or (N, 3) with z = 0
       projector: [[240, -90, -290], ...]     # ^0 P_i (N, 3) -- or:
@@ -27,6 +28,7 @@ Path input (``robocal projector path INPUT``)::
 
     units: {length: m, angle: deg, speed: m/s, time: s, angular_rate: deg/s}
     projectors: [ {name, H, d1, ..., yaw, t_0_W: [x, y, z]} | {name, H, ..., result: result.json}, ...]
+                                             # t_0_W z must be -H; 'result' or yaw/t_0_W, not both
     walls: [[x0, y0, x1, y1], ...]           # optional, floor-to-ceiling partitions
     path: {waypoints: [[x, y], ...], speed: 0.3, dt: 0.1}   # or {file: path.csv} with t, x, y
 """
@@ -38,10 +40,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robocal.errors import FileFormatError, RobocalError
+from robocal.errors import FileFormatError, RobocalError, SingularConfigurationError
 from robocal.geometry import rotz
 from robocal.io import Document, load_csv, load_document, load_result
-from robocal.rigs.projector.model import ProjectorModel
+from robocal.rigs.projector.model import HORIZON_TOL, ProjectorModel
 
 __all__ = ["CalibrationInput", "load_calibration_input", "projector_from_doc", "projector_to_yaml",
            "load_path_input", "PathInput"]
@@ -58,9 +60,13 @@ def projector_from_doc(doc: Document, *, extrinsics: bool = False) -> ProjectorM
         kw["tilt_limit"] = doc.float("tilt_limit", kind="angle")
     if "rate_limits" in doc:
         kw["rate_limits"] = tuple(doc.array("rate_limits", kind="angular_rate", shape=(2,)))
+    if "pan_range" in doc:
+        kw["pan_range"] = tuple(doc.array("pan_range", kind="angle", shape=(2,)))
     kw["name"] = str(doc.raw("name", "projector"))
     if extrinsics:
-        if "result" in doc:
+        both = [k for k in ("yaw", "R_0_W", "t_0_W") if k in doc]
+        if "result" in doc and both:
+            raise doc.error("result", f"give either 'result' or the extrinsics {both}, not both (which one counts?)")
             res = load_result(doc.path("result"))
             e = res.estimate
             try:
@@ -78,6 +84,11 @@ def projector_from_doc(doc: Document, *, extrinsics: bool = False) -> ProjectorM
             elif "R_0_W" in doc:
                 kw["R_0_W"] = doc.array("R_0_W", shape=(3, 3))
             kw["t_0_W"] = doc.array("t_0_W", kind="length", shape=(3,))
+            R = kw.get("R_0_W", np.eye(3))
+            # {0} sits H above the floor: with a level base (R about z only) t_z must be -H
+            if abs(R[2, 2] - 1.0) < 1e-9 and abs(kw["t_0_W"][2] + kw["H"]) > 1e-6 * max(1.0, kw["H"]):
+                raise doc.error("t_0_W", f"z = {kw['t_0_W'][2]:.6g} m must equal -H = {-kw['H']:.6g} m (the floor "
+                                         f"is z_0 = -H; wrong unit or sign?)")
     try:
         return ProjectorModel(**kw)
     except RobocalError as exc:
@@ -91,6 +102,8 @@ def projector_to_yaml(m: ProjectorModel, *, extrinsics: bool = False) -> dict:
          "offsets": {"value": [float(np.degrees(o)) for o in m.offsets], "unit": "deg"},
          "tilt_limit": {"value": float(np.degrees(m.tilt_limit)), "unit": "deg"},
          "rate_limits": {"value": [float(np.degrees(r)) for r in m.rate_limits], "unit": "deg/s"}}
+    if m.pan_range is not None:
+        d["pan_range"] = {"value": [float(np.degrees(r)) for r in m.pan_range], "unit": "deg"}
     if extrinsics:
         d["yaw"] = {"value": float(np.degrees(math.atan2(m.R_0_W[1, 0], m.R_0_W[0, 0]))), "unit": "deg"}
         d["t_0_W"] = {"value": [float(v * 1e3) for v in m.t_0_W], "unit": "mm"}
@@ -146,6 +159,8 @@ def load_calibration_input(path) -> CalibrationInput:
         n_other = (th if th is not None else p0).shape[0]
         if pw.shape[0] != n_other:
             raise pts.error("world", f"has {pw.shape[0]} points but the projector side has {n_other}")
+    if th is not None:
+        _check_joint_angles(th, model, pts.error if "file" not in pts else None, files[-1])
     sigma = doc.float("noise", kind="length", default=None)
     if sigma is not None and not sigma > 0:
         raise doc.error("noise", f"must be > 0, got {sigma:g}")
@@ -162,6 +177,25 @@ def load_calibration_input(path) -> CalibrationInput:
     truth = projector_from_doc(doc.sub("truth"), extrinsics=True) if "truth" in doc else None
     return CalibrationInput(str(path), model, pw, p0, th, sigma, tuple(methods), tuple(estimate), alpha, order,
                             doc.bool("strict", default=False), truth, files)
+
+
+def _check_joint_angles(th: np.ndarray, model: ProjectorModel, field_error, csv_path) -> None:
+    """Joint angles whose tilt (with its zero offset) reaches the horizon cannot come from a floor spot.
+
+    The usual cause is an angle unit mix-up (degrees declared as rad turn 55 deg into 55 rad), so the
+    message says so and names the row.
+    """
+    tilt = th[:, 1] + model.offsets[1]
+    bad = np.flatnonzero(np.cos(tilt) <= HORIZON_TOL)
+    if bad.size == 0:
+        return
+    k = int(bad[0])
+    msg = (f"row {k} (0-based): tilt theta2 = {th[k, 1]:.6g} rad (= {math.degrees(th[k, 1]):.6g} deg) puts the beam at or above "
+           f"the horizon, so the spot never reaches the floor ({bad.size} such row(s)); are the angles in the declared "
+           f"unit (degrees declared as rad?)")
+    if field_error is not None:
+        raise field_error("joint_angles", msg, SingularConfigurationError)
+    raise SingularConfigurationError(f"columns theta1, theta2: {msg}", source=str(csv_path))
 
 
 @dataclass

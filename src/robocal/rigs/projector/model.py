@@ -43,12 +43,18 @@ __all__ = [
     "NearSingularityWarning",
     "UnreachablePointError",
     "wrap_angle",
+    "NADIR_TOL",
+    "HORIZON_TOL",
+    "NEAR_NADIR_WARN",
 ]
 
 #: Below this tilt (rad) the beam is "at the nadir": the pan angle is undetermined.
 NADIR_TOL = 1e-9
 #: Beam directions with cos(tilt) below this never reach the floor (horizon).
 HORIZON_TOL = 1e-9
+#: :meth:`ProjectorModel.joint_rates` warns below this tilt (rad): the pan rate needed to move the spot at
+#: speed ``v`` is ``v / (h tan(tilt))``, over ``1000 v / h`` here (e.g. 100 rad/s for 0.3 m/s at h = 2.8 m).
+NEAR_NADIR_WARN = 1e-3
 
 
 class NearSingularityWarning(UserWarning):
@@ -69,6 +75,11 @@ def wrap_angle(a):
 def _first(mask) -> tuple:
     idx = np.argwhere(np.asarray(mask))
     return tuple(int(i) for i in idx[0]) if idx.size else ()
+
+
+def _at(mask) -> str:
+    """' at index (i, j)' for the first True of an array mask; '' for a scalar (no index to name)."""
+    return f" at index {_first(mask)}" if np.ndim(mask) else ""
 
 
 def _indices(mask) -> list[int]:
@@ -103,6 +114,10 @@ class ProjectorModel:
         directly below ``{0}``: ``R = I``, ``t = (0, 0, -H)``.
     name : str
         Label used in reports and multi-projector paths.
+    pan_range : (float, float), optional
+        Mechanical range (rad) of the *unwrapped* pan command, e.g. ``(-3 pi/2,
+        3 pi/2)`` for a head with a cable stop; None: endless pan. Used by path
+        planning (a path circling the nadir winds the pan up).
 
     References
     ----------
@@ -118,6 +133,7 @@ class ProjectorModel:
     R_0_W: np.ndarray = field(default=None, repr=False)
     t_0_W: np.ndarray = field(default=None, repr=False)
     name: str = "projector"
+    pan_range: tuple | None = None
 
     def __post_init__(self):
         for key in ("H", "d1", "d2", "tilt_limit"):
@@ -138,6 +154,11 @@ class ProjectorModel:
         if rl.ndim != 1 or np.any(rl <= 0):
             raise InputError(f"projector.rate_limits must be two values > 0 (rad/s), got {rl.tolist()}")
         object.__setattr__(self, "rate_limits", (float(rl[0]), float(rl[1])))
+        if self.pan_range is not None:
+            pr = check_array(self.pan_range, "projector.pan_range", shape=(2,))
+            if pr.ndim != 1 or not pr[1] - pr[0] > 0:
+                raise InputError(f"projector.pan_range must be (min, max) with max > min (rad), got {pr.tolist()}")
+            object.__setattr__(self, "pan_range", (float(pr[0]), float(pr[1])))
         R = np.eye(3) if self.R_0_W is None else check_rotation_matrix(self.R_0_W, "projector.R_0_W")
         t = np.array([0.0, 0.0, -self.H]) if self.t_0_W is None else check_array(self.t_0_W, "projector.t_0_W",
                                                                                  shape=(3,))
@@ -196,12 +217,34 @@ class ProjectorModel:
     def _actual(self, theta: np.ndarray):
         return theta[..., 0] + self.offsets[0], theta[..., 1] + self.offsets[1]
 
-    def _require_floor_hit(self, c2: np.ndarray, what: str) -> None:
+    def _require_floor_hit(self, c2: np.ndarray, what: str, a2=None) -> None:
         bad = c2 <= HORIZON_TOL
         if np.any(bad):
+            k = _first(bad)
+            where = [f"first at index {k}"] if np.ndim(bad) else []
+            if a2 is not None:
+                where.append(f"theta2 + offset = {float(np.broadcast_to(a2, bad.shape)[k]):.6g} rad")
+            where.append(f"cos(theta2) = {float(c2[k]):.3g}")
             raise SingularConfigurationError(
                 f"{what}: tilt theta2 + offset reaches the horizon (theta2 = pi/2) or beyond, the beam never "
-                f"meets the floor (first at index {_first(bad)}, cos(theta2) = {float(c2[_first(bad)]):.3g})")
+                f"meets the floor ({', '.join(where)}); angles are in rad: degrees passed as rad?")
+
+    def _warn_beyond_limit(self, a2: np.ndarray, what: str) -> None:
+        """Warn (NearSingularityWarning) where the actual tilt exceeds ``tilt_limit``.
+
+        Between the tilt limit and the horizon the spot exists but runs off as ``h tan(theta2)``
+        and its sensitivity to the tilt as ``h / cos^2(theta2)`` (seed eq. 9): 2.8e8 m and 2.8e16 m/rad
+        at 1e-8 rad below pi/2 (h = 2.78 m). Refusing there would break callers that probe a margin, so it warns.
+        """
+        bad = np.abs(a2) > self.tilt_limit + 1e-12
+        if np.any(bad):
+            k = _first(bad)
+            t = float(np.broadcast_to(a2, bad.shape)[k])
+            warnings.warn(
+                f"{what}: tilt theta2 + offset = {math.degrees(t):.6g} deg{_at(bad)} ({int(np.sum(bad))} "
+                f"configuration(s)) is beyond the tilt limit {math.degrees(self.tilt_limit):g} deg, near the horizon "
+                f"singularity: spot {self.h * abs(math.tan(t)):.4g} m from the nadir, d spot / d theta2 = "
+                f"{self.h / math.cos(t) ** 2:.4g} m/rad", NearSingularityWarning, stacklevel=3)
 
     # ---------------------------------------------------------- kinematics
     def pose(self, theta) -> np.ndarray:
@@ -222,7 +265,8 @@ class ProjectorModel:
         theta = self._theta(theta)
         a1, a2 = self._actual(theta)
         c2 = np.cos(a2)
-        self._require_floor_hit(c2, "spot")
+        self._require_floor_hit(c2, "spot", a2)
+        self._warn_beyond_limit(a2, "spot")
         rho = self.h * np.sin(a2) / c2
         out = np.empty(theta.shape[:-1] + (3,))
         out[..., 0] = rho * np.sin(a1)
@@ -235,9 +279,11 @@ class ProjectorModel:
 
         Independent of eq. (6) (used to check it); same result and errors as :meth:`spot`.
         """
+        theta = self._theta(theta)
         T = self.pose(theta)
         p, z = T[..., :3, 3], T[..., :3, 2]
-        self._require_floor_hit(-z[..., 2], "spot")
+        self._require_floor_hit(-z[..., 2], "spot", self._actual(theta)[1])
+        self._warn_beyond_limit(self._actual(theta)[1], "spot")
         s = (-self.H - p[..., 2]) / z[..., 2]
         return p + s[..., None] * z
 
@@ -246,7 +292,8 @@ class ProjectorModel:
         theta = self._theta(theta)
         _, a2 = self._actual(theta)
         c2 = np.cos(a2)
-        self._require_floor_hit(c2, "beam_range")
+        self._require_floor_hit(c2, "beam_range", a2)
+        self._warn_beyond_limit(a2, "beam_range")
         return self.h / c2 - self.d2
 
     def ik(self, points, *, theta1_at_nadir: float = 0.0, on_nadir: str = "warn", check_reach: bool = True,
@@ -274,6 +321,8 @@ class ProjectorModel:
         -------
         ndarray, shape (..., 2)
         """
+        if on_nadir not in ("warn", "raise", "ignore"):
+            raise InputError(f"on_nadir must be 'warn', 'raise' or 'ignore', got {on_nadir!r}")
         xy = self._floor_xy(points, "points", floor_tol)
         r = np.hypot(xy[..., 0], xy[..., 1])
         a2 = np.arctan2(r, self.h)
@@ -331,7 +380,8 @@ class ProjectorModel:
         theta = self._theta(theta)
         a1, a2 = self._actual(theta)
         c2 = np.cos(a2)
-        self._require_floor_hit(c2, "spot_jacobian")
+        self._require_floor_hit(c2, "spot_jacobian", a2)
+        self._warn_beyond_limit(a2, "spot_jacobian")
         s1, c1, s2 = np.sin(a1), np.cos(a1), np.sin(a2)
         k = self.h / c2
         J = np.zeros(theta.shape[:-1] + (3, 2))
@@ -341,7 +391,8 @@ class ProjectorModel:
         J[..., 1, 1] = k * c1 / c2
         return J
 
-    def joint_rates(self, theta, spot_velocity, *, nadir_tol: float = 1e-6) -> np.ndarray:
+    def joint_rates(self, theta, spot_velocity, *, nadir_tol: float = 1e-6,
+                    warn_tol: float = NEAR_NADIR_WARN) -> np.ndarray:
         """Joint rates (rad/s) that move the spot with a given floor velocity (inverse of eq. 9).
 
         ``theta1' = c2 (c1 vx - s1 vy) / (h s2)``, ``theta2' = c2^2 (s1 vx + c1 vy) / h``.
@@ -353,6 +404,10 @@ class ProjectorModel:
             Spot velocity in ``{0}`` (m/s); a third component must be 0.
         nadir_tol : float
             Tilt (rad) below which the inverse is refused.
+        warn_tol : float
+            Tilt (rad) below which :class:`NearSingularityWarning` is emitted
+            (default :data:`NEAR_NADIR_WARN` = 1e-3 rad: pan rate over ``1000 |v| / h``).
+            Beyond the tilt limit it warns too (horizon side).
 
         Raises
         ------
@@ -370,14 +425,23 @@ class ProjectorModel:
             v = v[..., :2]
         a1, a2 = self._actual(theta)
         c2 = np.cos(a2)
-        self._require_floor_hit(c2, "joint_rates")
+        self._require_floor_hit(c2, "joint_rates", a2)
+        self._warn_beyond_limit(a2, "joint_rates")
         s2 = np.sin(a2)
         bad = np.abs(s2) < math.sin(nadir_tol)
         if np.any(bad):
             raise SingularConfigurationError(
-                f"joint_rates: configuration {_first(bad)} is at the nadir singularity (theta2 = "
+                f"joint_rates: configuration{_at(bad)} is at the nadir singularity (theta2 = "
                 f"{float(np.broadcast_to(a2, bad.shape)[_first(bad)]):.3g} rad): the pan rate needed to move the spot "
                 f"is unbounded; keep the path at least {nadir_tol:g} rad of tilt away from the nadir")
+        near = np.abs(s2) < math.sin(warn_tol)
+        if np.any(near):
+            k = _first(near)
+            warnings.warn(
+                f"joint_rates: configuration{_at(near)} ({int(np.sum(near))} in all) is within {warn_tol:g} rad of the "
+                f"nadir singularity (theta2 + offset = {float(np.broadcast_to(a2, near.shape)[k]):.3g} rad): the pan "
+                f"rate is v / (h tan(theta2)), over {1 / math.tan(warn_tol):.4g} v / h", NearSingularityWarning,
+                stacklevel=2)
         s1, c1 = np.sin(a1), np.cos(a1)
         vx, vy = v[..., 0], v[..., 1]
         out = np.empty(np.broadcast_shapes(theta.shape[:-1], v.shape[:-1]) + (2,))
@@ -391,7 +455,7 @@ class ProjectorModel:
         td = check_array(theta_dot, "theta_dot", shape=(2,))
         _, a2 = self._actual(theta)
         c2 = np.cos(a2)
-        self._require_floor_hit(c2, "beam_range_rate")
+        self._require_floor_hit(c2, "beam_range_rate", a2)
         return self.h * np.sin(a2) / (c2 * c2) * td[..., 1]
 
     def singularity_margin(self, theta) -> np.ndarray:
@@ -439,4 +503,5 @@ class ProjectorModel:
         """SI values (m, rad) for result files."""
         return dict(name=self.name, H=self.H, d1=self.d1, d2=self.d2, offsets=list(self.offsets),
                     tilt_limit=self.tilt_limit, rate_limits=list(self.rate_limits),
+                    pan_range=None if self.pan_range is None else list(self.pan_range),
                     R_0_W=self.R_0_W.tolist(), t_0_W=self.t_0_W.tolist())

@@ -25,11 +25,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from robocal.errors import InputError, NotEnoughDataError, ShapeError
-from robocal.rigs.projector.model import ProjectorModel
+from robocal.rigs.projector.model import ProjectorModel, UnreachablePointError, wrap_angle
 from robocal.validation import check_array
 
 __all__ = ["sample_polyline", "JointTrajectory", "joint_trajectory", "segments_blocked", "MultiPlan",
-           "plan_multi"]
+           "plan_multi", "unreachable_samples", "require_reachable_path", "retime"]
 
 
 def sample_polyline(waypoints, speed: float, dt: float):
@@ -162,6 +162,10 @@ def joint_trajectory(model: ProjectorModel, t, points_W, velocity_W=None, *, nad
         Tilt (rad) under which a sample counts as at the nadir singularity.
     limit_margin : float
         Tilt (rad) kept free below the tilt limit.
+
+    The pan is unwrapped along the path; with ``model.pan_range`` the whole
+    series is shifted by whole turns to centre it in the range, and samples
+    still outside are infeasible ("pan beyond its range").
     """
     t, p, v = _timed(t, points_W, velocity_W)
     p0 = model.to_projector(p)
@@ -169,6 +173,13 @@ def joint_trajectory(model: ProjectorModel, t, points_W, velocity_W=None, *, nad
     tilt_actual = np.arctan2(r, model.h)
     theta = model.ik(p0, check_reach=False, on_nadir="ignore")
     theta[:, 0] = np.unwrap(theta[:, 0])
+    pan_out = np.zeros(len(t), dtype=bool)
+    if model.pan_range is not None:
+        # start on the turn that centres the wound-up pan in the mechanical range
+        lo, hi = model.pan_range
+        mid = 0.5 * (theta[:, 0].min() + theta[:, 0].max())
+        theta[:, 0] += 2 * math.pi * round((0.5 * (lo + hi) - mid) / (2 * math.pi))
+        pan_out = (theta[:, 0] < lo - 1e-12) | (theta[:, 0] > hi + 1e-12)
     margin = np.minimum(tilt_actual, model.tilt_limit - tilt_actual)
     reach = tilt_actual <= model.tilt_limit - limit_margin
     nadir = tilt_actual < nadir_margin
@@ -186,18 +197,21 @@ def joint_trajectory(model: ProjectorModel, t, points_W, velocity_W=None, *, nad
                           f"{math.degrees(model.tilt_limit - limit_margin):.1f} deg)")
         elif nadir[i]:
             reason.append(f"within {math.degrees(nadir_margin):g} deg of the nadir singularity")
+        elif pan_out[i]:
+            reason.append(f"pan beyond its range (unwrapped pan {math.degrees(theta[i, 0]):.1f} deg outside "
+                          f"[{math.degrees(model.pan_range[0]):g}, {math.degrees(model.pan_range[1]):g}] deg)")
         elif fast[i]:
             j = int(np.argmax(np.abs(rates[i]) / lim))
             reason.append(f"{'pan' if j == 0 else 'tilt'} rate {math.degrees(abs(rates[i, j])):.1f} deg/s > "
                           f"{math.degrees(lim[j]):.1f} deg/s")
         else:
             reason.append("")
-    feasible = reach & ~nadir & ~fast
+    feasible = reach & ~nadir & ~fast & ~pan_out
     segments = []
     for a, b in _runs(~feasible):
         kinds = sorted({reason[i].split(" (")[0].split(" rate")[0] for i in range(a, b + 1)})
         seg = dict(start=int(a), stop=int(b), t0=float(t[a]), t1=float(t[b]), reason="; ".join(kinds))
-        if np.all(reach[a:b + 1] & ~nadir[a:b + 1]):
+        if np.all(reach[a:b + 1] & ~nadir[a:b + 1] & ~pan_out[a:b + 1]):
             seg["slowdown"] = float(ratio[a:b + 1].max())
         segments.append(seg)
     return JointTrajectory(model.name, t, p, theta, rates, feasible, reason, margin, segments)
@@ -257,13 +271,25 @@ class MultiPlan:
     handovers: list
     segments: list
     infeasible: list
+    rate_limits: list = field(default_factory=list)  # per projector (rad/s), for the idle heads' slews
 
     @property
     def ok(self) -> bool:
         return bool(np.all(self.assignment >= 0))
 
+    def sample_status(self, i: int) -> str:
+        """'ok' for a served sample, else 'infeasible: ' and each projector's reason there."""
+        if self.assignment[i] >= 0:
+            return "ok"
+        why = []
+        for k, tr in enumerate(self.trajectories):
+            r = tr.reason[i] or ("beam blocked by a wall" if self.occluded[k, i] else "unavailable")
+            why.append(f"{self.names[k]}: {r}")
+        return "infeasible: " + "; ".join(why)
+
     def commands(self) -> dict:
-        """Per-sample commands of the serving projector: t, x, y, projector, theta, theta_dot (NaN if none)."""
+        """Per-sample commands of the serving projector: t, x, y, projector, theta, theta_dot (NaN if none),
+        status ('ok' or 'infeasible: <each projector's reason>', so unserved rows are not silently blank)."""
         K = len(self.t)
         th = np.full((K, 2), np.nan)
         td = np.full((K, 2), np.nan)
@@ -272,11 +298,118 @@ class MultiPlan:
             th[m] = tr.theta[m]
             td[m] = tr.theta_dot[m]
         return dict(t=self.t, x=self.points[:, 0], y=self.points[:, 1], projector=self.assignment, theta=th,
-                    theta_dot=td)
+                    theta_dot=td, status=[self.sample_status(i) for i in range(K)])
+
+    def projector_commands(self) -> tuple[list[dict], list[dict]]:
+        """One command stream per projector, with the idle heads pre-aimed for their next hand-over.
+
+        Each stream (dict) holds ``name, t, theta (K, 2), theta_dot (K, 2), laser_on (K,), mode (K,)``
+        with mode ``'serve'`` (its trajectory, laser on), ``'slew'`` (moving to the pose where it takes
+        over next, each joint at its rate limit, laser off) or ``'hold'``. Before its first segment a head
+        holds that segment's first pose (set before the path starts); after its last it holds. The pan
+        slews the short way round, and the commands after a slew continue on that turn.
+
+        Returns ``(streams, preaim)``: ``preaim`` lists each slew ``projector, t_start, t_ready,
+        t_handover, ok`` (``ok``: ready by the hand-over time; else the head arrives late and the spot
+        jumps there).
+        """
+        K = len(self.t)
+        streams, preaim = [], []
+        for k, tr in enumerate(self.trajectories):
+            lim = np.asarray(tr_limits(self, k))
+            th = np.array(tr.theta, dtype=float)
+            td = np.array(tr.theta_dot, dtype=float)
+            serve = self.assignment == k
+            mode = np.where(serve, "serve", "hold").astype(object)
+            runs = _runs(serve)
+            if not runs:  # never serves: park at the first sample's pose
+                th[:] = th[0]
+                td[:] = 0.0
+                streams.append(dict(name=self.names[k], t=self.t, theta=th, theta_dot=td, laser_on=serve,
+                                    mode=mode.tolist()))
+                continue
+            out_th = np.empty_like(th)
+            out_td = np.zeros_like(td)
+            shift = 0.0  # whole turns added to the pan after short-way slews
+            a0 = runs[0][0]
+            out_th[:a0] = th[a0]
+            for j, (a, b) in enumerate(runs):
+                out_th[a:b + 1] = th[a:b + 1] + [shift, 0.0]
+                out_td[a:b + 1] = td[a:b + 1]
+                nxt = runs[j + 1][0] if j + 1 < len(runs) else None
+                if nxt is None:
+                    out_th[b + 1:] = out_th[b]
+                    continue
+                start = out_th[b]
+                goal = th[nxt] + [shift, 0.0]
+                d = goal - start
+                d0 = float(wrap_angle(d[0]))
+                shift += d0 - d[0]
+                d[0] = d0
+                goal = start + d
+                dur = np.abs(d) / lim  # time each joint needs at its limit (s)
+                for i in range(b + 1, nxt):
+                    el = self.t[i] - self.t[b]
+                    frac = np.where(dur > 0, np.minimum(el / np.where(dur > 0, dur, 1.0), 1.0), 1.0)
+                    out_th[i] = start + frac * d
+                    out_td[i] = np.where(frac < 1.0, np.sign(d) * lim, 0.0)
+                    mode[i] = "slew" if np.any(frac < 1.0) else "hold"
+                t_ready = float(self.t[b] + dur.max())
+                preaim.append(dict(projector=self.names[k], t_start=float(self.t[b]), t_ready=t_ready,
+                                   t_handover=float(self.t[nxt]), ok=bool(t_ready <= self.t[nxt] + 1e-9)))
+            streams.append(dict(name=self.names[k], t=self.t, theta=out_th, theta_dot=out_td, laser_on=serve,
+                                mode=mode.tolist()))
+        return streams, preaim
 
     def to_dict(self) -> dict:
         return dict(names=self.names, ok=self.ok, n_samples=len(self.t), handovers=self.handovers,
-                    segments=self.segments, infeasible=self.infeasible)
+                    segments=self.segments, infeasible=self.infeasible, preaim=self.projector_commands()[1])
+
+
+def unreachable_samples(projectors, points_W) -> np.ndarray:
+    """Indices of path samples (K, 2) that lie outside the reachable floor of *every* projector.
+
+    No timing, hand-over or margin can serve them: the input is wrong (a
+    waypoint in the wrong unit or frame), unlike a stretch that is too fast.
+    """
+    p = check_array(points_W, "points_W", shape=("K", 2))
+    ok = np.zeros(len(p), dtype=bool)
+    for proj in projectors:
+        ok |= proj.reachable(proj.to_projector(p), floor_tol=1e-6 * max(1.0, proj.H))
+    return np.flatnonzero(~ok)
+
+
+def require_reachable_path(projectors, t, points_W) -> None:
+    """Raise :class:`~robocal.rigs.projector.model.UnreachablePointError` naming samples no projector reaches."""
+    bad = unreachable_samples(projectors, points_W)
+    if bad.size:
+        p = np.asarray(points_W, dtype=float)
+        k = int(bad[0])
+        disc = "; ".join(f"{q.name}: nadir ({q.nadir_world[0]:.3g}, {q.nadir_world[1]:.3g}) m, radius "
+                         f"{q.floor_radius:.3g} m" for q in projectors)
+        raise UnreachablePointError(
+            f"path: {bad.size} sample(s) outside every projector's reachable floor, first t = {float(t[k]):.3g} s at "
+            f"({p[k, 0]:.4g}, {p[k, 1]:.4g}) m ({disc})")
+
+
+def tr_limits(plan: "MultiPlan", k: int) -> tuple:
+    """Rate limits (rad/s) of projector ``k`` of a plan (default 90 deg/s when the plan predates them)."""
+    return plan.rate_limits[k] if plan.rate_limits else (math.radians(90.0), math.radians(90.0))
+
+
+def _peak_rate(tr: JointTrajectory, model: ProjectorModel, a: int, b: int):
+    """``(text, slowdown)`` for the fastest joint over samples a..b (inclusive) where rates exist, else None."""
+    lim = np.asarray(model.rate_limits)
+    idx = [i for i in range(a, b + 1) if " rate " in tr.reason[i] or not tr.reason[i]]
+    if not idx:
+        return None
+    ratio = np.abs(tr.theta_dot[idx]) / lim
+    i, j = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
+    f = float(ratio[i, j])
+    if f <= 1.0:
+        return None
+    return (f"{'pan' if j == 0 else 'tilt'} rate up to {math.degrees(abs(tr.theta_dot[idx[i], j])):.1f} deg/s > "
+            f"{math.degrees(lim[j]):.1f} deg/s (slow the path down by x{f:.2f})", f)
 
 
 def plan_multi(projectors, t, points_W, velocity_W=None, *, walls=None, nadir_margin: float = math.radians(2),
@@ -339,11 +472,56 @@ def plan_multi(projectors, t, points_W, velocity_W=None, *, walls=None, nadir_ma
                 segments.append(dict(projector=names[assign[start]], start=start, stop=i - 1, t0=float(t[start]),
                                      t1=float(t[i - 1])))
             else:
-                why = {}
+                why, slow = {}, {}
                 for k, tr in enumerate(trajs):
                     why[names[k]] = "beam blocked by a wall" if occl[k, start] and tr.feasible[start] else (
                         tr.reason[start] or ("beam blocked by a wall" if occl[k, start] else "unavailable"))
+                    peak = _peak_rate(tr, projectors[k], start, i - 1)
+                    if peak is not None and " rate " in why[names[k]]:
+                        # the first sample's rate understates the stretch: report its peak and the fix
+                        why[names[k]] = peak[0]
+                        slow[names[k]] = peak[1]
                 infeasible.append(dict(start=start, stop=i - 1, t0=float(t[start]), t1=float(t[i - 1]),
-                                       reasons=why))
+                                       reasons=why, **({"slowdown": slow} if slow else {})))
             start = i
-    return MultiPlan(names, t, p, assign, trajs, avail, occl, handovers, segments, infeasible)
+    return MultiPlan(names, t, p, assign, trajs, avail, occl, handovers, segments, infeasible,
+                     [tuple(q.rate_limits) for q in projectors])
+
+
+def retime(projectors, t, points_W, velocity_W=None, *, walls=None, nadir_margin: float = math.radians(2),
+           limit_margin: float = math.radians(2), max_passes: int = 8):
+    """Slow a path down where, and only where, the joint rate limits require it.
+
+    Joint rates are linear in the spot velocity at a given pose (seed eq. 9^-1),
+    so a sample whose best projector needs the factor ``f`` (largest ``|rate| /
+    limit``) is served once the spot moves ``f`` times slower there. Each pass
+    stretches the sample intervals next to such samples by ``f`` (given
+    velocities are divided by it; without velocities they follow from the new
+    times) and plans again, until no sample is limited by speed alone or
+    ``max_passes`` is reached. Samples infeasible for other reasons (reach,
+    nadir, walls, pan range) are left as they are.
+
+    Returns ``(t, velocity, plan)``: the new times (s), velocities (m/s, None
+    when none were given) and the :class:`MultiPlan` on them.
+    """
+    projectors = list(projectors)
+    t, p, v = _timed(t, points_W, velocity_W)
+    vel = None if velocity_W is None else v
+    kw = dict(walls=walls, nadir_margin=nadir_margin, limit_margin=limit_margin)
+    plan = plan_multi(projectors, t, p, vel, **kw)
+    for _ in range(max_passes):
+        need = np.ones(len(t))
+        for i in np.flatnonzero(plan.assignment < 0):
+            f = [float(np.max(np.abs(tr.theta_dot[i]) / np.asarray(q.rate_limits)))
+                 for k, (tr, q) in enumerate(zip(plan.trajectories, projectors))
+                 if tr.reason[i].startswith(("pan rate", "tilt rate")) and not plan.occluded[k, i]]
+            if f:
+                need[i] = min(f) * (1 + 1e-6)
+        if np.all(need == 1.0):
+            break
+        stretch = np.maximum(need[:-1], need[1:])
+        t = np.concatenate([[t[0]], t[0] + np.cumsum(np.diff(t) * stretch)])
+        if vel is not None:
+            vel = vel / need[:, None]
+        plan = plan_multi(projectors, t, p, vel, **kw)
+    return t, vel, plan

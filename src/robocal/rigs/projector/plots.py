@@ -8,24 +8,40 @@ import numpy as np
 
 from robocal.report import Section, new_figure
 
-__all__ = ["plot_cost_curves", "plot_residuals", "plot_error_map", "plot_path", "calibration_sections",
+__all__ = ["plot_cost_curves", "iterative_methods", "plot_residuals", "plot_error_map", "plot_path",
+           "calibration_sections",
            "evaluation_sections", "error_map_section"]
 
 
+def iterative_methods(estimates: dict) -> list[str]:
+    """Methods with a cost history of more than one value (the closed form has none to plot)."""
+    return [name for name, est in estimates.items() if np.asarray(est.cost_history).size > 1]
+
+
 def plot_cost_curves(estimates: dict, ax=None):
-    """Cost per iteration of each iterative solver (the seed's Fig. 4), log scale."""
+    """Cost per iteration of each iterative solver (the seed's Fig. 4), log scale.
+
+    ``ax``: one axis per method of :func:`iterative_methods` (a sequence), or a
+    single axis. The seed's ``eps^T eps`` (eq. 27, ~1e-5) and the LS cost
+    ``0.5 sum r^2 / sigma^2`` (~1e2) differ by orders of magnitude, so on one
+    axis the seed's curve is a flat line: give one axis each.
+    """
+    names = iterative_methods(estimates)
     if ax is None:
-        _, ax = new_figure()
-    for name, est in estimates.items():
-        h = np.asarray(est.cost_history, dtype=float)
-        if h.size > 1:
-            ax.semilogy(np.arange(h.size), np.maximum(h, 1e-300), marker="o", ms=3,
-                        label=f"{name} ({'eps^T eps, eq. 27' if name == 'seed' else '0.5 sum r^2/sigma^2'})")
-    ax.set_xlabel("iteration")
-    ax.set_ylabel("cost")
-    ax.set_title("cost per iteration (cf. seed Fig. 4)")
-    if ax.get_legend_handles_labels()[0]:
-        ax.legend(fontsize=8)
+        _, ax = new_figure(1, max(1, len(names)), size=(5.0 * max(1, len(names)), 4.0))
+    axes = list(np.atleast_1d(ax))
+    if len(axes) == 1:
+        axes = axes * len(names)
+    elif len(axes) < len(names):
+        raise ValueError(f"plot_cost_curves: {len(names)} methods to plot, {len(axes)} axes given")
+    for a, name in zip(axes, names):
+        h = np.asarray(estimates[name].cost_history, dtype=float)
+        a.semilogy(np.arange(h.size), np.maximum(h, 1e-300), marker="o", ms=3,
+                   label=f"{name} ({'eps^T eps, eq. 27' if name == 'seed' else '0.5 sum r^2/sigma^2'})")
+        a.set_xlabel("iteration")
+        a.set_ylabel("eps^T eps (eq. 27)" if name == "seed" else "LS cost")
+        a.set_title(f"{name}: cost per iteration" + (" (seed Fig. 4)" if name == "seed" else ""))
+        a.legend(fontsize=8)
     return ax
 
 
@@ -44,6 +60,7 @@ def plot_residuals(points_W: np.ndarray, residuals: np.ndarray, ax=None, *, scal
     for i, p in enumerate(points_W):
         ax.annotate(f"{i}: {1000 * n[i]:.1f} mm", p[:2], fontsize=7, xytext=(3, 3), textcoords="offset points")
     ax.set_aspect("equal")
+    ax.margins(0.18)  # room for the point labels at the edge
     ax.set_xlabel("x_W [m]")
     ax.set_ylabel("y_W [m]")
     ax.set_title(f"floor residuals (arrows x{scale:.3g})")
@@ -105,6 +122,8 @@ def calibration_sections(run, *, truth=None) -> list[Section]:
     s = Section("Consistency of pairwise distances")
     c = run.consistency
     s.status(c.consistent, "distances in {W} and {0} agree within " + c.threshold if c.consistent
+             else (f"inconsistent: uniform scale error {100 * c.scale:+.2f} % (model, not points)"
+                   + (f"; suspect point(s) {c.suspects}" if c.suspects else "")) if c.scale is not None
              else f"inconsistent: suspect point(s) {c.suspects}")
     s.table([dict(pair=f"{r['i']}-{r['j']}", **{"d_W [mm]": 1000 * r["d_W"], "d_0 [mm]": 1000 * r["d_0"],
                                                  "diff [mm]": 1000 * r["diff"], "diff [%]": 100 * r["rel"],
@@ -129,8 +148,10 @@ def calibration_sections(run, *, truth=None) -> list[Section]:
                f"refined {math.degrees(run.estimates['seed'].yaw):.4f} deg after "
                f"{run.estimates['seed'].iterations} iterations of eq. (29).")
     best = run.best
+    basis = (f"the stated noise sigma = {1000 * run.sigma:.3g} mm taken as known (absolute sigma)" if run.sigma
+             else "scaled by the residuals (no noise stated in the input)")
     s.text(f"Primary estimate: {run.primary}. Standard deviations are sampling error under the model "
-           f"(noise on the world measurements), not model error.")
+           f"(noise on the world measurements), not model error; they use {basis}.")
     est = {"yaw [rad]": best.yaw, "t_x [m]": best.t_0_W[0], "t_y [m]": best.t_0_W[1]}
     std = {"yaw [rad]": best.std.get("yaw"), "t_x [m]": best.std.get("t_x"), "t_y [m]": best.std.get("t_y")}
     for k in ("h", "tilt_offset", "pan_offset"):
@@ -142,11 +163,14 @@ def calibration_sections(run, *, truth=None) -> list[Section]:
     s.diagnostics(run.warnings)
     secs.append(s)
     s = Section("Cost curves and residuals")
-    fig, ax = new_figure(1, 2, size=(11, 4.2))
-    plot_cost_curves(run.estimates, ax[0])
-    plot_residuals(run.points_W, best.residuals, ax[1])
-    s.figure(fig, "left: cost per iteration (seed Fig. 4 for the seed's method); right: floor residuals of the "
-                  "primary estimate")
+    names = iterative_methods(run.estimates)
+    fig, ax = new_figure(1, len(names) + 1, size=(5.0 * (len(names) + 1), 4.2))
+    ax = np.atleast_1d(ax)
+    if names:
+        plot_cost_curves(run.estimates, ax[:-1])
+    plot_residuals(run.points_W, best.residuals, ax[-1])
+    s.figure(fig, ("cost per iteration, one panel per method (" + ", ".join(names) + "; seed Fig. 4 for the seed's "
+                   "method); " if names else "") + "right: floor residuals of the primary estimate")
     secs.append(s)
     secs.append(error_map_section(run, truth=truth))
     return secs
@@ -174,11 +198,15 @@ def error_map_section(run, *, truth=None, n: int = 41) -> Section:
         return s
     xs, ys, err = predicted_error_map(model, cov, labels, xr, yr, n)
     fin = err[np.isfinite(err)]
+    if fin.size == 0:
+        s.status(False, "no predicted error map: no grid cell on the reachable floor")
+        return s
     s.text(f"1-sigma spot error (RMS length of the error vector) of a spot commanded by the {run.primary} "
            f"estimate, from its covariance over {', '.join(labels)} propagated to first order through the spot "
            f"model (seed eqs. 1, 6, 8): {1000 * fin.min():.2f} to {1000 * fin.max():.2f} mm over the reachable "
            f"floor (radius {r:.2f} m at tilt {math.degrees(model.tilt_limit):g} deg). 95 % of spots lie within "
-           f"about 2.45 times this (2-D). Sampling error only: a model error (wrong H) is not included."
+           f"1.7 (round error ellipse) to 2.0 (flat ellipse) times this. Sampling error only: a model error "
+           f"(wrong H) is not included."
            + (f" Note: {note}." if note else ""))
     ncol = 2 if truth is not None else 1
     fig, ax = new_figure(1, ncol, size=(6.4 * ncol, 5.0))

@@ -61,6 +61,8 @@ def calibration_result(run: CalibrationRun, *, inputs=(), truth: ProjectorModel 
     diag = {"methods": per_method, "consistency": run.consistency.rows(),
             "consistency_threshold": run.consistency.threshold, "suspect_points": run.consistency.suspects,
             "n_points": int(len(run.points_W)), "sigma": run.sigma,
+            "std_basis": ("absolute: the input's noise sigma taken as known" if run.sigma else
+                          "residual-scaled: no noise given, sigma estimated from the residuals"),
             "frames": "p_0 = R_0_W p_W + t_0_W (seed eq. 1); quaternion scalar-last"}
     if truth is not None:
         diag["truth"] = {"yaw": float(yaw_of(truth.R_0_W)), "t_0_W": truth.t_0_W, "h": truth.h,
@@ -130,6 +132,11 @@ def path_report(plan, projectors, walls, *, title="projector spot path") -> Repo
     if plan.handovers:
         s.table([{"t [s]": h["t"], "x [m]": h["point"][0], "y [m]": h["point"][1], "from": h["from"], "to": h["to"]}
                  for h in plan.handovers], caption="hand-over points")
+    _, preaim = plan.projector_commands()
+    if preaim:
+        s.table([{"projector": a["projector"], "slew from [s]": a["t_start"], "ready at [s]": a["t_ready"],
+                  "takes over at [s]": a["t_handover"], "ready in time": a["ok"]} for a in preaim],
+                caption="pre-aiming: an idle head slews (laser off) to the pose where it takes over next")
     for bad in plan.infeasible:
         s.text(f"infeasible t = {bad['t0']:.2f} .. {bad['t1']:.2f} s: "
                + "; ".join(f"{k}: {v}" for k, v in bad["reasons"].items()), cls="fail")
