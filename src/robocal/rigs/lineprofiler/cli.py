@@ -210,14 +210,27 @@ RIG = Rig(name="lineprofiler", help="hand-eye calibration of an arm-mounted line
 
 
 # ----------------------------------------------------------------------------- handeye
-def _handeye_calibrate(args) -> int:
-    from robocal.rigs.lineprofiler.handeye import calibrate_hand_eye
+def _load_pose_pair(args):
+    """``(T_base_gripper, T_cam_target)`` from the two pose lists, the robot stream resampled at the
+    sensor's timestamps when both have timestamps that differ."""
     from robocal.rigs.lineprofiler.io import interpolate_poses, load_poses
 
     Tg, tg = load_poses(args.gripper_poses)
     Tc, tc = load_poses(args.target_poses)
     if tg is not None and tc is not None and (len(tg) != len(tc) or np.any(np.abs(tg - tc) > 1e-9)):
-        Tg = interpolate_poses(tg, Tg, tc)  # robot stream resampled at the sensor's timestamps
+        Tg = interpolate_poses(tg, Tg, tc)
+    return Tg, Tc
+
+
+def _pose_list_arguments(p) -> None:
+    p.add_argument("gripper_poses", type=Path, help="T_base_gripper list (CSV/YAML, scalar-last quaternions)")
+    p.add_argument("target_poses", type=Path, help="T_cam_target list (CSV/YAML)")
+
+
+def _handeye_calibrate(args) -> int:
+    from robocal.rigs.lineprofiler.handeye import calibrate_hand_eye
+
+    Tg, Tc = _load_pose_pair(args)
     res = calibrate_hand_eye(Tg, Tc, args.method, refine=not args.no_refine)
     std = {"T_gripper_cam.rotvec": [res.std.get(k) for k in ("rx", "ry", "rz")] if res.std else None,
            "T_gripper_cam.translation": [res.std.get(k) for k in ("tx", "ty", "tz")] if res.std else None}
@@ -245,12 +258,8 @@ def _handeye_calibrate(args) -> int:
 def _robot_world(args) -> int:
     from robocal.geometry import invert_transform
     from robocal.rigs.lineprofiler.handeye import calibrate_robot_world
-    from robocal.rigs.lineprofiler.io import interpolate_poses, load_poses
 
-    Tg, tg = load_poses(args.gripper_poses)
-    Tc, tc = load_poses(args.target_poses)
-    if tg is not None and tc is not None and (len(tg) != len(tc) or np.any(np.abs(tg - tc) > 1e-9)):
-        Tg = interpolate_poses(tg, Tg, tc)
+    Tg, Tc = _load_pose_pair(args)
     # A X = Z B with A = T_cam_target, B = T_gripper_base: X = T_target_base, Z = T_cam_gripper
     res = calibrate_robot_world(Tc, invert_transform(Tg), refine=not args.no_refine)
 
@@ -296,8 +305,7 @@ def _add_handeye(parser) -> None:
                        formatter_class=RawHelp, epilog=examples_epilog(
                            f"robocal handeye calibrate {EXAMPLES}/gripper_poses.csv {EXAMPLES}/target_poses.csv "
                            "--method park --out he"))
-    p.add_argument("gripper_poses", type=Path, help="T_base_gripper list (CSV/YAML, scalar-last quaternions)")
-    p.add_argument("target_poses", type=Path, help="T_cam_target list (CSV/YAML)")
+    _pose_list_arguments(p)
     p.add_argument("--method", default="tsai", choices=["tsai", "park", "horaud", "andreff", "daniilidis"])
     p.add_argument("--no-refine", action="store_true", help="closed form only (no covariance)")
     add_out_argument(p)
@@ -306,8 +314,7 @@ def _add_handeye(parser) -> None:
                        formatter_class=RawHelp, epilog=examples_epilog(
                            f"robocal handeye robot-world {EXAMPLES}/gripper_poses.csv {EXAMPLES}/target_poses.csv "
                            "--out rw"))
-    p.add_argument("gripper_poses", type=Path, help="T_base_gripper list (CSV/YAML, scalar-last quaternions)")
-    p.add_argument("target_poses", type=Path, help="T_cam_target list (CSV/YAML)")
+    _pose_list_arguments(p)
     p.add_argument("--no-refine", action="store_true", help="Shah's closed form only (no covariance)")
     add_out_argument(p)
     p.set_defaults(func=_robot_world)
