@@ -57,6 +57,29 @@ def test_sb_detector_and_unrefined_corners():
     assert _rms(raw, truth) < 1.0
 
 
+def test_full_output_names_corners_whose_refinement_wandered(monkeypatch):
+    import cv2
+
+    T = _poses(1, 11)[0]
+    img = render_planar_target(CAM, T, BOARD, blur_sigma=0.7)
+    clean, info = detect_checkerboard(img, BOARD, method="classic", full_output=True)
+    assert info == {"detector": "classic", "unrefined": ()}
+    real = cv2.cornerSubPix
+
+    def wander(image, corners, *a):  # cornerSubPix meets an edge: corner 5 of the detector moves 20 px
+        out = real(image, corners, *a)
+        out[5, 0, 0] += 20.0
+        return out
+
+    monkeypatch.setattr(cv2, "cornerSubPix", wander)
+    uv, info = detect_checkerboard(img, BOARD, method="classic", full_output=True)
+    raw = detect_checkerboard(img, BOARD, method="classic", refine=False)
+    (k,) = info["unrefined"]
+    assert np.array_equal(uv[k], raw[k]) and not np.array_equal(uv[k], clean[k])  # the detector's pixel
+    others = np.delete(np.arange(len(uv)), k)
+    assert np.allclose(uv[others], clean[others])
+
+
 def test_orientation_of_asymmetric_board_upside_down():
     # rows + cols odd: a 180-degree in-plane turn is still resolved from the square colours.
     T = transform_from_rotvec([0.0, 0.0, np.pi], [0.08, 0.07, 0.5])

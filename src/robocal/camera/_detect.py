@@ -128,8 +128,10 @@ def _refine_corners(img: np.ndarray, corners: np.ndarray, board: Checkerboard) -
     out = cv2.cornerSubPix(smooth, corners.astype(np.float32).reshape(-1, 1, 2), (win, win), (-1, -1), crit)
     out = out.reshape(-1, 2).astype(np.float64)
     moved = np.linalg.norm(out - corners, axis=1)
-    # A corner that wanders off by more than a quarter spacing met something else: keep the detector's.
-    return np.where((moved < 0.25 * spacing)[:, None], out, corners)
+    # A corner that wanders off by more than a quarter spacing met something else: keep the
+    # detector's (pixel-level for "classic") and say so through detect_checkerboard's full_output.
+    kept = moved >= 0.25 * spacing
+    return np.where(kept[:, None], corners, out), kept
 
 
 def detect_checkerboard(
@@ -139,7 +141,8 @@ def detect_checkerboard(
     expected_uv=None,
     refine: bool = True,
     method: str = "auto",
-) -> np.ndarray:
+    full_output: bool = False,
+):
     """Sub-pixel inner corners of ``board`` in ``image``, in ``board.object_points()`` order.
 
     Parameters
@@ -161,9 +164,18 @@ def detect_checkerboard(
         blurred/noisy/distorted images, ~0.1 s); ``"auto"`` tries classic, then
         sb. After refinement both give the same corners.
 
+    full_output : bool
+        Also return a dict: ``"detector"`` (``"classic"`` or ``"sb"``, the one
+        that found the board) and ``"unrefined"`` (indices, in the returned
+        order, of corners whose sub-pixel refinement wandered off by more than
+        a quarter of the corner spacing and that keep the detector's estimate:
+        only pixel-accurate for ``"classic"``; a careful caller drops them or
+        the view).
+
     Returns
     -------
-    ndarray, shape (rows * cols, 2) [px], OpenCV pixel-centre convention.
+    ndarray, shape (rows * cols, 2) [px], OpenCV pixel-centre convention
+        (and the dict when ``full_output``).
 
     Raises
     ------
@@ -178,20 +190,28 @@ def detect_checkerboard(
         raise InputError(f"method must be 'auto', 'classic' or 'sb', got {method!r}")
     img = _grey(image)
     size = board.pattern_size
-    found, corners = False, None
+    found, corners, detector = False, None, None
     if method in ("auto", "classic"):
         flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
         found, corners = cv2.findChessboardCorners(img, size, flags=flags)
+        detector = "classic"
     if not found and method in ("auto", "sb"):
         # (CALIB_CB_ACCURACY would cost ~0.5 s; the refinement below does that job.)
         flags = cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_EXHAUSTIVE
         found, corners = cv2.findChessboardCornersSB(img, size, flags=flags)
+        detector = "sb"
     if not found or corners is None or len(corners) != board.n_corners:
         raise DetectionError(
             f"no {board.rows}x{board.cols} checkerboard (inner corners) found in image "
             f"of size {img.shape[1]}x{img.shape[0]} (method {method!r})"
         )
     corners = corners.reshape(-1, 2).astype(np.float64)
+    kept = np.zeros(len(corners), dtype=bool)
     if refine:
-        corners = _refine_corners(img, corners, board)
-    return order_checkerboard_corners(img, corners, board, expected_uv)
+        corners, kept = _refine_corners(img, corners, board)
+    ordered = order_checkerboard_corners(img, corners, board, expected_uv)
+    if not full_output:
+        return ordered
+    # the ordering only permutes the corners: find where the unrefined ones went
+    unrefined = sorted(int(np.argmin(np.linalg.norm(ordered - c, axis=1))) for c in corners[kept])
+    return ordered, {"detector": detector, "unrefined": tuple(unrefined)}
