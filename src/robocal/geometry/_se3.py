@@ -8,7 +8,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from robocal.geometry._so3 import _tail, matrix_from_quaternion, matrix_from_rotvec, quaternion_from_matrix, rotvec_from_matrix
+from robocal.geometry._so3 import (
+    _tail,
+    matrix_from_quaternion,
+    matrix_from_rotvec,
+    quaternion_from_matrix,
+    rotvec_from_matrix,
+)
 from robocal.validation import check_array
 
 __all__ = [
