@@ -106,6 +106,14 @@ def test_tied_hip_yaw_pitch(model, tied_model):
     data = simulate_dataset(tied_model, rng, n_per_foot=6)
     cal = calibrate(tied_model, data)
     assert len(cal.free) == 20 and "RHipYawPitch" not in cal.free
+    # the corrected URDF shifts the mimic joint's limits by its leader's offset (one motor)
+    from robocal.kinematics import KinematicTree
+
+    c = cal.value("LHipYawPitch")
+    assert cal.limit_shifts()["RHipYawPitch"] == pytest.approx(c) and abs(c) > 1e-5
+    lo, hi = tied_model.tree.joint("RHipYawPitch").limits
+    reloaded = KinematicTree.from_urdf(cal.urdf_text())
+    assert reloaded.joint("RHipYawPitch").limits == pytest.approx((lo - c, hi - c))
     # parameter-level tie on the untied model: one value for both joints
     truth = draw_truth(model, rng)
     n = len(model.joint_names)
@@ -155,3 +163,106 @@ def test_parameter_selection(model):
     assert resolve_parameters(model, "LKneePitch, camera.roll") == ["LKneePitch", "camera.roll"]
     with pytest.raises(InputError, match="unknown calibration parameter"):
         resolve_parameters(model, "LElbow")
+
+
+def test_reject_outliers_restores_the_clean_estimate(model, tmp_path):
+    # 3 views per foot, 0.3 px corners: one corner 3 px off pulls the estimate by ~3 std. It is
+    # injected into the corners, past detection (whose homography check would drop this whole view:
+    # its threshold is 1.34 px here). View 0, corner 18: a board corner with high leverage, chosen
+    # once by scanning every corner.
+    data = simulate_dataset(model, np.random.default_rng(11), n_per_foot=3)
+    clean = calibrate(model, data)
+    assert not clean.outlier_corners
+    bad = data.subset(np.arange(data.n_views))
+    bad.corners = bad.corners.copy()
+    bad.corners[0, 18] += [0.0, 3.0]
+
+    def worst(cal):
+        return max(abs(cal.value(lab) - clean.value(lab)) / clean.std(lab) for lab in clean.free)
+
+    plain = calibrate(model, bad)
+    assert plain.outlier_corners == [(data.names[0], 18)] and plain.rejected_corners == []
+    w = [w for w in plain.warnings if w.code == "outliers"][0]
+    assert f"{data.names[0]}: corners [18]" in w.message
+    assert worst(plain) > 2.0  # measured 2.95 std
+
+    cal = calibrate(model, bad, reject_outliers=True)
+    assert cal.rejected_corners == [(data.names[0], 18)] and cal.rejected_views == []
+    assert int((~cal.keep).sum()) == 1 and not cal.keep[0, 18]
+    assert worst(cal) < 1.0  # measured 0.09 std
+    # the noise model of the kept corners fits: residual variance as for the clean data
+    assert cal.lsq.residual_variance == pytest.approx(clean.lsq.residual_variance, rel=0.15)
+    assert any(w.code == "low_quality" and "corners [18]" in w.message for w in cal.warnings)
+    assert "1 corner(s) removed" in cal.summary()
+    d = json.loads(write_result(tmp_path / "r.json", cal.to_result()).read_text())["diagnostics"]
+    assert d["rejected_corners"] == [[data.names[0], 18]] and d["rejected_views"] == []
+    assert d["n_corners_used"] == d["n_corners"] - 1
+    # nothing to reject: the same calibration
+    same = calibrate(model, data, reject_outliers=True)
+    assert same.keep is None and np.array_equal(same.params, clean.params)
+
+
+def test_reject_outliers_drops_a_view_with_many_bad_corners(model):
+    data = simulate_dataset(model, np.random.default_rng(11), n_per_foot=3)
+    bad = data.subset(np.arange(data.n_views))
+    bad.corners = bad.corners.copy()
+    # a third of the view's corners 3 px off in alternating directions (no board pose absorbs that)
+    bad.corners[1, [0, 3, 5, 10, 13, 18, 20, 23]] += np.array([[3.0, 0.0], [-3.0, 0.0]] * 4)
+    cal = calibrate(model, bad, reject_outliers=True)
+    assert data.names[1] in cal.rejected_views and not cal.keep[1].any()
+    assert all(v != data.names[1] for v, _ in cal.rejected_corners)
+
+
+def test_corrected_urdf_shifts_limits_and_carries_provenance(model, corner_data, tmp_path):
+    import re
+
+    from robocal import __version__
+    from robocal.kinematics import KinematicTree
+
+    cal = calibrate(model, corner_data)
+    path = tmp_path / "nao_calibrated.urdf"
+    text = cal.write_urdf(path, inputs={"data/run.yaml": "f" * 64})
+    assert path.read_text() == text
+    reloaded = KinematicTree.from_urdf(path)
+    n = len(model.joint_names)
+    # physical range unchanged: new limits + offset = the model's limits, for every calibrated joint
+    for k, j in enumerate(model.joint_names):
+        lo, hi = model.tree.joint(j).limits
+        c = cal.params[k]
+        assert reloaded.joint(j).limits == pytest.approx((lo - c, hi - c), abs=1e-12)
+        if j in model.leg_joints:
+            assert abs(c) > 1e-5  # really shifted
+    # a raw reading at the physical limit is at the new limit
+    theta = np.array([model.tree.joint(j).limits[1] for j in model.joint_names]) - cal.params[:n]
+    assert reloaded.within_limits(theta) and not reloaded.within_limits(theta + 1e-6)
+    # provenance: version, date, input and its hash, the offsets applied
+    head = text.split("<robot", 1)[0]
+    assert f"robocal {__version__}" in head and re.search(r"on \d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ", head)
+    assert "data/run.yaml sha256 " + "f" * 64 in head
+    for r in cal.offsets_table():
+        if not r["estimated"]:
+            assert re.search(rf"\n\s+{r['joint']} \+0\.000000\n", head)
+            continue
+        m = re.search(rf"\n\s+{r['joint']} ([+-]\d+\.\d+) \(std (\d+\.\d+)\)", head)
+        assert m and float(m.group(1)) == pytest.approx(r["offset [deg]"], abs=1e-6)
+        assert float(m.group(2)) == pytest.approx(r["std [deg]"], abs=1e-6)
+    assert "camera correction in CameraBottom_frame" in head 
+    body = head.split("<!--", 1)[1].rsplit("-->", 1)[0]
+    assert "--" not in body and not body.endswith("-")  # a well-formed XML comment
+
+
+def test_rejected_corners_in_both_reports(model, tmp_path):
+    from robocal.cli import write_run
+    from robocal.io import load_result
+    from robocal.rigs.humanoid.report import report_from_result, write_outputs
+
+    data = simulate_dataset(model, np.random.default_rng(11), n_per_foot=3)
+    data.corners = data.corners.copy()
+    data.corners[0, 18] += [0.0, 3.0]
+    cal = calibrate(model, data, reject_outliers=True)
+    write_outputs(cal, tmp_path / "a", quiet=True)
+    write_run(tmp_path / "b", None, report_from_result(load_result(tmp_path / "a" / "result.json"),
+                                                       n_overlays=1), quiet=True)
+    for d in ("a", "b"):
+        html = (tmp_path / d / "report.html").read_text()
+        assert "re-solved once without them" in html and f"{data.names[0]} corners [18]" in html

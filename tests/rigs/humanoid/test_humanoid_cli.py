@@ -29,6 +29,10 @@ def test_calibrate_example_and_report(tmp_path, capsys):
     assert (out / "report.html").stat().st_size > 10_000
     urdf = next(out.glob("*_calibrated.urdf"))
     assert KinematicTree.from_urdf(urdf).n_joints == 14
+    import hashlib
+
+    digest = hashlib.sha256(EXAMPLE.read_bytes()).hexdigest()
+    assert f"run.yaml sha256 {digest}" in urdf.read_text().split("<robot", 1)[0]  # provenance comment
     assert "joint_offsets" in (out / "offsets.yaml").read_text()
     text = capsys.readouterr().out
     assert "LM iterations: " in text and " from zero + " in text and "warning" not in text

@@ -120,6 +120,39 @@ def test_mislabelled_foot_is_refused(example):
         calibrate(model, data)
 
 
+def test_consistency_thresholds_are_parameters(example, model, corner_data, capsys):
+    from robocal.cli.main import main
+    from robocal.rigs.humanoid.calibrate import NOMINAL_MIN_PX, NOMINAL_RATIO, check_views_consistent
+    from robocal.rigs.humanoid.cli import RIG
+
+    dist = check_views_consistent(model, corner_data)  # defaults: 60 px, 4 x the median view
+    assert dist.max() < NOMINAL_MIN_PX == 60.0 and NOMINAL_RATIO == 4.0
+    # tighter than the spread of good views: the farthest one is refused
+    with pytest.raises(InconsistentDataError, match=f"view {corner_data.names[int(np.argmax(dist))]!r}"):
+        calibrate(model, corner_data, consistency_px=1.0, consistency_ratio=1.0)
+    check_views_consistent(model, corner_data, min_px=dist.max() + 1, ratio=1.0)
+    for kw in ({"consistency_px": 0.0}, {"consistency_px": np.nan}, {"consistency_ratio": 0.5}):
+        with pytest.raises(InputError, match="consistency"):
+            calibrate(model, corner_data, **kw)
+    # the CLI passes its flags through (the example passes the defaults: test_calibrate_example_and_report)
+    out = str(example.parent / "out")
+    assert main(["humanoid", "calibrate", str(example), "--consistency-px", "1", "--consistency-ratio", "1",
+                 "--out", out]) == 2
+    assert "expected < " in capsys.readouterr().err
+    # the mislabelled foot (250+ px) passes a threshold set beyond it (and is then only a warning)
+    _edit(example, lambda d: d["feet"].__setitem__(4, "left" if d["feet"][4] == "right" else "right"))
+    m, data, _ = load_dataset(example)
+    cal = calibrate(m, data, consistency_px=1000.0)
+    assert any(w.code == "inconsistent_data" for w in cal.warnings)
+    # the CLI's defaults are the library's
+    import argparse
+
+    parser = argparse.ArgumentParser()
+    RIG.add_commands(parser)
+    args = parser.parse_args(["calibrate", "x.yaml"])
+    assert (args.consistency_px, args.consistency_ratio) == (NOMINAL_MIN_PX, NOMINAL_RATIO)
+
+
 def test_swapped_joint_records_are_refused(example):
     # before: exit 0 with LKneePitch -160.7 deg (outside its own limits)
     _edit(example, lambda d: d["joints"]["records"].__setitem__(slice(0, 2), d["joints"]["records"][1::-1]))

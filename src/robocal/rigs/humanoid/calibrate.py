@@ -8,13 +8,14 @@ differences. The result carries the residual RMS in x and y, per-view
 residuals, > 3 sigma outliers by view and corner, and the identifiability
 analysis of the shared estimation layer: rank, condition number, standard
 deviations, strongest correlations, and no value for a parameter the data do
-not determine.
+not determine. Optionally (``reject_outliers``) the named corners are removed
+and the problem re-solved once.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -105,25 +106,30 @@ def noise_weights(model: HumanoidModel, data: HumanoidDataset, x, *, corner_sigm
     return np.linalg.inv(L), S
 
 
-def corner_noise(model: HumanoidModel, data: HumanoidDataset, x) -> float:
+def corner_noise(model: HumanoidModel, data: HumanoidDataset, x, keep=None) -> float:
     """Corner noise [px] from the residual part no joint-reading error can explain.
 
     Per view, the residual is projected onto the orthogonal complement of the
     columns of ``d uv / d theta``; ``sigma^2 = sum ||P r||^2 / sum (2N - rank)``.
+    ``keep`` (V, N) bool, optional: only these corners count (rejected outliers left out).
     """
     V, N = data.corners.shape[:2]
     n = len(model.joint_names)
     uv, J = model.project(data.theta, data.feet, x, jacobian=True, check=False)
     r = (uv - data.corners).reshape(V, 2 * N)
     Jt = J[..., :n].reshape(V, 2 * N, n)
+    rows = np.ones((V, 2 * N), bool) if keep is None else np.repeat(np.asarray(keep, bool), 2, axis=1)
     ss, dof = 0.0, 0
     for v in range(V):
-        U, sv, _ = np.linalg.svd(Jt[v], full_matrices=False)
+        if not rows[v].any():
+            continue
+        U, sv, _ = np.linalg.svd(Jt[v][rows[v]], full_matrices=False)
         k = int(np.sum(sv > 1e-9 * max(sv.max(), 1e-300)))
         Uk = U[:, :k]
-        e = r[v] - Uk @ (Uk.T @ r[v])
+        rv = r[v][rows[v]]
+        e = rv - Uk @ (Uk.T @ rv)
         ss += float(e @ e)
-        dof += 2 * N - k
+        dof += int(rows[v].sum()) - k
     return float(np.sqrt(ss / max(dof, 1)))
 
 
@@ -151,15 +157,19 @@ def choose_gauge(pre) -> list[str]:
 
 def build_problem(model: HumanoidModel, data: HumanoidDataset, free: Sequence[str], *, tie: bool = False,
                   x0=None, analytic: bool = True, corner_sigma: float = 0.3,
-                  joint_sigma: float = 0.0) -> tuple[Problem, np.ndarray]:
+                  joint_sigma: float = 0.0, keep=None) -> tuple[Problem, np.ndarray]:
     """The least-squares problem over one block ``p`` (all parameters, unselected ones fixed at ``x0``).
 
     Residuals: ``uv_pred - uv_meas`` [px] of each view, whitened by
     :func:`noise_weights` (so they are in units of the assumed noise; with
     ``joint_sigma = 0`` simply divided by ``corner_sigma``), shape
     ``(V, 2N)``: one observation per view. ``tie`` ties the RHipYawPitch offset to
-    LHipYawPitch (one motor) when the tree does not already do so. Returns the
-    problem and the per-view noise covariances (V, 2N, 2N) [px^2].
+    LHipYawPitch (one motor) when the tree does not already do so. ``keep`` (V, N)
+    bool, optional: corners to use; a view's kept corners are whitened by the
+    inverse Cholesky factor of their own sub-block of ``Sigma_v`` (the marginal of
+    the noise model), the rows of the left-out corners are zero (so ``m`` counts
+    them: see :func:`_exclude_zero_rows`). Returns the problem and the per-view noise
+    covariances (V, 2N, 2N) [px^2] of all corners.
     """
     labels = model.parameter_labels()
     x0 = np.zeros(len(labels)) if x0 is None else np.asarray(x0, dtype=float)
@@ -167,6 +177,13 @@ def build_problem(model: HumanoidModel, data: HumanoidDataset, free: Sequence[st
     theta, feet, meas = data.theta, np.asarray(data.feet), data.corners
     V, N = meas.shape[:2]
     W, S = noise_weights(model, data, x0, corner_sigma=corner_sigma, joint_sigma=joint_sigma)
+    if keep is not None:
+        rows = np.repeat(np.asarray(keep, bool), 2, axis=1)
+        W = np.zeros_like(W)
+        for v in range(V):
+            K = np.flatnonzero(rows[v])
+            if K.size:
+                W[v][np.ix_(np.arange(K.size), K)] = np.linalg.inv(np.linalg.cholesky(S[v][np.ix_(K, K)]))
 
     def fun(p):
         r = (model.project(theta, feet, p["p"], check=False) - meas).reshape(V, 2 * N)
@@ -221,6 +238,13 @@ class HumanoidCalibration:
         of free parameters (tied ones counted once), before the gauge is held.
     two_pass : bool
         True when the corner noise was measured and a second LM pass run (``lsq`` is that pass).
+    keep : ndarray of bool, shape (V, N), or None
+        Corners used in the final solve (None: all; see ``calibrate(reject_outliers=True)``).
+        ``residuals`` covers every corner; RMS values are over the kept ones.
+    rejected_corners : list of (str, int)
+        ``(view name, corner index)`` removed as outliers before the re-solve.
+    rejected_views : list of str
+        Views removed whole (too many of their corners flagged).
     """
 
     model: HumanoidModel
@@ -243,6 +267,9 @@ class HumanoidCalibration:
     rank: int | None = None
     n_params: int | None = None
     two_pass: bool = False
+    keep: np.ndarray | None = None
+    rejected_corners: list = field(default_factory=list)
+    rejected_views: list = field(default_factory=list)
 
     # -- queries -----------------------------------------------------------------------------
     @property
@@ -283,8 +310,13 @@ class HumanoidCalibration:
 
     @property
     def rms_xy(self) -> np.ndarray:
-        """RMS of the residuals in x and y [px]."""
-        return np.sqrt(np.mean(self.residuals ** 2, axis=(0, 1)))
+        """RMS of the residuals in x and y [px] (over the kept corners)."""
+        return np.sqrt(np.mean(self.used_residuals ** 2, axis=0))
+
+    @property
+    def used_residuals(self) -> np.ndarray:
+        """Residuals (K, 2) [px] of the corners used in the final solve."""
+        return self.residuals.reshape(-1, 2) if self.keep is None else self.residuals[self.keep]
 
     def offsets_table(self) -> list[dict]:
         """Per-joint offset table (deg), the form a robot framework loads."""
@@ -311,9 +343,82 @@ class HumanoidCalibration:
         """
         return self.model.corrected_tree(self.params).fold_offsets()
 
-    def write_urdf(self, path) -> str:
-        """Write the corrected URDF (use it with the raw sensor angles)."""
-        return self.corrected_tree().to_urdf(path)
+    def limit_shifts(self) -> dict:
+        """``{joint: c}`` [rad]: the offset folded into each movable joint's origin (a mimic joint's own
+        plus ``multiplier`` times its leader's, as :meth:`KinematicTree.fold_offsets`). The corrected
+        URDF's variable is the sensor angle ``theta = q - c``, so its limits are the model's minus ``c``."""
+        tree = self.model.corrected_tree(self.params)
+        out = {}
+        for j in tree.joints:
+            if j.movable:
+                lead = j.mimic.multiplier * tree.joint(j.mimic.joint).offset if j.mimic else 0.0
+                out[j.name] = j.offset + lead
+        return out
+
+    def urdf_text(self, *, inputs: dict | None = None, created: str | None = None) -> str:
+        """The corrected URDF: offsets and camera correction folded into the joint origins, each joint's
+        ``<limit>`` shifted by ``-c`` (:meth:`limit_shifts`) so the physical range ``q = theta + c``
+        stays the model's, and a provenance comment before ``<robot>`` (robocal version, UTC date,
+        inputs ``{path: sha256}`` as ``hash_inputs`` gives them, offsets and camera correction applied).
+
+        ``urdf_from_tree`` writes the limits of the tree unchanged and no comment, so both are added
+        here on its text."""
+        import datetime as _dt
+        import xml.etree.ElementTree as ET
+
+        from robocal import __version__
+
+        text = self.corrected_tree().to_urdf()
+        decl, body = text.split("\n", 1) if text.startswith("<?xml") else ('<?xml version="1.0"?>', text)
+        root = ET.fromstring(body)
+        shifts = self.limit_shifts()
+        joints = {j.name: j for j in self.model.tree.joints}  # mimic joints included
+        for elem in root.findall("joint"):
+            name, lim = elem.get("name"), elem.find("limit")
+            j = joints.get(name)
+            if lim is None or name not in shifts or j is None or j.limits is None:
+                continue
+            lim.set("lower", repr(float(j.limits[0] - shifts[name])))
+            lim.set("upper", repr(float(j.limits[1] - shifts[name])))
+        ET.indent(root)
+        created = created or _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat().replace(
+            "+00:00", "Z")
+        lines = [f"Calibrated by robocal {__version__} (rig humanoid, seed 001 method) on {created}."]
+        inputs = dict(inputs or {})
+        if inputs:
+            first = next(iter(inputs))
+            lines.append(f"input: {first} sha256 {inputs[first]}")
+            more = [k for k in inputs if k != first]
+            urdfs = [k for k in more if str(k).lower().endswith(".urdf")]
+            lines += [f"input: {k} sha256 {inputs[k]}" for k in urdfs]
+            if len(more) > len(urdfs):
+                lines.append(f"and {len(more) - len(urdfs)} image file(s), hashes in result.json")
+        else:
+            lines.append(f"input: data set in memory ({self.data.n_views} views), no file")
+        lines.append("Joint variables are the raw sensor angles theta: the origins carry q = theta + c and each "
+                     "<limit> is the model's minus c (same physical range).")
+        lines.append("c applied [deg] (std null: not determined by the data, the gauge's solution; no std: not "
+                     "calibrated):")
+        for lab, c in shifts.items():
+            sd = self.std(lab) if lab in self.free else None
+            lines.append(f"  {lab} {np.degrees(c):+.6f}" + ("" if lab not in self.free else
+                                                             " (std null)" if sd is None else
+                                                             f" (std {np.degrees(sd):.6f})"))
+        n = len(self.model.joint_names)
+        cam = self.params[n:n + 5]
+        lines.append(f"camera correction in {self.model.camera_link} (Trans(x, y, 0) Rz(yaw) Ry(pitch) Rx(roll)): "
+                     f"roll {np.degrees(cam[0]):+.4f} deg, pitch {np.degrees(cam[1]):+.4f} deg, yaw "
+                     f"{np.degrees(cam[2]):+.4f} deg, x {cam[3] * 1e3:+.3f} mm, y {cam[4] * 1e3:+.3f} mm")
+        comment = "\n     ".join(ln.replace("--", "- -") for ln in lines)
+        return f"{decl}\n<!-- {comment}\n-->\n" + ET.tostring(root, encoding="unicode") + "\n"
+
+    def write_urdf(self, path, *, inputs: dict | None = None) -> str:
+        """Write the corrected URDF (use it with the raw sensor angles): :meth:`urdf_text`, atomically."""
+        from robocal.io import atomic_write_text
+
+        text = self.urdf_text(inputs=inputs)
+        atomic_write_text(path, text)
+        return text
 
     def parameter_rows(self, truth=None) -> list[dict]:
         """Table of every free parameter: value and std in deg/mm, optional truth and error in sigmas."""
@@ -365,6 +470,11 @@ class HumanoidCalibration:
             "views": [{"name": nm, "foot": f, "rms_px": float(r)}
                       for nm, f, r in zip(self.data.names, self.data.feet, self.view_rms)],
             "outlier_corners": [[v, c] for v, c in self.outlier_corners],
+            # --reject-outliers: corners removed before the re-solve, by view name and corner index
+            # (the board's object-point order, row by row), and views removed whole
+            "rejected_corners": [[v, c] for v, c in self.rejected_corners],
+            "rejected_views": list(self.rejected_views),
+            "n_corners_used": int(self.used_residuals.shape[0]),
             "n_views": self.data.n_views,
             "n_corners": int(self.residuals.shape[0] * self.residuals.shape[1]),
             "joint_offsets_deg": {r["joint"]: r["offset [deg]"] for r in self.offsets_table() if r["estimated"]},
@@ -388,7 +498,8 @@ class HumanoidCalibration:
         if command is not None:
             kw["command"] = command
         return CalibrationResult(rig="humanoid", method=f"lm ({lsq.jac_method} Jacobian)", estimate=estimate,
-                                 std=std, units=units, residual_rms=float(np.sqrt(np.mean(self.residuals ** 2))), residual_unit="px",
+                                 std=std, units=units, residual_unit="px",
+                                 residual_rms=float(np.sqrt(np.mean(self.used_residuals ** 2))),
                                  warnings=list(self.warnings), inputs=inputs or {}, diagnostics=diag, **kw)
 
     def summary(self) -> str:
@@ -399,6 +510,8 @@ class HumanoidCalibration:
                  + (f" + {lsq.iterations} with the measured corner noise" if self.two_pass else "")
                  + f"; residual RMS x {self.rms_xy[0]:.3f} px, y {self.rms_xy[1]:.3f} px",
                  self.rank_text()]
+        if self.keep is not None:
+            lines.insert(1, "outliers rejected and re-solved once: " + self.rejection_text())
         for r in self.parameter_rows():
             val = "not identifiable" if r["value"] is None else f"{r['value']:+.4f} +- {r['std']:.4f} {r['unit']}"
             lines.append(f"  {r['parameter']:<18s} {val}")
@@ -406,6 +519,18 @@ class HumanoidCalibration:
             lines.append("strongest correlations: " + ", ".join(f"{a}/{b} {c:+.2f}"
                                                                  for a, b, c in self.correlations[:5]))
         return "\n".join(lines)
+
+    def rejection_text(self) -> str:
+        """What ``reject_outliers`` removed: corners by view, whole views ('' when nothing)."""
+        if self.keep is None:
+            return ""
+        by_view: dict[str, list[int]] = {}
+        for nm, c in self.rejected_corners:
+            by_view.setdefault(nm, []).append(c)
+        parts = [f"{nm} corners {cs}" for nm, cs in by_view.items()]
+        if self.rejected_views:
+            parts.append(f"whole views {self.rejected_views}")
+        return f"{int((~self.keep).sum())} corner(s) removed: " + "; ".join(parts)
 
     def rank_text(self) -> str:
         """'Jacobian rank r of n free parameters ...', with the undetermined ones and the gauge."""
@@ -418,8 +543,10 @@ class HumanoidCalibration:
             (f" (of the {len(self.lsq.free_labels)} solved)" if r < n else "")
 
 
-#: A view is refused when its corners lie further than this from the nominal prediction [px]
-#: and :data:`NOMINAL_RATIO` times the median view's distance. Offsets of 0.5 deg (the simulator's
+#: Defaults of ``check_views_consistent(min_px=, ratio=)`` (``calibrate(consistency_px=,
+#: consistency_ratio=)``, CLI ``--consistency-px``, ``--consistency-ratio``): a view is refused when its
+#: corners lie further than this from the nominal prediction [px] and :data:`NOMINAL_RATIO` times the
+#: median view's distance. Offsets of 0.5 deg (the simulator's
 #: scale) put corners up to 28 px from it, 2 deg up to 110 px; a mislabelled foot 250 px, two
 #: swapped joint records 136 px (measured, 20 x 16 simulated views).
 NOMINAL_MIN_PX = 60.0
@@ -429,21 +556,25 @@ NOMINAL_RATIO = 4.0
 PLAUSIBLE_OFFSET = np.radians(5.0)
 
 
-def check_views_consistent(model: HumanoidModel, data: HumanoidDataset, x0=None) -> np.ndarray:
+def check_views_consistent(model: HumanoidModel, data: HumanoidDataset, x0=None, *,
+                           min_px: float = NOMINAL_MIN_PX, ratio: float = NOMINAL_RATIO) -> np.ndarray:
     """Refuse views whose joint record or foot label does not match the image.
 
     For each view, the median distance [px] between the detected corners and the corners the
     model predicts from the joint readings at ``x0`` (default zero offsets, seed 001 eq. 5) is
-    compared with ``max(NOMINAL_MIN_PX, NOMINAL_RATIO * median over views)``: offsets move every
-    view's corners alike, a wrong record or foot moves one view's. Raises
-    :class:`InconsistentDataError` naming the first such view; returns the distances (V,) [px].
+    compared with ``max(min_px, ratio * median over views)`` (defaults 60 px and 4,
+    :data:`NOMINAL_MIN_PX`, :data:`NOMINAL_RATIO`): offsets move every view's corners alike, a
+    wrong record or foot moves one view's. Raise ``min_px`` for a robot whose offsets are larger
+    than ~1 deg (2 deg put corners up to 110 px off, still under ``ratio`` times the median view).
+    Raises :class:`InconsistentDataError` naming the first such view; returns the distances (V,) [px].
     """
+    _check_consistency_thresholds(min_px, ratio)
     x0 = np.zeros(len(model.parameter_labels())) if x0 is None else np.asarray(x0, dtype=float)
     pred = model.project(data.theta, data.feet, x0, check=False)
     dist = np.median(np.linalg.norm(pred - data.corners, axis=-1), axis=1)
     dist = np.where(np.isfinite(dist), dist, np.inf)  # board behind the camera: as far as can be
     typical = float(np.median(dist))
-    tol = max(NOMINAL_MIN_PX, NOMINAL_RATIO * typical)
+    tol = max(float(min_px), float(ratio) * typical)
     bad = np.flatnonzero(dist > tol)
     if bad.size:
         v = int(bad[np.argmax(dist[bad])])
@@ -453,6 +584,14 @@ def check_views_consistent(model: HumanoidModel, data: HumanoidDataset, x0=None)
             f"{typical:.0f} px): the joint record or the foot label does not match the image"
             + (f" ({bad.size} such views: {[data.names[i] for i in bad]})" if bad.size > 1 else ""))
     return dist
+
+
+def _check_consistency_thresholds(min_px, ratio) -> None:
+    if not (np.isfinite(min_px) and min_px > 0):
+        raise InputError(f"consistency threshold min_px (--consistency-px) must be a finite number > 0 px, "
+                         f"got {min_px}")
+    if not (np.isfinite(ratio) and ratio >= 1):
+        raise InputError(f"consistency ratio (--consistency-ratio) must be a finite number >= 1, got {ratio}")
 
 
 def plausibility_warnings(model: HumanoidModel, free, params, view_rms, names,
@@ -471,8 +610,8 @@ def plausibility_warnings(model: HumanoidModel, free, params, view_rms, names,
                               "records, foot labels and model".format(
                                   np.degrees(PLAUSIBLE_OFFSET), ", ".join(f"{a} {b:+.1f} deg" for a, b in big)),
                               params=tuple(a for a, _ in big)))
-    med = float(np.median(view_rms))
-    far = [i for i, r in enumerate(view_rms) if r > max(1.0, 10 * med)]
+    med = float(np.nanmedian(view_rms))  # NaN: a view removed by reject_outliers
+    far = [i for i, r in enumerate(view_rms) if np.isfinite(r) and r > max(1.0, 10 * med)]
     if far:
         out.append(Diagnostic("inconsistent_data", f"view(s) fit far worse than the rest (RMS > 10x the median "
                               f"{med:.2f} px): " + ", ".join(f"{names[i]} {view_rms[i]:.1f} px" for i in far)
@@ -487,7 +626,9 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
               tie: bool = False, jac: str = "analytic", method: str = "lm", x0=None,
               corner_sigma: float | None = None, joint_resolution: float = JOINT_RESOLUTION,
               outlier_sigma: float = 3.0, progress: bool = False,
-              check_consistency: bool = True) -> HumanoidCalibration:
+              check_consistency: bool = True, consistency_px: float = NOMINAL_MIN_PX,
+              consistency_ratio: float = NOMINAL_RATIO, reject_outliers: bool = False,
+              max_rejected_fraction: float = 0.25) -> HumanoidCalibration:
     """Estimate the selected offsets from the corners of every complete view.
 
     Parameters
@@ -518,11 +659,23 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
     outlier_sigma : float
         Corners whose residual exceeds this many sigma (chi-square(2) test on
         the 2x2 noise block, scaled by the residual variance) are named.
+    reject_outliers : bool
+        Remove the corners named as outliers (``outlier_sigma``) and re-solve once from the
+        solution, with the noise model marginalised to the kept corners (:func:`build_problem`
+        ``keep``) and, when ``corner_sigma`` is measured, the corner noise re-measured without them.
+        What was removed is reported (``rejected_corners``, ``rejected_views``, a ``low_quality``
+        warning); corners still beyond ``outlier_sigma`` afterwards are named, not removed.
+    max_rejected_fraction : float
+        With ``reject_outliers``, a view with more than this fraction of its corners flagged is
+        removed whole (its detection or joint record, not single corners, is then suspect).
     check_consistency : bool
         Refuse views whose corners are far from where the joint record and
         foot label put them (:func:`check_views_consistent`), and warn
         (``inconsistent_data``) about implausible offsets after the solve
         (:func:`plausibility_warnings`).
+    consistency_px, consistency_ratio : float
+        The thresholds of that check [px, -]: a view is refused beyond
+        ``max(consistency_px, consistency_ratio * median view)`` (defaults 60 px, 4).
 
     Returns
     -------
@@ -532,6 +685,9 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
         raise InputError(f"corner_sigma must be a finite number > 0 px, got {corner_sigma}")
     if not (np.isfinite(joint_resolution) and joint_resolution >= 0):
         raise InputError(f"joint_resolution must be a finite number >= 0 rad, got {joint_resolution}")
+    _check_consistency_thresholds(consistency_px, consistency_ratio)
+    if not (0.0 <= max_rejected_fraction <= 1.0):
+        raise InputError(f"max_rejected_fraction must be within [0, 1], got {max_rejected_fraction}")
     free = resolve_parameters(model, parameters)
     messages = list(data.messages)
     ok = _valid_views(data)
@@ -548,7 +704,7 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
     if n_res < len(free):
         raise NotEnoughDataError(f"{n_res} residuals for {len(free)} parameters")
     if check_consistency:
-        check_views_consistent(model, used, x0)
+        check_views_consistent(model, used, x0, min_px=consistency_px, ratio=consistency_ratio)
     joint_sigma = joint_resolution / np.sqrt(12.0)
     sig = 0.3 if corner_sigma is None else float(corner_sigma)
     prob, S = build_problem(model, used, free, tie=tie, x0=x0, analytic=True,
@@ -599,36 +755,113 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
         two_pass = True
     params = res.params["p"].reshape(-1)
     V, N = used.corners.shape[:2]
-    resid = model.project(used.theta, used.feet, params, check=False) - used.corners
-    view_rms = np.sqrt(np.mean(resid ** 2, axis=(1, 2)))
-    # outliers on the raw corner residuals, each against its own 2x2 noise block
-    idx = np.arange(N)
-    blocks = np.stack([np.stack([S[:, 2 * idx, 2 * idx], S[:, 2 * idx, 2 * idx + 1]], -1),
-                       np.stack([S[:, 2 * idx + 1, 2 * idx], S[:, 2 * idx + 1, 2 * idx + 1]], -1)], -2)
-    score = np.einsum("vni,vnij,vnj->vn", resid, np.linalg.inv(blocks), resid) / res.residual_variance
-    thr = outlier_threshold(outlier_sigma, 2)
-    flat = np.flatnonzero(score.reshape(-1) > thr)
+    resid, view_rms, score, flat = _corner_stats(model, used, params, S, res.residual_variance, outlier_sigma)
+    keep, rejected, rejected_views = None, [], []
+    outlier_warning = None
+    if reject_outliers and flat.size:
+        # Drop the flagged corners (a view that loses more than max_rejected_fraction of its corners as
+        # a whole: so many bad corners say its detection or joint record is wrong) and re-solve once, from
+        # the solution, with the noise model of the kept corners.
+        keep = np.ones((V, N), bool)
+        keep.reshape(-1)[flat] = False
+        lost = (~keep).sum(axis=1)
+        whole = np.flatnonzero(lost > max_rejected_fraction * N)
+        rejected = [(used.names[int(i) // N], int(i) % N) for i in flat if int(i) // N not in whole]
+        rejected_views = [used.names[v] for v in whole]
+        keep[whole] = False
+        gone = [f for f in FEET if any(lab.startswith(f"board.{f}.") for lab in free)
+                and not keep[[i for i, ft in enumerate(used.feet) if ft == f]].any()]
+        if gone or keep.sum() * 2 < len(free):
+            raise NotEnoughDataError(f"--reject-outliers: removing the outlier corners ({len(flat)}) leaves "
+                                     + (f"no view of the {gone[0]} board" if gone else "too few corners")
+                                     + "; check the data or calibrate without rejection")
+        first_outliers = [(used.names[int(i) // N], int(i) % N) for i in flat]
+        outlier_warning = _outlier_diagnostic(first_outliers, flat, outlier_sigma, V * N,
+                                              " (before rejection)")
+        if corner_sigma is None and joint_sigma > 0:
+            sig = corner_noise(model, used, params, keep)
+        prob, S = build_problem(model, used, free, tie=tie, x0=params, analytic=(jac == "analytic"),
+                                corner_sigma=sig, joint_sigma=joint_sigma, keep=keep)
+        res = solve(prob, method=method, jac=None if jac == "analytic" else jac, progress=progress,
+                    outlier_sigma=outlier_sigma)
+        res = _exclude_zero_rows(res, 2 * int((~keep).sum()))
+        params = res.params["p"].reshape(-1)
+        resid, view_rms, score, flat = _corner_stats(model, used, params, S, res.residual_variance,
+                                                     outlier_sigma, keep)
     outliers = [(used.names[int(i) // N], int(i) % N) for i in flat]
     warnings = [w for w in res.warnings if w.code != "outliers"]
     if warn_held is not None:
         warnings.insert(0, warn_held)
-    if outliers:
+    if outlier_warning is not None:
+        warnings.append(outlier_warning)
         by_view: dict[str, list[int]] = {}
-        for nm, c in outliers:
+        for nm, c in rejected:
             by_view.setdefault(nm, []).append(c)
         text = "; ".join(f"{nm}: corners {cs}" for nm, cs in by_view.items())
-        warnings.append(Diagnostic("outliers", f"{len(outliers)} corner residuals beyond {outlier_sigma:g} "
-                                               f"sigma ({100 * len(outliers) / (V * N):.1f} %): {text}",
-                                   indices=tuple(int(i) for i in flat)))
+        if rejected_views:
+            text += ("; " if text else "") + f"whole view(s) {rejected_views} (more than " \
+                    f"{100 * max_rejected_fraction:.0f} % of their corners beyond {outlier_sigma:g} sigma)"
+        warnings.append(Diagnostic("low_quality", f"--reject-outliers: removed {int((~keep).sum())} corner(s) "
+                                                  f"and re-solved once: {text}",
+                                   indices=tuple(int(i) for i in np.flatnonzero(~keep.reshape(-1)))))
+    if outliers:
+        warnings.append(_outlier_diagnostic(outliers, flat, outlier_sigma, V * N,
+                                            " (after rejection, kept)" if keep is not None else ""))
     dropped = [i for i, good in enumerate(ok) if not good]
     if dropped:
         warnings.append(Diagnostic("dropped", f"{len(dropped)} view(s) without a fully and correctly detected "
                                               f"board were dropped: {[data.names[i] for i in dropped]}",
                                    indices=tuple(dropped)))
     if check_consistency:
-        warnings += plausibility_warnings(model, free, params, view_rms, used.names, res.residual_variance)
+        vr = view_rms if keep is None else np.where(keep.any(axis=1), view_rms, np.nan)
+        warnings += plausibility_warnings(model, free, params, vr, used.names, res.residual_variance)
     selected = [lab for lab in model.parameter_labels() if lab in free or lab in gauge]
     return HumanoidCalibration(model, used, res, params, selected, resid, view_rms, outliers, messages,
                                warnings, score, sig, joint_resolution, first_iterations, list(gauge),
                                first_history, undetermined=undetermined, rank=pre.rank,
-                               n_params=len(pre.labels), two_pass=two_pass)
+                               n_params=len(pre.labels), two_pass=two_pass, keep=keep,
+                               rejected_corners=rejected, rejected_views=rejected_views)
+
+
+def _corner_stats(model, data, params, S, residual_variance, outlier_sigma, keep=None):
+    """Residuals (V, N, 2) [px], per-view RMS (V,) over the kept corners, outlier scores (V, N) and the
+    flat indices of the kept corners beyond ``outlier_sigma``: each corner's raw residual against its
+    own 2x2 noise block (chi-square(2)), scaled by the residual variance."""
+    V, N = data.corners.shape[:2]
+    resid = model.project(data.theta, data.feet, params, check=False) - data.corners
+    k = np.ones((V, N), bool) if keep is None else keep
+    with np.errstate(invalid="ignore"):
+        sq = np.sum(resid ** 2, axis=2)
+        view_rms = np.sqrt(np.where(k.any(1), np.sum(sq * k, 1) / np.maximum(k.sum(1), 1) / 2,
+                                    np.mean(sq, 1) / 2))
+    idx = np.arange(N)
+    blocks = np.stack([np.stack([S[:, 2 * idx, 2 * idx], S[:, 2 * idx, 2 * idx + 1]], -1),
+                       np.stack([S[:, 2 * idx + 1, 2 * idx], S[:, 2 * idx + 1, 2 * idx + 1]], -1)], -2)
+    score = np.einsum("vni,vnij,vnj->vn", resid, np.linalg.inv(blocks), resid) / residual_variance
+    thr = outlier_threshold(outlier_sigma, 2)
+    flat = np.flatnonzero((score > thr).reshape(-1) & k.reshape(-1))
+    return resid, view_rms, score, flat
+
+
+def _outlier_diagnostic(outliers, flat, outlier_sigma, n_corners, note="") -> Diagnostic:
+    by_view: dict[str, list[int]] = {}
+    for nm, c in outliers:
+        by_view.setdefault(nm, []).append(c)
+    text = "; ".join(f"{nm}: corners {cs}" for nm, cs in by_view.items())
+    return Diagnostic("outliers", f"{len(outliers)} corner residuals beyond {outlier_sigma:g} sigma"
+                                  f"{note} ({100 * len(outliers) / n_corners:.1f} %): {text}",
+                      indices=tuple(int(i) for i in flat))
+
+
+def _exclude_zero_rows(res: LSQResult, n_zero: int) -> LSQResult:
+    """Correct the residual variance (and so the covariance) for ``n_zero`` residual rows that are
+    identically zero (left-out corners, :func:`build_problem` ``keep``): the solver's
+    ``s^2 = sum r^2 / (m - rank)`` counts them in ``m``."""
+    if n_zero <= 0 or not np.isfinite(res.residual_variance):
+        return res
+    dof = res.dof - n_zero
+    if dof <= 0:
+        raise NotEnoughDataError(f"{res.dof + res.rank - n_zero} residuals left for {res.rank} parameters")
+    k = res.dof / dof
+    std = {lab: (None if v is None else v * np.sqrt(k)) for lab, v in res.std.items()}
+    return replace(res, residual_variance=res.residual_variance * k, cov=res.cov * k, std=std, dof=dof)

@@ -63,6 +63,15 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--fd", action="store_true", help="finite-difference Jacobian instead of the analytic one")
     p.add_argument("--corner-sigma", type=float, default=None,
                    help="corner noise [px] (default: measured from the data)")
+    p.add_argument("--reject-outliers", action="store_true",
+                   help="remove the corners beyond 3 sigma (a view with > 25 %% of its corners flagged: the "
+                        "whole view) and re-solve once; what was removed is listed in result.json and the report")
+    p.add_argument("--consistency-px", type=float, default=60.0,
+                   help="refuse a view whose corners lie further [px, median] from where its joint record and "
+                        "foot label put them than max(this, --consistency-ratio x the median view's); raise it "
+                        "for a robot with offsets beyond ~1 deg")
+    p.add_argument("--consistency-ratio", type=float, default=4.0,
+                   help="see --consistency-px")
     add_out_argument(p)
     p.set_defaults(func=_cmd_calibrate)
 
@@ -156,7 +165,9 @@ def _cmd_calibrate(args) -> int:
     for m in data.messages:
         print(m, file=sys.stderr)
     cal = calibrate(model, data, parameters=args.params, tie=args.tie, jac="2-point" if args.fd else "analytic",
-                    corner_sigma=args.corner_sigma, joint_resolution=info["joint_resolution"])
+                    corner_sigma=args.corner_sigma, joint_resolution=info["joint_resolution"],
+                    reject_outliers=args.reject_outliers, consistency_px=args.consistency_px,
+                    consistency_ratio=args.consistency_ratio)
     out = prepare_out_dir(args.out, "humanoid-calibrate")
     write_outputs(cal, out, inputs=info["inputs"], truth=_truth_of(args.input, model))
     print(cal.summary())

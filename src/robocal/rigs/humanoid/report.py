@@ -4,7 +4,8 @@
 * ``offsets.yaml`` -- per-joint offset table (deg and rad) and the camera
   mounting correction, the form a robot framework loads;
 * ``<robot>_calibrated.urdf`` -- the URDF with the offsets and the camera
-  correction folded into the joint origins (use it with raw sensor angles);
+  correction folded into the joint origins, limits shifted by the offsets (use
+  it with raw sensor angles), and a provenance comment;
 * ``report.html`` -- reprojection overlays of a few views, residual
   histograms, per-view RMS, parameter table with uncertainties, the
   identifiability analysis and every warning.
@@ -171,7 +172,13 @@ def build_report(cal: HumanoidCalibration, *, title: str = "NAO leg and camera c
         {"quantity": "Jacobian rank", "value": "{} of {}".format(*cal.jacobian_rank)},
         {"quantity": "condition number (scaled)", "value": float(lsq.condition_number)},
         {"quantity": "outlier corners (> 3 sigma)", "value": len(cal.outlier_corners)},
+        {"quantity": "corners removed (--reject-outliers)",
+         "value": "—" if cal.keep is None else int((~cal.keep).sum())},
     ])
+    if cal.keep is not None:
+        s.text("Outliers rejected and the calibration re-solved once without them: " + cal.rejection_text()
+               + " (view name, corner index in the board's object-point order, row by row). RMS values and "
+               "histograms are over the corners used.", cls="warn")
     s.text("Standard deviations are sampling errors under the noise model (corner noise plus joint "
            "quantisation), scaled by the residual variance; they say nothing about model error.")
     s.diagnostics(cal.warnings)
@@ -194,7 +201,7 @@ def build_report(cal: HumanoidCalibration, *, title: str = "NAO leg and camera c
             caption="strongest correlations")
     r = rep.section("Residuals")
     fig, ax = new_figure(1, 2, size=(11, 3.6))
-    plot_residual_histograms(cal.residuals, ax=ax[0])
+    plot_residual_histograms(cal.used_residuals, ax=ax[0])
     plot_cost(lsq.cost_history, ax=ax[1], first=cal.first_cost_history)
     r.figure(fig, "corner residual histograms; cost per LM iterate")
     fig, ax = new_figure(size=(9, 3.2))
@@ -236,7 +243,17 @@ def report_from_result(result: CalibrationResult, *, title: str = "NAO leg and c
         {"quantity": "Jacobian rank", "value": f"{rank[0]} of {rank[1]}"},
         {"quantity": "condition number (scaled)", "value": d.get("condition_number")},
         {"quantity": "outlier corners (> 3 sigma)", "value": len(d.get("outlier_corners") or [])},
+        {"quantity": "corners removed (--reject-outliers)",
+         "value": len(d["rejected_corners"]) if d.get("rejected_corners") or d.get("rejected_views") else "—"},
     ])
+    if d.get("rejected_corners") or d.get("rejected_views"):
+        by_view: dict = {}
+        for v, c in d.get("rejected_corners") or []:
+            by_view.setdefault(v, []).append(c)
+        s.text("Outliers rejected and the calibration re-solved once without them: "
+               + "; ".join(f"{v} corners {cs}" for v, cs in by_view.items())
+               + (f"; whole views {d['rejected_views']}" if d.get("rejected_views") else "")
+               + " (view name, corner index in the board's object-point order, row by row).", cls="warn")
     s.diagnostics(result.warnings)
     for msg in d.get("messages") or []:
         s.text(msg, cls="warn")
@@ -270,7 +287,16 @@ def report_from_result(result: CalibrationResult, *, title: str = "NAO leg and c
     sec = rep.section("Residuals")
     if resid is not None and resid.size:
         fig, ax = new_figure(1, 2, size=(11, 3.6))
-        plot_residual_histograms(resid, ax=ax[0])
+        used = resid
+        if (d.get("rejected_corners") or d.get("rejected_views")) and views:
+            names = [v["name"] for v in views]
+            keep = np.ones(resid.shape[:2], bool)
+            for v, c in d.get("rejected_corners") or []:
+                keep[names.index(v), c] = False
+            for v in d.get("rejected_views") or []:
+                keep[names.index(v)] = False
+            used = resid[keep]
+        plot_residual_histograms(used, ax=ax[0])
         hist = d.get("cost_history") or []
         first = d.get("cost_history_first_pass")
         plot_cost(np.asarray(hist, float), ax=ax[1],
@@ -307,13 +333,14 @@ def write_outputs(cal: HumanoidCalibration, out_dir, *, inputs=(), command: str 
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    result = cal.to_result(inputs=hash_inputs(inputs), command=command)
+    hashes = hash_inputs(inputs)
+    result = cal.to_result(inputs=hashes, command=command)
     rep = report if report is not None else build_report(cal, truth=truth)
     paths = list(write_run(out_dir, result, rep, quiet=quiet))
     paths.append(atomic_write_text(out_dir / "offsets.yaml",
                                    yaml.safe_dump(offsets_document(cal), sort_keys=False, width=200)))
     urdf = out_dir / f"{cal.model.tree.name}_calibrated.urdf"
-    cal.write_urdf(urdf)
+    cal.write_urdf(urdf, inputs=hashes)
     paths.append(urdf)
     if not quiet:
         for p in paths[-2:]:
