@@ -72,9 +72,11 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
                        formatter_class=RawHelp,
                        epilog=examples_epilog(f"robocal projector path {EXAMPLES}/path_room.yaml --out path",
                                               f"robocal projector path {EXAMPLES}/path_timed.yaml --out path",
-                                              f"robocal projector path {EXAMPLES}/path_timed.yaml --retime --out path"))
+                                              f"robocal projector path {EXAMPLES}/path_timed.yaml --retime --out path",
+                                              f"robocal projector path {EXAMPLES}/path_nadir.yaml --out path"))
     p.add_argument("input", type=Path, help="path input (YAML/JSON)")
-    p.add_argument("--nadir-margin", type=float, default=2.0, help="keep this far from the nadir [deg]")
+    p.add_argument("--nadir-margin", type=float, default=2.0, help="keep this far from the nadir [deg]; with the "
+                   "projector's tilt_min < 0 a path may pass through it (constant pan, tilt through zero)")
     p.add_argument("--limit-margin", type=float, default=2.0, help="keep this far below the tilt limit [deg]")
     p.add_argument("--retime", action="store_true",
                    help="slow the spot down where the joint rate limits require it (instead of infeasible rows)")
@@ -188,6 +190,22 @@ def _safe(name: str) -> str:
     return "".join(c if c.isalnum() or c in "-_" else "_" for c in str(name)) or "projector"
 
 
+def _require_distinct_file_names(names, *, source: str) -> None:
+    """Raise InputError when two projector names give the same ``commands_<name>.csv``.
+
+    :func:`_safe` maps e.g. ``A/1`` and ``A 1`` both to ``A_1``; names differing only in case collide on
+    case-insensitive file systems. Either would silently overwrite one head's command stream with another's.
+    """
+    seen = {}
+    for n in names:
+        key = _safe(n).casefold()
+        if key in seen:
+            raise InputError(f"projectors[].name: {seen[key]!r} and {n!r} would both be written to "
+                             f"commands_{_safe(n)}.csv (names must differ in letters, digits, '-' or '_', "
+                             f"not only in case or other characters)", source=source)
+        seen[key] = n
+
+
 def _jsonable(d):
     from robocal.io import to_jsonable
 
@@ -200,6 +218,7 @@ def _cmd_path(args) -> int:
     from robocal.rigs.projector.workflow import path_report
 
     inp = load_path_input(args.input)
+    _require_distinct_file_names([q.name for q in inp.projectors], source=str(args.input))
     try:  # exit 2: a point no projector reaches is wrong input; exit 1 is kept for a plan that fails its checks
         require_reachable_path(inp.projectors, inp.t, inp.points)
     except RobocalError as exc:

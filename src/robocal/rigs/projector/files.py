@@ -12,6 +12,7 @@ Calibration input (``robocal projector calibrate INPUT``)::
       tilt_limit: 75                         # optional (angle)
       rate_limits: {value: [90, 90], unit: deg/s}   # optional
       pan_range: [-270, 270]                 # optional: unwrapped pan stops (angle); default endless
+      tilt_min: -75                          # optional: lowest tilt (angle, >= -tilt_limit); default 0
     points:
       world: [[0, 0], [60, 60], [0, 90]]     # ^W P_i, (N, 2) or (N, 3) with z = 0
       projector: [[240, -90, -290], ...]     # ^0 P_i (N, 3) -- or:
@@ -62,12 +63,18 @@ def projector_from_doc(doc: Document, *, extrinsics: bool = False) -> ProjectorM
         kw["rate_limits"] = tuple(doc.array("rate_limits", kind="angular_rate", shape=(2,)))
     if "pan_range" in doc:
         kw["pan_range"] = tuple(doc.array("pan_range", kind="angle", shape=(2,)))
+    if "tilt_min" in doc:
+        kw["tilt_min"] = doc.float("tilt_min", kind="angle")
     kw["name"] = str(doc.raw("name", "projector"))
     if extrinsics:
         both = [k for k in ("yaw", "R_0_W", "t_0_W") if k in doc]
-        if "result" in doc and both:
-            raise doc.error("result", f"give either 'result' or the extrinsics {both}, not both (which one counts?)")
+        if "result" in doc:
+            if both:
+                raise doc.error("result", f"give either 'result' or the extrinsics {both}, not both (which one "
+                                          f"counts?)")
             res = load_result(doc.path("result"))
+            if res.rig != "projector":
+                raise doc.error("result", f"result of rig {res.rig!r}, expected 'projector'")
             e = res.estimate
             try:
                 kw["R_0_W"] = np.asarray(e["R_0_W"], dtype=float)
@@ -104,6 +111,8 @@ def projector_to_yaml(m: ProjectorModel, *, extrinsics: bool = False) -> dict:
          "rate_limits": {"value": [float(np.degrees(r)) for r in m.rate_limits], "unit": "deg/s"}}
     if m.pan_range is not None:
         d["pan_range"] = {"value": [float(np.degrees(r)) for r in m.pan_range], "unit": "deg"}
+    if m.tilt_min != 0.0:
+        d["tilt_min"] = {"value": float(np.degrees(m.tilt_min)), "unit": "deg"}
     if extrinsics:
         d["yaw"] = {"value": float(np.degrees(math.atan2(m.R_0_W[1, 0], m.R_0_W[0, 0]))), "unit": "deg"}
         d["t_0_W"] = {"value": [float(v * 1e3) for v in m.t_0_W], "unit": "mm"}

@@ -118,6 +118,14 @@ class ProjectorModel:
         Mechanical range (rad) of the *unwrapped* pan command, e.g. ``(-3 pi/2,
         3 pi/2)`` for a head with a cable stop; None: endless pan. Used by path
         planning (a path circling the nadir winds the pan up).
+    tilt_min : float
+        Lowest *actual* tilt (rad, with its offset) the tilt joint reaches, in
+        ``[-tilt_limit, 0]``. 0 (default): the seed's eq. (8) branch only
+        (tilt >= 0). Negative: the other IK branch ``(theta1 + pi, -theta2)``
+        (same spot, seed eq. 6 is invariant under it) is usable where
+        ``-tilt_min`` allows; path planning uses it to follow a line through the
+        nadir with constant pan (the tilt goes through zero) instead of flipping
+        the pan by pi there.
 
     References
     ----------
@@ -134,9 +142,10 @@ class ProjectorModel:
     t_0_W: np.ndarray = field(default=None, repr=False)
     name: str = "projector"
     pan_range: tuple | None = None
+    tilt_min: float = 0.0
 
     def __post_init__(self):
-        for key in ("H", "d1", "d2", "tilt_limit"):
+        for key in ("H", "d1", "d2", "tilt_limit", "tilt_min"):
             v = float(check_array(getattr(self, key), f"projector.{key}"))
             object.__setattr__(self, key, v)
         if not self.H > 0:
@@ -146,6 +155,9 @@ class ProjectorModel:
                              f"H = {self.H:g} m, d1 = {self.d1:g} m")
         if not 0.0 < self.tilt_limit < math.pi / 2:
             raise InputError(f"projector.tilt_limit must be in (0, 90) deg, got {math.degrees(self.tilt_limit):g} deg")
+        if not -self.tilt_limit - 1e-12 <= self.tilt_min <= 0.0:
+            raise InputError(f"projector.tilt_min must be in [-tilt_limit, 0] = "
+                             f"[{-math.degrees(self.tilt_limit):g}, 0] deg, got {math.degrees(self.tilt_min):g} deg")
         off = check_array(self.offsets, "projector.offsets", shape=(2,))
         if off.ndim != 1:
             raise InputError(f"projector.offsets must have shape (2,), got {off.shape}")
@@ -503,5 +515,5 @@ class ProjectorModel:
         """SI values (m, rad) for result files."""
         return dict(name=self.name, H=self.H, d1=self.d1, d2=self.d2, offsets=list(self.offsets),
                     tilt_limit=self.tilt_limit, rate_limits=list(self.rate_limits),
-                    pan_range=None if self.pan_range is None else list(self.pan_range),
+                    pan_range=None if self.pan_range is None else list(self.pan_range), tilt_min=self.tilt_min,
                     R_0_W=self.R_0_W.tolist(), t_0_W=self.t_0_W.tolist())

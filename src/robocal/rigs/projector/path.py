@@ -7,7 +7,9 @@ sample is infeasible when the spot is outside the reachable floor, within
 ``nadir_margin`` of the nadir singularity (the pan rate is unbounded there),
 or when a joint would exceed its speed limit; infeasible samples are grouped
 into segments with their reason and the slow-down factor that would fix a
-speed violation.
+speed violation. A path through the nadir is followed on the other IK branch
+``(theta1 + pi, -theta2)`` (constant pan, the tilt through zero) when the
+model's ``tilt_min < 0`` allows negative tilt; see :func:`joint_trajectory`.
 
 With several projectors (the seed's room has A and B), every sample is served
 by a projector that reaches it, whose beam is not blocked by a wall (walls
@@ -25,10 +27,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from robocal.errors import InputError, NotEnoughDataError, ShapeError
-from robocal.rigs.projector.model import ProjectorModel, UnreachablePointError, wrap_angle
+from robocal.rigs.projector.model import NADIR_TOL, ProjectorModel, UnreachablePointError, wrap_angle
 from robocal.validation import check_array
 
-__all__ = ["sample_polyline", "JointTrajectory", "joint_trajectory", "segments_blocked", "MultiPlan",
+#: Distance (m) from the nadir within which a path sample is commanded onto the nadir (pan held).
+NADIR_SNAP = 1e-3
+
+__all__ = ["NADIR_SNAP", "sample_polyline", "JointTrajectory", "joint_trajectory", "segments_blocked", "MultiPlan",
            "plan_multi", "unreachable_samples", "require_reachable_path", "retime"]
 
 
@@ -144,14 +149,59 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1))
 
 
+def _turns(p0: np.ndarray, pan: np.ndarray):
+    """Per step ``i-1 -> i`` (value at ``i``; False/inf at 0): whether the eq. (8) pan turns by more than
+    pi/2, and the distance (m) of the step's chord from the nadir.
+
+    A turn with its chord within ``nadir_snap`` of the nadir is a *crossing*: eq. (8) flips the pan by
+    ~pi there and the continuous joint motion is the other branch ``(theta1 + pi, -theta2)``. A turn
+    farther out means the path is sampled too coarsely near the nadir to follow the pan between samples.
+    """
+    turn = np.zeros(len(pan), dtype=bool)
+    closest = np.full(len(pan), np.inf)
+    if len(pan) < 2:
+        return turn, closest
+    turn[1:] = np.abs(wrap_angle(np.diff(pan))) > math.pi / 2
+    q0, q1 = p0[:-1, :2], p0[1:, :2]
+    d = q1 - q0
+    dd = np.einsum("ij,ij->i", d, d)
+    u = np.clip(-np.einsum("ij,ij->i", q0, d) / np.where(dd > 0, dd, 1.0), 0.0, 1.0)
+    closest[1:] = np.hypot(*(q0 + u[:, None] * d).T)
+    return turn, closest
+
+
+def _fill_pan(pan: np.ndarray, defined: np.ndarray) -> np.ndarray:
+    """Eq. (8) pans (K,) with the undefined ones (spot on the nadir) held from the previous defined sample."""
+    if not np.any(defined) or np.all(defined):
+        return pan.copy()
+    idx = np.maximum.accumulate(np.where(defined, np.arange(len(pan)), -1))
+    idx[idx < 0] = int(np.flatnonzero(defined)[0])
+    return pan[idx]
+
+
+def _branch_theta(model: ProjectorModel, th0: np.ndarray, flips: np.ndarray, b0: int):
+    """Commanded angles (K, 2) and branch (K,) with the branch switched at ``flips``, starting on ``b0``.
+
+    Branch 0 is seed eq. (8); branch 1 is ``(theta1 + pi, -theta2)`` (actual angles, offsets kept), the same
+    spot by eq. (6). ``th0``: eq. (8) angles with the undefined pans filled (:func:`_fill_pan`).
+    """
+    pan = th0[:, 0]
+    branch = (b0 + np.cumsum(flips)) % 2
+    tilt_act = th0[:, 1] + model.offsets[1]
+    theta = np.empty_like(th0)
+    theta[:, 0] = np.unwrap(pan + math.pi * branch)
+    theta[:, 1] = np.where(branch == 1, -tilt_act, tilt_act) - model.offsets[1]
+    return theta, branch
+
+
 def joint_trajectory(model: ProjectorModel, t, points_W, velocity_W=None, *, nadir_margin: float = math.radians(2),
-                     limit_margin: float = 0.0) -> JointTrajectory:
+                     limit_margin: float = 0.0, nadir_snap: float = NADIR_SNAP) -> JointTrajectory:
     """Joint angles and rates that move the spot along a timed world path (seed eqs. 1, 2, 8, 9).
 
     Parameters
     ----------
     model : ProjectorModel
-        Calibrated projector (extrinsics, ``rate_limits``, ``tilt_limit``).
+        Calibrated projector (extrinsics, ``rate_limits``, ``tilt_limit``, ``tilt_min``, ``pan_range``).
     t : array_like, shape (K,)
         Sample times (s), strictly increasing.
     points_W : array_like, shape (K, 2)
@@ -162,6 +212,24 @@ def joint_trajectory(model: ProjectorModel, t, points_W, velocity_W=None, *, nad
         Tilt (rad) under which a sample counts as at the nadir singularity.
     limit_margin : float
         Tilt (rad) kept free below the tilt limit.
+    nadir_snap : float
+        Samples closer than this (m) to the nadir are commanded onto the nadir itself (tilt 0, pan held
+        from the previous sample): the spot error there is at most ``nadir_snap`` (default 1 mm), and a
+        path passing that close counts as going through the nadir whatever the sampling phase.
+
+    IK branch: eq. (8) (tilt >= 0) is used unless the path crosses the nadir
+    (a step turning the spot's direction by > pi/2 with its chord within
+    ``nadir_snap`` of the nadir). There eq. (8) flips the pan by pi; with
+    ``model.tilt_min < 0`` the trajectory instead switches to the other branch
+    ``(theta1 + pi, -theta2)``, so the pan stays put and the tilt goes through
+    zero. The starting branch (and whether to switch) is the candidate with the
+    most feasible samples (ties: eq. 8, switching). Near the nadir eq. (9)^-1
+    is undefined: with ``tilt_min < 0`` the rates there are finite differences
+    of the continuous joint series and only the rate limits decide; with
+    ``tilt_min = 0`` those samples are infeasible (reason "within ... of the
+    nadir singularity", or "nadir crossing needs negative tilt"). A step whose
+    pan turns by > pi/2 farther from the nadir is infeasible ("pan turns by
+    over 90 deg between two samples"): eq. (9) at its ends cannot see that.
 
     The pan is unwrapped along the path; with ``model.pan_range`` the whole
     series is shifted by whole turns to centre it in the range, and samples
@@ -171,18 +239,79 @@ def joint_trajectory(model: ProjectorModel, t, points_W, velocity_W=None, *, nad
     p0 = model.to_projector(p)
     r = np.hypot(p0[:, 0], p0[:, 1])
     tilt_actual = np.arctan2(r, model.h)
-    theta = model.ik(p0, check_reach=False, on_nadir="ignore")
-    theta[:, 0] = np.unwrap(theta[:, 0])
-    pan_out = np.zeros(len(t), dtype=bool)
+    th0 = model.ik(p0, check_reach=False, on_nadir="ignore")
+    # within nadir_snap of the nadir the spot is put on the nadir itself (error <= nadir_snap): the pan there is
+    # undefined and held, so a path that passes that close is followed through the nadir, not round it
+    defined = r > max(nadir_snap, NADIR_TOL * model.h)
+    th0[:, 0] = _fill_pan(th0[:, 0], defined)
+    th0[~defined, 1] = -model.offsets[1]
+    turn, closest = _turns(p0, th0[:, 0])
+    crossing = turn & (closest <= max(nadir_snap, NADIR_TOL * model.h))
+    jump = turn & ~crossing
+    nadir = tilt_actual < nadir_margin
+    reach = tilt_actual <= model.tilt_limit - limit_margin
+    negative_ok = model.tilt_min < 0.0
+    none = np.zeros(len(t), dtype=bool)
+    candidates = [(0, crossing), (1, crossing), (0, none)] if negative_ok and np.any(crossing) else (
+        [(0, none), (1, none)] if negative_ok else [(0, none)])
+    # how low the tilt would have to go to follow every crossing on the other branch (for the reason text)
+    need = float(np.min(_branch_theta(model, th0, flips=crossing, b0=0)[0][:, 1])) + model.offsets[1]
+    best = None
+    for b0, flips in candidates:
+        res = _evaluate(model, t, p, v, th0, flips, b0, crossing & ~flips, jump, closest, nadir, reach, tilt_actual,
+                        nadir_margin, limit_margin, need)
+        if best is None or int(res[2].sum()) > int(best[2].sum()):
+            best = res
+        if np.all(best[2]):
+            break  # nothing left to gain from the other candidates
+    theta, rates, feasible, reason, slow_ok, ratio = best
+    margin = np.minimum(tilt_actual, model.tilt_limit - tilt_actual)
+    segments = []
+    for a, b in _runs(~feasible):
+        kinds = sorted({reason[i].split(" (")[0].split(" rate")[0] for i in range(a, b + 1)})
+        seg = dict(start=int(a), stop=int(b), t0=float(t[a]), t1=float(t[b]), reason="; ".join(kinds))
+        if np.all(slow_ok[a:b + 1]):
+            seg["slowdown"] = float(ratio[a:b + 1].max())
+        segments.append(seg)
+    return JointTrajectory(model.name, t, p, theta, rates, feasible, reason, margin, segments)
+
+
+def _evaluate(model, t, p, v, th0, flips, b0, unfollowed, jump, closest, nadir, reach, tilt_actual, nadir_margin,
+              limit_margin, need):
+    """Joint series on one branch choice and its per-sample feasibility (see :func:`joint_trajectory`).
+
+    ``unfollowed``: nadir crossings (True at the step's end sample) taken on the same branch, i.e. with the
+    pan flipping by ~pi; ``jump``: steps whose pan turns by > pi/2 away from the nadir (too coarse a
+    sampling: eq. 9 at the samples cannot see the pan's motion between them). Both steps' two samples are
+    infeasible.
+    """
+    K = len(t)
+    theta, branch = _branch_theta(model, th0, flips, b0)
+    negative_ok = model.tilt_min < 0.0
+    flipped = np.zeros(K, dtype=bool)
+    i_unf = np.flatnonzero(unfollowed)
+    flipped[i_unf] = True
+    flipped[i_unf - 1] = True
+    if not negative_ok:
+        # the whole nadir stretch of a crossing is infeasible for that one reason (the first sample is quoted)
+        for a, b in _runs(nadir | flipped):
+            if np.any(flipped[a:b + 1]):
+                flipped[a:b + 1] = True
+    jumped = np.zeros(K, dtype=bool)
+    i_j = np.flatnonzero(jump)
+    jumped[i_j] = True
+    jumped[i_j - 1] = True
+    pan_out = np.zeros(K, dtype=bool)
     if model.pan_range is not None:
         # start on the turn that centres the wound-up pan in the mechanical range
         lo, hi = model.pan_range
         mid = 0.5 * (theta[:, 0].min() + theta[:, 0].max())
         theta[:, 0] += 2 * math.pi * round((0.5 * (lo + hi) - mid) / (2 * math.pi))
         pan_out = (theta[:, 0] < lo - 1e-12) | (theta[:, 0] > hi + 1e-12)
-    margin = np.minimum(tilt_actual, model.tilt_limit - tilt_actual)
-    reach = tilt_actual <= model.tilt_limit - limit_margin
-    nadir = tilt_actual < nadir_margin
+    signed_tilt = np.where(branch == 1, -tilt_actual, tilt_actual)
+    too_low = signed_tilt < model.tilt_min - 1e-12
+    # eq. (9)^-1 is undefined near the nadir: there the rates are those of the continuous joint series
+    singular = nadir if negative_ok else (nadir | flipped)
     rates = np.gradient(theta, t, axis=0)
     good = reach & ~nadir
     if np.any(good):
@@ -190,13 +319,26 @@ def joint_trajectory(model: ProjectorModel, t, points_W, velocity_W=None, *, nad
     lim = np.asarray(model.rate_limits)
     ratio = np.max(np.abs(rates) / lim, axis=1)
     fast = ratio > 1.0 + 1e-9
+    blocked = (singular if not negative_ok else flipped) | jumped
     reason = []
-    for i in range(len(t)):
+    for i in range(K):
         if not reach[i]:
             reason.append(f"outside the reachable floor (tilt {math.degrees(tilt_actual[i]):.1f} deg > "
                           f"{math.degrees(model.tilt_limit - limit_margin):.1f} deg)")
-        elif nadir[i]:
-            reason.append(f"within {math.degrees(nadir_margin):g} deg of the nadir singularity")
+        elif flipped[i]:
+            reason.append(f"nadir crossing needs negative tilt (the eq. 8 pan flips by 180 deg here; following "
+                          f"the path on the (theta1 + pi, -theta2) branch needs tilt down to {math.degrees(need):.1f} "
+                          f"deg, tilt_min = {math.degrees(model.tilt_min):g} deg)")
+        elif jumped[i]:
+            reason.append(f"pan turns by over 90 deg between two samples near the nadir (the path passes "
+                          f"{float(np.min(closest[i:i + 2])):.3g} m from it; sample it more finely)")
+        elif blocked[i]:
+            reason.append(f"within {math.degrees(nadir_margin):g} deg of the nadir singularity (pan undefined; "
+                          f"set tilt_min < 0 to pass through it on the (theta1 + pi, -theta2) branch)")
+        elif too_low[i]:
+            reason.append(f"tilt below tilt_min (tilt {math.degrees(signed_tilt[i]):.1f} deg < "
+                          f"{math.degrees(model.tilt_min):g} deg on the (theta1 + pi, -theta2) branch after a "
+                          f"nadir crossing)")
         elif pan_out[i]:
             reason.append(f"pan beyond its range (unwrapped pan {math.degrees(theta[i, 0]):.1f} deg outside "
                           f"[{math.degrees(model.pan_range[0]):g}, {math.degrees(model.pan_range[1]):g}] deg)")
@@ -206,15 +348,9 @@ def joint_trajectory(model: ProjectorModel, t, points_W, velocity_W=None, *, nad
                           f"{math.degrees(lim[j]):.1f} deg/s")
         else:
             reason.append("")
-    feasible = reach & ~nadir & ~fast & ~pan_out
-    segments = []
-    for a, b in _runs(~feasible):
-        kinds = sorted({reason[i].split(" (")[0].split(" rate")[0] for i in range(a, b + 1)})
-        seg = dict(start=int(a), stop=int(b), t0=float(t[a]), t1=float(t[b]), reason="; ".join(kinds))
-        if np.all(reach[a:b + 1] & ~nadir[a:b + 1] & ~pan_out[a:b + 1]):
-            seg["slowdown"] = float(ratio[a:b + 1].max())
-        segments.append(seg)
-    return JointTrajectory(model.name, t, p, theta, rates, feasible, reason, margin, segments)
+    other = ~reach | blocked | too_low | pan_out
+    feasible = ~other & ~fast
+    return theta, rates, feasible, reason, ~other, ratio
 
 
 def segments_blocked(starts, ends, walls) -> np.ndarray:
@@ -246,6 +382,7 @@ class MultiPlan:
     ----------
     names : list of str
     t, points : the path samples
+    rate_limits, pan_ranges : per projector (rad/s; rad or None), used by :meth:`projector_commands`
     assignment : ndarray of int, shape (K,)
         Index of the serving projector, -1 where none can serve.
     trajectories : list of JointTrajectory
@@ -272,6 +409,7 @@ class MultiPlan:
     segments: list
     infeasible: list
     rate_limits: list = field(default_factory=list)  # per projector (rad/s), for the idle heads' slews
+    pan_ranges: list = field(default_factory=list)  # per projector: (min, max) unwrapped pan (rad) or None
 
     @property
     def ok(self) -> bool:
@@ -307,7 +445,10 @@ class MultiPlan:
         with mode ``'serve'`` (its trajectory, laser on), ``'slew'`` (moving to the pose where it takes
         over next, each joint at its rate limit, laser off) or ``'hold'``. Before its first segment a head
         holds that segment's first pose (set before the path starts); after its last it holds. The pan
-        slews the short way round, and the commands after a slew continue on that turn.
+        slews the short way round, and the commands after a slew continue on that turn, unless that
+        would take the pan outside the head's ``pan_range`` during the slew or the next serving segment:
+        then it slews on the nearest turn that keeps both inside (the serving trajectory's own turn always
+        does, as its samples are checked against the range).
 
         Returns ``(streams, preaim)``: ``preaim`` lists each slew ``projector, t_start, t_ready,
         t_handover, ok`` (``ok``: ready by the hand-over time; else the head arrives late and the spot
@@ -344,6 +485,17 @@ class MultiPlan:
                 goal = th[nxt] + [shift, 0.0]
                 d = goal - start
                 d0 = float(wrap_angle(d[0]))
+                rng = self.pan_ranges[k] if self.pan_ranges else None
+                if rng is not None:
+                    # the slew is monotone, so it stays in range iff its end does; the next segment must too
+                    end = runs[j + 1][1]
+                    seg_lo, seg_hi = float(th[nxt:end + 1, 0].min()), float(th[nxt:end + 1, 0].max())
+                    m0 = round((start[0] + d0 - th[nxt, 0]) / (2 * math.pi))
+                    fits = [m for m in range(m0 - 3, m0 + 4)
+                            if seg_lo + 2 * math.pi * m >= rng[0] - 1e-9 and seg_hi + 2 * math.pi * m <= rng[1] + 1e-9]
+                    if fits:
+                        m = min(fits, key=lambda m: abs(th[nxt, 0] + 2 * math.pi * m - start[0]))
+                        d0 = float(th[nxt, 0] + 2 * math.pi * m - start[0])
                 shift += d0 - d[0]
                 d[0] = d0
                 goal = start + d
@@ -485,7 +637,7 @@ def plan_multi(projectors, t, points_W, velocity_W=None, *, walls=None, nadir_ma
                                        reasons=why, **({"slowdown": slow} if slow else {})))
             start = i
     return MultiPlan(names, t, p, assign, trajs, avail, occl, handovers, segments, infeasible,
-                     [tuple(q.rate_limits) for q in projectors])
+                     [tuple(q.rate_limits) for q in projectors], [q.pan_range for q in projectors])
 
 
 def retime(projectors, t, points_W, velocity_W=None, *, walls=None, nadir_margin: float = math.radians(2),
