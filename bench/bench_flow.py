@@ -5,6 +5,8 @@ log-processing rate relative to real time for 3 sensors at 400 Hz.
     python bench/bench_flow.py            # prints a Markdown table
     python bench/bench_flow.py --seeds    # calibration accuracy and fresh-run ATE/RPE over
                                           # seeds 100-103 (docs/rigs/flow.md; about 2 min)
+    python bench/bench_flow.py --s270     # where sensor s270's R bias comes from: ideal vs kernel
+                                          # flow, and the kernel's error per speed (seed 100; 15 s)
 
 Times are CPU seconds of this process (``time.process_time``, best of several
 repeats): the machine is shared, and wall time would measure the neighbours.
@@ -13,6 +15,7 @@ repeats): the machine is shared, and wall time would measure the neighbours.
 from __future__ import annotations
 
 import os
+import sys
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
@@ -122,15 +125,21 @@ def main():
           f"{per_run:.3f} s CPU (best of 7) = {realtime:.0f}x real time ({3 * 400 * realtime:,.0f} pairs/s end to end)")
 
 
+def _err(a, b, p, i):
+    e = getattr(a, p)[i] - getattr(b, p)[i]
+    return np.angle(np.exp(1j * e)) if p in ("psi", "phi") else e
+
+
 def seeds(seed_list=(100, 101, 102, 103)):
     """Calibration error / total std and fresh-run ATE and RPE (nominal / calibrated / true / wheels)."""
     from robocal.rigs.flow.calibrate import calibrate_array
     from robocal.rigs.flow.evaluate import evaluate_trajectory
     from robocal.rigs.flow.workflow import mounted_array
 
-    print("| seed | max abs(err)/total std | s270.R err [mm] (stat std, sys) | ATE nom / cal / true / wheels [mm] "
+    print("| seed | max abs(err)/total std | s270.R err [mm] (stat std, sys; debiased err) | ATE nom / cal / true / wheels [mm] "
           "| RPE trans nom / cal / true [%] | RPE rot nom / cal / true [deg/m] |")
     print("|---|---:|---|---|---|---|")
+    debiased = []
     for seed in seed_list:
         rng = np.random.default_rng(seed)
         sa = default_sim("calibration", 6.0, supersample=2)
@@ -149,15 +158,83 @@ def seeds(seed_list=(100, 101, 102, 103)):
         stb, _ = steps_from_frames(rb.frames, rb.t, rb.gyro, rb.height, sb.camera.focal_px)
         ev = [evaluate_trajectory(dead_reckon(stb, a).poses, rb.poses) for a in (sb.array_nominal, cal.array, tr)]
         ew = evaluate_trajectory(rb.wheel_poses, rb.poses)
+        # both drives with the kernel's bias removed (FlowConfig(debias=True)): docs/rigs/flow.md
+        fd = FlowConfig(debias=True)
+        st_d, _ = steps_from_frames(ra.frames, ra.t, ra.gyro, ra.height, sa.camera.focal_px, fd)
+        cal_d = calibrate_array(st_d, ra.t, ra.poses, sa.array_nominal)
+        stb_d, _ = steps_from_frames(rb.frames, rb.t, rb.gyro, rb.height, sb.camera.focal_px, fd)
+        e_d = evaluate_trajectory(dead_reckon(stb_d, cal_d.array).poses, rb.poses)
+        debiased.append(f"| {seed} | {ev[1].ate_rmse * 1e3:.1f} / {e_d.ate_rmse * 1e3:.1f} "
+                        f"| {ev[1].rpe[0.5]['trans_per_m'] * 100:.2f} / {e_d.rpe[0.5]['trans_per_m'] * 100:.2f} "
+                        f"| {np.degrees(ev[1].rpe[0.5]['rot_per_m']):.2f} / {np.degrees(e_d.rpe[0.5]['rot_per_m']):.2f} "
+                        f"| {(cal_d.array.R[2] - tr.R[2]) * 1e3:+.1f} |")
+        for i, nm in enumerate(tr.names):
+            print("   ", nm, "  ".join(
+                f"{p} err {_err(cal.array, tr, p, i):+.3g} deb {_err(cal.array_debiased, tr, p, i):+.3g} "
+                f"stat {cal.std[f'{nm}.{p}']:.3g} sys {cal.systematic[f'{nm}.{p}']:.3g}" for p in ("R", "psi", "phi", "scale")),
+                  file=sys.stderr)
         ate = " / ".join(f"{e.ate_rmse * 1e3:.1f}" for e in ev + [ew])
         rt = " / ".join(f"{e.rpe[0.5]['trans_per_m'] * 100:.2f}" for e in ev)
         rr = " / ".join(f"{np.degrees(e.rpe[0.5]['rot_per_m']):.2f}" for e in ev)
         e270 = (cal.array.R[2] - tr.R[2]) * 1e3
-        print(f"| {seed} | {max(z):.2f} | {e270:.1f} ({cal.std['s270.R'] * 1e3:.2f}, {cal.systematic['s270.R'] * 1e3:.0f}) "
+        d270 = (cal.array_debiased.R[2] - tr.R[2]) * 1e3
+        print(f"| {seed} | {max(z):.2f} | {e270:.1f} ({cal.std['s270.R'] * 1e3:.2f}, {cal.systematic['s270.R'] * 1e3:.1f}; "
+              f"{d270:+.1f}) "
               f"| {ate} | {rt} | {rr} |", flush=True)
+    print("\n| seed | ATE effective / debiased [mm] | RPE trans [%] | RPE rot [deg/m] | s270.R err debiased [mm] |")
+    print("|---|---|---|---|---:|")
+    print("\n".join(debiased))
+
+
+def s270(seed=100):
+    """Calibration of the rendered drive on ideal flow (the simulator's true displacements) vs the
+    kernel's, and the kernel's error of each sensor's flow per speed band (docs/rigs/flow.md)."""
+    from robocal.rigs.flow.calibrate import calibrate_array
+    from robocal.rigs.flow.model import rot2
+    from robocal.rigs.flow.odometry import SensorSteps
+    from robocal.rigs.flow.workflow import mounted_array
+
+    sa = default_sim("calibration", 6.0, supersample=2)
+    ra = simulate_run(sa, np.random.default_rng(seed))
+    st, flows = steps_from_frames(ra.frames, ra.t, ra.gyro, ra.height, sa.camera.focal_px)
+    tr = mounted_array()
+    hs = np.asarray(sa.height_scale)
+    th = ra.poses[:, 2]
+    ideal = []
+    for i in range(tr.n):
+        p = ra.poses[:, :2] + np.einsum("kab,b->ka", rot2(th), tr.positions[i])
+        ideal.append(np.einsum("kba,kb->ka", rot2(th[1:] + tr.phi[i]), np.diff(p, axis=0)))
+    ideal = np.array(ideal)
+    n, K = st.valid.shape
+    for label, steps, truth in (
+            ("ideal flow", SensorSteps(ra.t, ideal, np.ones((n, K), bool), st.sigma, st.quality), tr),
+            ("kernel flow", st, tr.copy(scale=1 / hs))):
+        cal = calibrate_array(steps, ra.t, ra.poses, sa.array_nominal, jackknife=False)
+        print(f"{label:12s}", " | ".join(
+            f"{nm}: R {(cal.array.R[i] - truth.R[i]) * 1e3:+.2f} mm, psi {np.degrees(_err(cal.array, truth, 'psi', i)):+.2f} deg, "
+            f"phi {np.degrees(_err(cal.array, truth, 'phi', i)):+.2f} deg, scale {(cal.array.scale[i] / truth.scale[i] - 1) * 100:+.2f} %"
+            for i, nm in enumerate(tr.names)))
+    f = sa.camera.focal_px
+    print("\nkernel error of the along-track flow u per speed band (true u from the simulator), px:")
+    print("| sensor | true u [px] | frames | mean u error [px] | relative | mean true v [px] | mean v error [px] |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for i, nm in enumerate(tr.names):
+        ut = -ideal[i][:, 0] * f / ra.true_height[i]
+        vt = ideal[i][:, 1] * f / ra.true_height[i]
+        comp = flows[i].flow_comp_px
+        eu, ev = comp[:, 0] - ut, comp[:, 1] - vt
+        band = np.round(ut * 4) / 4
+        for b in np.unique(band):
+            m = (band == b) & np.isfinite(eu)
+            if m.sum() >= 100 and abs(b) >= 0.2:
+                print(f"| {nm} | {ut[m].mean():+.2f} | {m.sum()} | {eu[m].mean():+.4f} | {eu[m].mean() / ut[m].mean() * 100:+.1f} % "
+                      f"| {vt[m].mean():+.3f} | {ev[m].mean():+.4f} |")
 
 
 if __name__ == "__main__":
-    import sys
-
-    seeds() if "--seeds" in sys.argv[1:] else main()
+    if "--seeds" in sys.argv[1:]:
+        seeds()
+    elif "--s270" in sys.argv[1:]:
+        s270()
+    else:
+        main()

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 
 from robocal.errors import InputError, NotEnoughDataError
-from robocal.rigs.flow.calibrate import calibrate_array, interpolate_poses
+from robocal.rigs.flow.calibrate import KERNEL_SYSTEMATIC, calibrate_array, interpolate_poses
 from robocal.rigs.flow.evaluate import evaluate_trajectory
+from robocal.rigs.flow.kernel import FlowConfig
 from robocal.rigs.flow.log import steps_from_frames
 from robocal.rigs.flow.model import SensorArray, seed_array
 from robocal.rigs.flow.odometry import SensorSteps, dead_reckon
@@ -141,18 +142,77 @@ def _assert_within_total_std(cal, truth, k=3.0):
     return z
 
 
-def test_calibration_std_covers_the_truth_on_rendered_drives():
-    # Monte Carlo over rendered drives (a second seed; seed 7 is in the fresh-run test): the flow
-    # errors are correlated in time and the kernel is biased, so the white-noise std misses the
-    # truth by 4-10 sigma (s270.R); the jackknife + kernel systematic must cover it
+@pytest.fixture(scope="module")
+def rendered_101():
+    """A rendered 4 s calibration drive (seed 101): steps, run, simulator config, true array."""
     sim = default_sim("calibration", 4.0, supersample=1)
     run = simulate_run(sim, np.random.default_rng(101))
     st, _ = steps_from_frames(run.frames, run.t, run.gyro, run.height, sim.camera.focal_px)
     truth = mounted_array().copy(scale=1 / np.asarray(sim.height_scale))
     cal = calibrate_array(st, run.t, run.poses, sim.array_nominal, window=0.1)
+    return st, run, sim, truth, cal
+
+
+def test_calibration_std_covers_the_truth_on_rendered_drives(rendered_101):
+    # Monte Carlo over rendered drives (a second seed; seed 7 is in the fresh-run test): the flow
+    # errors are correlated in time and the kernel is biased, so the white-noise std misses the
+    # truth by 4-10 sigma (s270.R); the jackknife + kernel systematic must cover it
+    st, run, sim, truth, cal = rendered_101
     _assert_within_total_std(cal, truth)
     # the statistical std does not follow the window (the white-noise one halves from 0.1 to 0.025 s)
     cal2 = calibrate_array(st, run.t, run.poses, sim.array_nominal, window=0.025)
     assert cal2.std_model["s270.R"] / cal.std_model["s270.R"] < 0.6
     for key in ("s60.R", "s270.R", "s270.scale"):
         assert 0.7 < cal2.std[key] / cal.std[key] < 1.4, (key, cal2.std[key], cal.std[key])
+
+
+def test_kernel_systematic_is_derived_from_the_run(rendered_101):
+    # s270's flow lies along its x axis in every manoeuvre: straights at 1.7 px/frame (sub-pixel
+    # phase 0.3, read long: pulled to 2) and turns at 1.3 px/frame (phase 0.7, read short:
+    # pulled to 1), so its R comes out ~9 mm short (ideal flow gives it exactly). The systematic
+    # was a constant 7 mm for every sensor; measured on the run's own frames it is that sensor's
+    # bias, and removing the bias recovers the mounting.
+    st, run, sim, truth, cal = rendered_101
+    assert cal.systematic_source == "run" and cal.bias_table.shape == (8, 8, 2)
+    err = cal.array.R[2] - truth.R[2]
+    assert err < -0.006
+    assert 0.6 < cal.systematic["s270.R"] / abs(err) < 1.4, (cal.systematic["s270.R"], err)
+    assert cal.systematic["s270.R"] > 1.5 * max(cal.systematic["s60.R"], cal.systematic["s120.R"])
+    assert cal.systematic["s270.scale"] > 0.006
+    assert abs(cal.array_debiased.R[2] - truth.R[2]) < 0.0025
+    assert abs(cal.array_debiased.scale[2] / truth.scale[2] - 1) < 0.004
+
+
+def test_ideal_flow_calibrates_exactly_and_falls_back_to_the_constant_systematic(rendered_101):
+    # the model (signs, lever arm, chaining) is exact for s270 too: the bias is the kernel's
+    st, run, sim, truth, cal = rendered_101
+    ideal = _disp(mounted_array(), run.poses)
+    c = calibrate_array(_steps(run.t, ideal), run.t, run.poses, sim.array_nominal, jackknife=False)
+    assert np.abs(c.array.R - mounted_array().R).max() < 1e-9
+    # no frames (a flow log): the constant systematic, said so
+    assert c.systematic_source == "constant" and c.array_debiased is None
+    assert c.systematic["s270.R"] == KERNEL_SYSTEMATIC["R"]
+
+
+def test_debias_removes_the_kernel_bias_from_calibration_and_odometry(rendered_101):
+    # FlowConfig(debias=True): the bias per sub-pixel phase, measured on the run's own frames, is
+    # removed from every displacement. The calibration then finds s270 where it is mounted, and a
+    # fresh drive dead-reckoned with debiased flow and the debiased array beats the effective pair
+    # (rendered seeds 100-103, supersample 2: ATE 8.8/5.5/7.5/4.8 -> 4.5/2.6/3.0/2.1 mm)
+    st, run, sim, truth, cal = rendered_101
+    fc = FlowConfig(debias=True)
+    st_d, _ = steps_from_frames(run.frames, run.t, run.gyro, run.height, sim.camera.focal_px, fc)
+    assert st_d.kernel.debiased and not st.kernel.debiased
+    cal_d = calibrate_array(st_d, run.t, run.poses, sim.array_nominal, jackknife=False)
+    assert cal_d.array_debiased is cal_d.array
+    assert abs(cal_d.array.R[2] - truth.R[2]) < 0.0025 < abs(cal.array.R[2] - truth.R[2])
+    # the systematic is the size of what was removed: the same as without debias
+    assert abs(cal_d.systematic["s270.R"] - cal.systematic["s270.R"]) < 0.1 * cal.systematic["s270.R"]
+    sim_b = default_sim("loop", 4.0, supersample=1)
+    run_b = simulate_run(sim_b, np.random.default_rng(102))
+    ate = []
+    for config, array in ((FlowConfig(), cal.array), (fc, cal_d.array)):
+        sb, _ = steps_from_frames(run_b.frames, run_b.t, run_b.gyro, run_b.height, sim_b.camera.focal_px, config)
+        ate.append(evaluate_trajectory(dead_reckon(sb, array).poses, run_b.poses).ate_rmse)
+    print(ate)
+    assert ate[1] < 0.8 * ate[0]

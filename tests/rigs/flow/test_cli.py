@@ -31,6 +31,18 @@ def test_examples_run(tmp_path, capsys):
     assert abs(cal["estimate"]["s60.R"] - 0.356) < 0.01
     # statistical and systematic parts, and a residual figure in the report
     assert cal["diagnostics"]["std_systematic_kernel"]["s60.R"] > 0 and cal["diagnostics"]["std_total"]["s60.R"] > cal["std"]["s60.R"]
+    # a flow log has no frames: the systematic comes from its flow phases through the kernel's bias measured
+    # on gravel frames; s270 (flow along one axis at two speeds) gets far more than s60 (the example's
+    # s270.R is ~12 mm short of the mounting)
+    d = cal["diagnostics"]
+    assert d["std_systematic_kernel_source"] == "model" and "derived from this run's flow phases" in out
+    assert d["std_systematic_kernel"]["s270.R"] > 0.006 > d["std_systematic_kernel"]["s60.R"]
+    assert abs(d["estimate_kernel_debiased"]["s270.R"] - 0.353) < 0.5 * abs(cal["estimate"]["s270.R"] - 0.353)
+    code, out, _ = _run(["flow", "calibrate", str(EX / "calibration" / "run.yaml"), "--out", str(tmp_path / "cald"),
+                         "--debias", "--no-progress"], capsys)
+    assert code == 0 and "--debias removed that bias" in out
+    cald = json.loads((tmp_path / "cald" / "result.json").read_text())
+    assert abs(cald["estimate"]["s270.R"] - 0.353) < 0.005
     assert "<img" in (tmp_path / "cal" / "report.html").read_text()
     assert "psi: 271." in (tmp_path / "cal" / "array_calibrated.yaml").read_text()   # near the nominal 270, not -89
     code, out, _ = _run(["flow", "evaluate", str(EX / "loop" / "run.yaml"), "--array", str(tmp_path / "cal" / "array_calibrated.yaml"),
@@ -185,6 +197,9 @@ def test_flow_sigma_comes_from_run_yaml_and_is_checked(tmp_path, capsys):
     assert np.allclose(st1.sigma, st6.sigma / 6)
     code, _, err = _run(["flow", "odometry", str(d / "run.yaml"), "--out", str(tmp_path / "o"), "--no-progress"], capsys)
     assert code == 0 and "[inconsistent_data]" in err and "sigma_px" in err
+    # another kernel's log (its stated flow error differs): its sub-pixel bias is unknown, --debias is refused
+    code, _, err = _run(["flow", "odometry", str(d / "run.yaml"), "--out", str(tmp_path / "o3"), "--debias", "--no-progress"], capsys)
+    assert code == 2 and "another flow kernel" in err
     code, _, err = _run(["flow", "odometry", str(EX / "loop" / "run.yaml"), "--out", str(tmp_path / "o2"), "--no-progress"], capsys)
     assert code == 0 and "[inconsistent_data]" not in err
 

@@ -236,3 +236,19 @@ def test_bad_frames_and_config():
         compute_flow(np.zeros((2, 64, 64), np.uint8), np.zeros((2, 64, 64), np.uint8), height=[0.1, 0.0], focal_px=100)
     with pytest.raises(InputError, match="dt"):
         compute_flow(np.zeros((1, 64, 64), np.uint8), np.zeros((1, 64, 64), np.uint8), gyro=np.zeros((1, 3)), focal_px=100)
+
+
+def test_kernel_bias_measured_on_the_frames_predicts_the_pixel_locking(gravel_pairs):
+    # the equiangular fit pulls the flow towards whole pixels by a function of the sub-pixel
+    # phase; the table measured by shifting 32 of the frames themselves (no truth needed)
+    # predicts it on real-photo pairs: removing it cuts the RMS error by a third
+    from robocal.rigs.flow.kernel_bias import measure_bias_table, predict_bias
+
+    prev, curr, shift = gravel_pairs
+    ff = compute_flow(prev, curr)
+    table = measure_bias_table(prev[:32])
+    e = ff.flow_px - shift
+    ok = np.isfinite(e).all(axis=1)
+    r0 = np.sqrt(np.mean(e[ok] ** 2, axis=0))
+    r1 = np.sqrt(np.mean((e - predict_bias(ff.flow_px, table))[ok] ** 2, axis=0))
+    assert np.all(r1 < 0.8 * r0), (r0, r1)

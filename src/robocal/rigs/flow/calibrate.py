@@ -26,17 +26,21 @@ noise would swamp 1 mm steps).
 
 The covariance is sampling error under the model, from the residual scatter;
 the reference trajectory is treated as exact (errors-in-variables ignored).
+The flow kernel's bias, which a drive repeats and no resampling sees, is the
+separate ``systematic`` term, derived from the run's flow phases
+(:mod:`robocal.rigs.flow.kernel_bias`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from robocal.diagnostics import Diagnostic
 from robocal.errors import InputError, NotEnoughDataError
 from robocal.estimation import Problem, solve
+from robocal.rigs.flow.kernel_bias import displacement_bias
 from robocal.rigs.flow.model import SensorArray, rot2
 from robocal.rigs.flow.odometry import SensorSteps
 
@@ -49,14 +53,13 @@ MIN_WINDOW_FRAMES = 4
 #: Jackknife segments: contiguous blocks of windows deleted one at a time.
 JACKKNIFE_SEGMENTS = 10
 
-#: Systematic uncertainty per parameter kind from the flow kernel's pixel locking (the
-#: sub-pixel fit's pull towards whole pixels). It depends on the direction and speed of each
-#: sensor's flow, which the drive repeats, so it is the same in every part of a drive and
-#: invisible to resampling: e.g. sensor s270 of the simulated rig, whose flow is along its x
-#: axis in every manoeuvre, comes out 10-12 mm short in R and 1.3-1.6 % low in scale on every
-#: seed. Values: RMS error over sensors and seeds of rendered calibration drives (gravel,
-#: 400 Hz, equiangular kernel, seeds 100-103, 6 s; docs/rigs/flow.md), rounded up. Other
-#: kernel modes and textures may differ (``refine="lk"`` flips the s270 bias to about +9 mm).
+#: Fallback systematic uncertainty per parameter kind from the flow kernel's pixel locking, used
+#: only when the steps carry no raw flow of this kernel (hand-built steps, a log that states
+#: another kernel's flow error): the RMS
+#: error over sensors and seeds of rendered calibration drives (gravel, 400 Hz, equiangular
+#: kernel, seeds 100-103, 6 s; docs/rigs/flow.md), rounded up. Otherwise the systematic is
+#: derived from the run (:mod:`robocal.rigs.flow.kernel_bias`): it follows each sensor's
+#: motion, e.g. 9-10 mm for s270.R of the simulated rig and 1-2 mm for s60.R and s120.R.
 KERNEL_SYSTEMATIC = {"R": 0.007, "psi": np.radians(0.6), "phi": np.radians(0.2), "scale": 0.009}
 
 
@@ -131,8 +134,25 @@ class ArrayCalibration:
         not computed).
     systematic : dict
         Systematic uncertainty of the flow kernel (pixel locking of the
-        sub-pixel fit, which no resampling of one drive can see), same units;
-        see :data:`KERNEL_SYSTEMATIC`. Combine as ``hypot(std, systematic)``.
+        sub-pixel fit, which no resampling of one drive can see), same units.
+        Derived from the run: ``|estimate - estimate_debiased|``, the change
+        when the kernel's bias, evaluated at each frame's flow phase, is
+        removed (:mod:`robocal.rigs.flow.kernel_bias`). The bias table is
+        measured on the run's own frames (``systematic_source == "run"``) or,
+        for a flow log of this kernel, on gravel-photograph frames
+        (``"model"``); else (steps without raw flow, a log of another kernel)
+        the constant :data:`KERNEL_SYSTEMATIC` (``"constant"``). Combine as
+        ``hypot(std, systematic)``.
+    systematic_source : str
+        ``"run"``, ``"model"`` or ``"constant"``.
+    array_debiased : SensorArray or None
+        The estimate with the modelled kernel bias removed (None with the
+        constant; ``array`` itself when the steps were debiased, ``FlowConfig.debias``):
+        closer to the physical mounting (s270.R within 2 mm instead of 10-11 mm
+        short on rendered drives), but the odometry of a later run reads the
+        same biased kernel, so ``array`` (effective parameters) is the one to use.
+    bias_table : ndarray or None
+        The kernel's bias per sub-pixel phase cell, px (``kernel_bias.measure_bias_table``).
     undetermined : list of str
         Parameters the drive does not determine (kept at nominal).
     window_times : dict
@@ -157,6 +177,9 @@ class ArrayCalibration:
     systematic: dict = field(default_factory=dict)
     undetermined: list = field(default_factory=list)
     window_times: dict = field(default_factory=dict)
+    systematic_source: str = "constant"
+    array_debiased: SensorArray | None = None
+    bias_table: np.ndarray | None = None
 
     def total_std(self) -> dict:
         """``hypot(std, systematic)`` per parameter (None where undetermined)."""
@@ -286,6 +309,27 @@ def calibrate_array(steps: SensorSteps, t_ref, poses_ref, nominal: SensorArray, 
     # (residuals correlated in time), the jackknife does not
     std = {lab: (std_jk[lab] if std_jk[lab] is not None else std_model[lab]) for lab in labels}
     systematic = {lab: (None if lab in undetermined else float(KERNEL_SYSTEMATIC[lab.split(".")[1]])) for lab in labels}
+    source, est_deb, table = "constant", None, None
+    if steps.kernel is not None:
+        # the kernel's pull towards whole pixels depends on each frame's sub-pixel phase, which a
+        # drive repeats: measure it (on the run's own frames; gravel frames for a flow log), remove
+        # it and re-solve; the change is this run's kernel systematic (s270 of the simulated rig:
+        # 9-10 mm in R, s60 and s120 1-2 mm, where a constant gave 7 mm to all)
+        table, source = steps.kernel.bias_table()
+        # steps already debiased (FlowConfig.debias): put the bias back instead; the systematic
+        # is then the size of the removed bias (conservative: the removal is not trusted further)
+        sign = 1.0 if steps.kernel.debiased else -1.0
+        deb = replace(steps, disp=steps.disp + sign * displacement_bias(steps.kernel, table))
+        M_d, _, _ = window_observations(deb, poses, window)
+        rd = _solve(_problem(M_d, dP, dth, nominal.names, [est[nm] for nm in nominal.names], keep), loss)
+        est_deb = {nm: np.array(rd.params[nm], float) for nm in nominal.names}
+        for j, lab in enumerate(labels):
+            nm, k = divmod(j, 4)
+            if lab in undetermined:
+                est_deb[nominal.names[nm]][k] = est[nominal.names[nm]][k]
+                continue
+            d = est[nominal.names[nm]][k] - est_deb[nominal.names[nm]][k]
+            systematic[lab] = float(abs(np.angle(np.exp(1j * d)) if k in (1, 2) else d))
     arr = nominal.copy(
         R=np.array([est[nm][0] for nm in nominal.names]),
         # angles wrapped to within 180 deg of the nominal ones (270 stays 270, not -90)
@@ -293,6 +337,16 @@ def calibrate_array(steps: SensorSteps, t_ref, poses_ref, nominal: SensorArray, 
         phi=np.array([nominal.phi[i] + np.angle(np.exp(1j * (est[nm][2] - nominal.phi[i]))) for i, nm in enumerate(nominal.names)]),
         scale=np.array([est[nm][3] for nm in nominal.names]),
     )
+    arr_deb = None
+    if est_deb is not None and steps.kernel.debiased:
+        arr_deb = arr
+    elif est_deb is not None:
+        arr_deb = arr.copy(
+            R=np.array([est_deb[nm][0] for nm in nominal.names]),
+            psi=np.array([arr.psi[i] + np.angle(np.exp(1j * (est_deb[nm][1] - arr.psi[i]))) for i, nm in enumerate(nominal.names)]),
+            phi=np.array([arr.phi[i] + np.angle(np.exp(1j * (est_deb[nm][2] - arr.phi[i]))) for i, nm in enumerate(nominal.names)]),
+            scale=np.array([est_deb[nm][3] for nm in nominal.names]),
+        )
     warnings = list(res.warnings)
     if undetermined:
         warnings.append(Diagnostic("rank_deficient", f"the drive does not determine {', '.join(undetermined)}: they keep "
@@ -300,5 +354,5 @@ def calibrate_array(steps: SensorSteps, t_ref, poses_ref, nominal: SensorArray, 
                                    params=tuple(undetermined)))
     return ArrayCalibration(array=arr, std=std, residual_rms=float(res.rms), n_windows=n_win, lsq=res,
                             warnings=warnings, std_model=std_model, std_jackknife=std_jk, systematic=systematic,
-                            undetermined=undetermined,
-                            window_times={nm: t_win[keep[i]] for i, nm in enumerate(nominal.names)})
+                            undetermined=undetermined, systematic_source=source, array_debiased=arr_deb,
+                            bias_table=table, window_times={nm: t_win[keep[i]] for i, nm in enumerate(nominal.names)})

@@ -55,6 +55,7 @@ def _flow_config(args, spec=None) -> FlowConfig:
     kw = {k: getattr(args, k) if getattr(args, k, None) is not None else getattr(d, k) for k in _KERNEL_ARGS}
     if spec is not None:
         kw["window"] = spec.window
+    kw["debias"] = bool(getattr(args, "debias", False))
     return FlowConfig(**kw)
 
 
@@ -66,12 +67,16 @@ def _check_kernel_args(args, spec) -> None:
                          f"('flow_log: {spec.flow_log.name}', flow computed by the sensors); drop the option(s) or add 'frames'")
 
 
-def _add_flow_args(p):
+def _add_flow_args(p, *, debias: bool = True):
     p.add_argument("--subpixel", default=None, choices=("none", "half", "quarter", "parabolic", "equiangular"),
                    help="sub-pixel method of the block matcher (half = PX4FLOW; default equiangular); raw frames only")
     p.add_argument("--refine", default=None, choices=("none", "lk"),
                    help="frame-level Gauss-Newton refinement (default none); raw frames only")
     p.add_argument("--search", type=int, default=None, help="integer search range, +/- px (default 4); raw frames only")
+    if debias:
+        p.add_argument("--debias", action="store_true",
+                       help="remove the kernel's sub-pixel bias (pixel locking), measured on the run's frames (a flow "
+                            "log: on gravel frames), from every displacement")
     p.add_argument("--no-progress", action="store_true", help="never show progress bars")
 
 
@@ -167,8 +172,17 @@ def cmd_calibrate(args) -> int:
                      "systematic (kernel)": None if und else conv(cal.systematic[k]),
                      "total": None if und else conv(tot[k]),
                      "note": "not determined: kept nominal" if und else ""})
+    removed = cal.array_debiased is cal.array
+    how = {"run": "derived from this run: the change of each parameter when the kernel's bias, measured on the run's "
+                  "own frames per sub-pixel phase, is removed",
+           "model": "derived from this run's flow phases: the change of each parameter when the kernel's bias per "
+                    "sub-pixel phase (measured on gravel-photograph frames: the log has no frames) is removed",
+           }.get(cal.systematic_source, "a constant measured on rendered drives (the input has neither frames nor "
+                                        "this kernel's raw flow)")
+    if removed:
+        how += "; --debias removed that bias from the estimate, and the systematic is the size of what was removed"
     sec.table(rows, digits=4, caption="statistical std: delete-one-segment jackknife over the drive (the flow errors "
-              "are correlated in time); systematic: the flow kernel's pixel-locking bias, measured on rendered drives "
+              f"are correlated in time); systematic: the flow kernel's pixel-locking bias, {how} "
               "(docs/rigs/flow.md); total = both in quadrature. Use the total to judge the values.")
     sec.text(f"Residual RMS {cal.residual_rms * 1e3:.3f} mm per {args.window} s window; the reference is taken as exact.")
     sec.figure(_window_residual_figure(cal), "Per-window residual of each sensor over the drive: outlying windows "
@@ -188,6 +202,7 @@ def cmd_calibrate(args) -> int:
             print(f"  {k:14s} {conv(v):10.4f} {u:5s} not determined by this drive (kept nominal)")
         else:
             print(f"  {k:14s} {conv(v):10.4f} {u:5s} +/- {conv(res.std[k]):<12.4f} +/- {conv(cal.systematic[k]):.4f}")
+    print(f"  kernel systematic: {how}")
     return 0
 
 
@@ -263,7 +278,7 @@ def add_commands(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--no-frames", action="store_true", help="write only the flow log, not frames.npz")
     add_seed_argument(p)
     add_out_argument(p)
-    _add_flow_args(p)
+    _add_flow_args(p, debias=False)
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser("odometry", help="dead reckoning from a run (flow log or raw frames)", formatter_class=RawHelp,

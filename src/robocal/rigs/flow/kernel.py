@@ -128,6 +128,14 @@ class FlowConfig:
         the block matching. Beyond the PX4FLOW firmware.
     refine_iterations : int
         Gauss–Newton iterations of ``refine="lk"``.
+    debias : bool
+        Remove the kernel's pull towards whole pixels from a run's
+        displacements (:mod:`robocal.rigs.flow.kernel_bias`: the bias per
+        sub-pixel phase, measured on the run's own frames, or on gravel
+        frames for a flow log, evaluated at each frame's flow). Acts in
+        :func:`robocal.rigs.flow.log.steps_from_frames` / ``steps_from_records``,
+        not in :func:`compute_flow`. Off by default (the documented figures
+        are without it); on rendered drives it halves the ATE (docs/rigs/flow.md).
     """
 
     window: int = 64
@@ -145,6 +153,7 @@ class FlowConfig:
     max_spread_px: float = 0.45
     refine: str = "none"
     refine_iterations: int = 3
+    debias: bool = False
 
     @property
     def sigma_px(self) -> float:

@@ -45,6 +45,7 @@ from robocal.diagnostics import Diagnostic
 from robocal.errors import FileFormatError, InputError, ShapeError
 from robocal.io import atomic_write_text, load_csv, load_document
 from robocal.rigs.flow.kernel import FlowConfig, compensate_rotation, compute_flow_sequence, metric_displacement
+from robocal.rigs.flow.kernel_bias import KernelTrace, displacement_bias, sample_frames
 from robocal.rigs.flow.model import SensorArray
 from robocal.rigs.flow.odometry import SensorSteps, flow_sigma
 
@@ -229,7 +230,19 @@ def steps_from_records(rec: FlowRecords, focal_px: float, config: FlowConfig = F
                                    f"{rec.gap_lengths.sum():.4f} s in all (first at t = {rec.gaps[0]:.6f} s, "
                                    f"{rec.gap_lengths[0]:.4f} s): bridged at the last velocity over their real length",
                                    indices=tuple(int(k) for k in np.flatnonzero(in_gap)[:200])))
-    return SensorSteps(rec.t, disp, valid, sigma, rec.quality, reasons=reasons, warnings=warnings)
+    # the calibration's kernel-bias model: the logged raw flow is this kernel's only when the log
+    # does not state another flow error than the kernel's (a PX4FLOW half-pixel log says 0.16 px)
+    trace = None
+    if abs(sigma_px - config.sigma_px) < 1e-9:
+        trace = KernelTrace(flow_px=np.where(valid[..., None], rec.flow, np.nan),
+                            px_to_m=np.nan_to_num(rec.height, nan=1.0) / float(focal_px), frames=None, config=config)
+        if config.debias:
+            disp = disp - displacement_bias(trace, trace.bias_table()[0])
+            trace.debiased = True
+    elif config.debias:
+        raise InputError(f"camera: sigma_px = {sigma_px:g} px says the log comes from another flow kernel than this one "
+                         f"({config.sigma_px:g} px): its sub-pixel bias is unknown, so it cannot be removed (drop debias)")
+    return SensorSteps(rec.t, disp, valid, sigma, rec.quality, reasons=reasons, warnings=warnings, kernel=trace)
 
 
 def steps_from_frames(frames, t, gyro, height, focal_px: float, config: FlowConfig = FlowConfig(), *,
@@ -295,7 +308,13 @@ def steps_from_frames(frames, t, gyro, height, focal_px: float, config: FlowConf
     for ff in flows:
         r = [x for x in ff.reason if x]
         reasons.append({k: r.count(k) for k in sorted(set(r))})
-    return SensorSteps(t, disp, valid, sigma, quality, reasons=reasons), flows
+    # what the calibration's kernel-bias model needs: the raw flow, its scale and a few frames
+    trace = KernelTrace(flow_px=np.stack([ff.flow_px for ff in flows]), px_to_m=height / float(focal_px),
+                        frames=sample_frames(frames), config=config)
+    if config.debias:
+        disp = disp - displacement_bias(trace, trace.bias_table()[0])
+        trace.debiased = True
+    return SensorSteps(t, disp, valid, sigma, quality, reasons=reasons, kernel=trace), flows
 
 
 def read_frames_npz(path):

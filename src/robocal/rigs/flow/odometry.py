@@ -63,6 +63,10 @@ class SensorSteps:
     warnings : list of Diagnostic
         Found while reading the input (dropped stretches, ...); passed on by
         :func:`dead_reckon`.
+    kernel : KernelTrace, optional
+        Raw flow, pixel scale and a sample of the frames when the steps come
+        from frames (:func:`robocal.rigs.flow.log.steps_from_frames`): what the
+        calibration's kernel-bias model needs (:mod:`robocal.rigs.flow.kernel_bias`).
     """
 
     t: np.ndarray
@@ -72,6 +76,7 @@ class SensorSteps:
     quality: np.ndarray
     reasons: list | None = None
     warnings: list = field(default_factory=list)
+    kernel: object = None
 
     def __post_init__(self):
         t = np.asarray(self.t, float)

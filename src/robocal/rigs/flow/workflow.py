@@ -178,6 +178,10 @@ def calibration_run(spec: RunSpec, *, config: FlowConfig | None = None, window: 
     return cal, steps
 
 
+def _estimate(array: SensorArray) -> dict:
+    return {f"{nm}.{p}": float(getattr(array, p)[i]) for i, nm in enumerate(array.names) for p in ("R", "psi", "phi", "scale")}
+
+
 def calibration_result(cal, spec: RunSpec | None = None, *, method: str = "windowed-lsq") -> CalibrationResult:
     """The shared result schema: ``std`` is the statistical std (segment jackknife, see
     :func:`~robocal.rigs.flow.calibrate.calibrate_array`); the kernel systematic, their
@@ -190,6 +194,8 @@ def calibration_result(cal, spec: RunSpec | None = None, *, method: str = "windo
         inputs=hash_inputs(spec.inputs()) if spec is not None else {},
         diagnostics={"undetermined_kept_nominal": list(cal.undetermined),
                      "std_systematic_kernel": {k: cal.systematic.get(k) for k in keys},
+                     "std_systematic_kernel_source": cal.systematic_source,
+                     "estimate_kernel_debiased": (None if cal.array_debiased is None else _estimate(cal.array_debiased)),
                      "std_total": cal.total_std(),
                      "std_model_white_noise": {k: cal.std_model.get(k) for k in keys},
                      "std_jackknife": {k: cal.std_jackknife.get(k) for k in keys},
