@@ -144,6 +144,23 @@ def test_rigid_fit_covariance_matches_monte_carlo(monte_carlo):
     assert np.mean(fit.sigma_hat**2) / SIGMA**2 == pytest.approx(1.0, abs=0.05)
 
 
+def test_bound_and_covariance_are_batched():
+    # one call over 4 x 5 designs (each with its own fitted rotation and sigma) equals 20 calls
+    rng = np.random.default_rng(9)
+    X = rng.uniform(-0.3, 0.3, size=(4, 5, 6, 3))
+    R = matrix_from_rotvec(rng.normal(size=(4, 5, 3)))
+    sig = rng.uniform(0.5e-3, 2e-3, size=(4, 5))
+    w = rng.uniform(0.5, 2.0, size=(6,))
+    crb, cov = rigid_fit_rotation_crb(X, sig, w), rigid_fit_covariance(X, R, sig, w)
+    assert crb.shape == (4, 5, 3, 3) and cov.shape == (4, 5, 6, 6)
+    for i, j in ((0, 0), (3, 4), (2, 1)):
+        np.testing.assert_allclose(crb[i, j], rigid_fit_rotation_crb(X[i, j], sig[i, j], w), rtol=1e-12)
+        np.testing.assert_allclose(cov[i, j], rigid_fit_covariance(X[i, j], R[i, j], sig[i, j], w), rtol=1e-12)
+    X[1, 2] = np.linspace(0, 1, 6)[:, None] * [1.0, 2.0, 3.0]  # one collinear design: named
+    with pytest.raises(DegenerateGeometryError, match=r"collinear.*batch index \(1, 2\)"):
+        rigid_fit_rotation_crb(X, sig)
+
+
 def test_weighted_fit_attains_weighted_bound():
     rng = np.random.default_rng(6)
     X = rng.uniform(-0.3, 0.3, size=(6, 3))

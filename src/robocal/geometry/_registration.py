@@ -269,21 +269,32 @@ def rigid_fit(points_from, points_to, weights=None, *, with_scale: bool = False,
 
 
 def _check_model(points_from, sigma, weights):
-    x = check_array(points_from, "points_from", shape=("N", 3))
-    if x.ndim != 2:
-        raise ShapeError(f"points_from must have shape (N, 3), got {x.shape}")
-    sigma = float(check_array(sigma, "sigma"))
-    if not sigma > 0:
-        raise InputError(f"sigma must be > 0, got {sigma!r}")
-    if weights is None:
-        w = np.ones(x.shape[0])
-    else:
-        w = check_array(weights, "weights", shape=(x.shape[0],))
-        if w.ndim != 1 or np.any(w < 0):
-            raise InputError(f"weights must be a non-negative (N,) array with N = {x.shape[0]}")
-    if np.count_nonzero(w) < 3:
-        raise NotEnoughDataError(f"a rigid fit needs at least 3 points with non-zero weight, got {np.count_nonzero(w)}")
-    return x, sigma, w
+    """``x (..., N, 3)``, ``sigma (...)`` and ``w (..., N)`` broadcast together."""
+    x = check_array(points_from, "points_from", shape=("N", 3), min_ndim=2)
+    sigma = check_array(sigma, "sigma")
+    if np.any(~(sigma > 0)):
+        raise InputError(f"sigma must be > 0, got {sigma.tolist()!r}")
+    n = x.shape[-2]
+    w = np.ones(n) if weights is None else check_array(weights, "weights", shape=(n,))
+    if np.any(w < 0):
+        raise InputError(f"weights must be >= 0, got {float(w[w < 0].reshape(-1)[0])!r}")
+    try:
+        lead = np.broadcast_shapes(x.shape[:-2], w.shape[:-1], sigma.shape)
+    except ValueError:
+        raise ShapeError(f"batch shapes of points_from {x.shape[:-2]}, weights {w.shape[:-1]} and sigma "
+                         f"{sigma.shape} do not broadcast") from None
+    used = np.count_nonzero(w, axis=-1)
+    if np.any(used < 3):
+        raise NotEnoughDataError(f"a rigid fit needs at least 3 points with non-zero weight, got {int(np.min(used))}")
+    x = np.broadcast_to(x, lead + (n, 3))
+    w = np.broadcast_to(w, lead + (n,))
+    return x, np.broadcast_to(sigma, lead), w
+
+
+def _centred(x, w):
+    xc = x - ((w[..., None] * x).sum(axis=-2) / w.sum(axis=-1)[..., None])[..., None, :]
+    _require_rank2(np.linalg.svd(np.sqrt(w)[..., None] * xc, compute_uv=False), "points_from", RTOL)
+    return xc
 
 
 def rigid_fit_rotation_crb(points_from, sigma, weights=None) -> np.ndarray:
@@ -306,17 +317,17 @@ def rigid_fit_rotation_crb(points_from, sigma, weights=None) -> np.ndarray:
 
     Parameters
     ----------
-    points_from : array_like, shape (N, 3)
-        Model points (exact).
-    sigma : float
+    points_from : array_like, shape (..., N, 3)
+        Model points (exact); leading axes are independent designs.
+    sigma : float or array_like, shape (...)
         Per-coordinate noise standard deviation of a unit-weight target point
         (same length unit as the points).
-    weights : array_like, shape (N,), optional
+    weights : array_like, shape (..., N), optional
         Inverse relative variances: point i has noise ``sigma / sqrt(w_i)``.
 
     Returns
     -------
-    ndarray, shape (3, 3)
+    ndarray, shape (..., 3, 3)
         Covariance bound of ``delta`` (rad^2).
 
     Raises
@@ -325,10 +336,10 @@ def rigid_fit_rotation_crb(points_from, sigma, weights=None) -> np.ndarray:
         Collinear model points (the rotation about their line is undetermined).
     """
     x, sigma, w = _check_model(points_from, sigma, weights)
-    xc = x - (w @ x) / w.sum()
-    _require_rank2(np.linalg.svd(np.sqrt(w)[:, None] * xc, compute_uv=False), "points_from", RTOL)
-    S = np.einsum("n,ni,nj->ij", w, xc, xc)
-    return sigma**2 * np.linalg.inv(np.trace(S) * np.eye(3) - S)
+    xc = _centred(x, w)
+    S = np.einsum("...n,...ni,...nj->...ij", w, xc, xc)
+    tr = np.trace(S, axis1=-2, axis2=-1)[..., None, None]
+    return sigma[..., None, None] ** 2 * np.linalg.inv(tr * np.eye(3) - S)
 
 
 def rigid_fit_covariance(points_from, R_to_from, sigma, weights=None) -> np.ndarray:
@@ -346,26 +357,29 @@ def rigid_fit_covariance(points_from, R_to_from, sigma, weights=None) -> np.ndar
 
     Parameters
     ----------
-    points_from : array_like, shape (N, 3)
-    R_to_from : array_like, shape (3, 3)
-        The fitted rotation (``RigidFit.R``).
-    sigma : float
+    points_from : array_like, shape (..., N, 3)
+    R_to_from : array_like, shape (..., 3, 3)
+        The fitted rotation (``RigidFit.R``); leading axes broadcast with the points'.
+    sigma : float or array_like, shape (...)
         Unit-weight noise std per coordinate (e.g. ``RigidFit.sigma_hat``).
-    weights : array_like, shape (N,), optional
+    weights : array_like, shape (..., N), optional
 
     Returns
     -------
-    ndarray, shape (6, 6)
+    ndarray, shape (..., 6, 6)
         Covariance of ``(delta_x, delta_y, delta_z, eps_x, eps_y, eps_z)``.
     """
     x, sigma, w = _check_model(points_from, sigma, weights)
     R = check_array(R_to_from, "R_to_from", shape=(3, 3))
-    if R.ndim != 2:
-        raise ShapeError(f"R_to_from must have shape (3, 3), got {R.shape}")
-    xc = x - (w @ x) / w.sum()
-    _require_rank2(np.linalg.svd(np.sqrt(w)[:, None] * xc, compute_uv=False), "points_from", RTOL)
-    J = np.zeros((x.shape[0], 3, 6))
-    J[:, :, :3] = -R @ skew(x)
-    J[:, :, 3:] = np.eye(3)
-    F = np.einsum("n,nki,nkj->ij", w, J, J) / sigma**2
+    try:
+        lead = np.broadcast_shapes(x.shape[:-2], R.shape[:-2])
+    except ValueError:
+        raise ShapeError(f"R_to_from batch shape {R.shape[:-2]} does not broadcast with {x.shape[:-2]}") from None
+    x, w, sigma = np.broadcast_to(x, lead + x.shape[-2:]), np.broadcast_to(w, lead + w.shape[-1:]), \
+        np.broadcast_to(sigma, lead)
+    _centred(x, w)  # the degeneracy check
+    J = np.zeros(lead + (x.shape[-2], 3, 6))
+    J[..., :3] = -R[..., None, :, :] @ skew(x)
+    J[..., 3:] = np.eye(3)
+    F = np.einsum("...n,...nki,...nkj->...ij", w, J, J) / sigma[..., None, None] ** 2
     return np.linalg.inv(F)
