@@ -115,6 +115,7 @@ def _mct_copy(tmp_path):
     ("mct_input.yaml", lambda s: s.replace("sigma: 0.02", "sigma: -0.02"), "heights.sigma"),
     ("mct_input.yaml", lambda s: s.replace("block_size: [60.000", "block_size: [0"), "block_size"),
     ("mct_input.yaml", lambda s: s.replace("method: mct", "method: tracker"), "method"),
+    ("mct_input.yaml", lambda s: s.replace("# arm_sigma: {length: 0.3", "arm_sigma: {length: -0.3"), "arm_sigma"),
 ])
 def test_mct_input_errors_are_one_line(tmp_path, capsys, file, edit, message):
     yaml_path = _mct_copy(tmp_path)
@@ -136,3 +137,13 @@ def test_handeye_robot_world_example(tmp_path):
     assert all(v is not None and 0 < v < 3e-3 for v in res["std"]["T_cam_gripper.translation"])
     assert np.allclose(np.array(res["estimate"]["T_base_target"]) @ np.array(res["estimate"]["T_target_base"]),
                        np.eye(4), atol=1e-12)
+
+
+def test_mct_arm_sigma_enters_the_covariance(tmp_path):
+    yaml_path = _mct_copy(tmp_path)
+    yaml_path.write_text(yaml_path.read_text().replace("# arm_sigma: {length: 0.3", "arm_sigma: {length: 0.3"))
+    assert main(["lineprofiler", "calibrate", str(yaml_path), "--out", str(tmp_path / "o")]) == 0
+    res = json.loads((tmp_path / "o" / "result.json").read_text())
+    assert res["diagnostics"]["arm_dh_sigma"] == pytest.approx({"length_m": 3e-4, "angle_rad": np.deg2rad(0.1)})
+    # 0.3 mm of arm error dominates the 0.03-0.08 mm the tracker and the scan leave
+    assert all(v > 2.5e-4 for v in np.array(res["std"]["T_E_L.translation"])[[0, 2]])

@@ -22,6 +22,7 @@ Input (YAML, units stated)::
       block_faces: mct_block.csv # face (0, 1, 2), x, y, z: points probed on the block's corner faces
       sigma: 0.01                # optional, per axis; default: pooled from the arc, line and face fits
     heights: {h0: 40.0, h1: 85.0, sigma: 0.02}  # ball centre / frame 2's origin above P3's top face
+    arm_sigma: {length: 0.3, angle: 0.1}        # optional: uncertainty of P3's D-H row (default: exact)
     block_size: [50, 50, 50]
     scan: mct_scan.csv           # profiles of the block corner during a P3 stroke (profile, x, z, q1..qn)
 
@@ -147,7 +148,15 @@ def load_mct_file(doc, chain: DHChain):
                               "recommended) is needed", source=str(scan_path))
     data = MCTData(q_arc, arc_T, q_line, line_T, h0, h1, q_scan[0].copy(), faces, tuple(size), q_scan[:, -1],
                    profiles)
-    return data, [arc_path, line_path, faces_path, scan_path], t_sigma, h_sigma
+    dh_sigma = (0.0, 0.0)
+    if "arm_sigma" in doc:
+        arm_sigma = doc.sub("arm_sigma")
+        dh_sigma = (arm_sigma.float("length", kind="length", default=0.0),
+                    arm_sigma.float("angle", kind="angle", default=0.0))
+        if min(dh_sigma) < 0:
+            raise FileFormatError(f"field 'arm_sigma' must hold lengths/angles >= 0, got {dh_sigma}",
+                                  source=doc.source)
+    return data, [arc_path, line_path, faces_path, scan_path], t_sigma, h_sigma, dh_sigma
 
 
 def calibrate_file(path) -> tuple[SphereCalibration | MCTCalibration, dict]:
@@ -156,8 +165,8 @@ def calibrate_file(path) -> tuple[SphereCalibration | MCTCalibration, dict]:
     chain = load_arm(doc)
     method = doc.str("method", default="fpdp", choices=("fpdp", "mct"))
     if method == "mct":
-        data, files, t_sigma, h_sigma = load_mct_file(doc, chain)
-        res = mct_calibrate(data, chain, tracker_sigma=t_sigma, height_sigma=h_sigma)
+        data, files, t_sigma, h_sigma, dh_sigma = load_mct_file(doc, chain)
+        res = mct_calibrate(data, chain, tracker_sigma=t_sigma, height_sigma=h_sigma, dh_sigma=dh_sigma)
         return MCTCalibration(res, data, chain), hash_inputs([path, *files])
     R = doc.float("sphere_radius", kind="length", positive=True)
     prof_path = doc.path("profiles")
@@ -230,6 +239,7 @@ def _mct_result(cal: MCTCalibration, inputs=None) -> CalibrationResult:
                                     "matrix": [_finite_or_none(row) for row in r.X_cov],
                                     "std_by_source": terms},
                      "tracker_sigma_m": r.tracker_sigma, "height_sigma_m": r.height_sigma,
+                     "arm_dh_sigma": {"length_m": r.dh_sigma[0], "angle_rad": r.dh_sigma[1]},
                      "fit_rms_m": {"arc": r.arc_rms, "line": r.line_rms, "block_faces": r.block_rms,
                                    "block_scan": r.scan_rms},
                      "n_scan_points": r.n_scan_points})
@@ -259,9 +269,12 @@ def _mct_report(result: CalibrationResult, cal: MCTCalibration | None, extra_sec
         for src, v in terms.items():
             vals = list(v["T_E_L.rotvec"]) + list(v["T_E_L.translation"])
             srows.append({"source": src, **{lab: (None if x is None else 1e3 * x) for lab, x in zip(labels, vals)}})
+        arm = d.get("arm_dh_sigma") or {}
         s.table(srows, digits=3, caption=f"standard deviation of X by source (tracker sigma "
                 f"{1e6 * (d.get('tracker_sigma_m') or 0):.1f} um, heights sigma "
-                f"{1e6 * (d.get('height_sigma_m') or 0):.1f} um)")
+                f"{1e6 * (d.get('height_sigma_m') or 0):.1f} um, P3's D-H row "
+                + (f"{1e3 * arm['length_m']:.3g} mm / {np.rad2deg(arm['angle_rad']):.3g} deg)"
+                   if arm and any(arm.values()) else "taken as exact: errors of the arm model are not included)"))
     if cal is not None and cal.mct.scan_residuals is not None:
         fig, ax = new_figure(1, 2, size=(10, 3.4))
         ax[0].hist(cal.mct.scan_residuals * 1e6, bins=60)

@@ -76,7 +76,9 @@ def _write_mct(out: Path, rig, rng, args) -> None:
         "# robocal lineprofiler calibrate input, MCT method (simulated, seed %d)\nmethod: mct\n"
         "units: {length: mm, angle: deg}\narm: p1r2p3\n"
         "tracker:\n  arc: mct_arc.csv\n  line: mct_line.csv\n  block_faces: mct_block.csv\n"
-        "  # sigma: %.4f  # per-axis tracker noise; default: pooled from the arc, line and face fits\nheights: {h0: %.4f, h1: %.4f, sigma: 0.02}\nblock_size: [%.3f, %.3f, %.3f]\n"
+        "  # sigma: %.4f  # per-axis tracker noise; default: pooled from the arc, line and face fits\nheights: {h0: %.4f, h1: %.4f, sigma: 0.02}\n"
+        "# arm_sigma: {length: 0.3, angle: 0.1}  # uncertainty of P3's D-H row; default: taken as exact\n"
+        "block_size: [%.3f, %.3f, %.3f]\n"
         "scan: mct_scan.csv\n# truth: T_E_L translation [m] = %s\n")
         % (args.seed, 1e3 * rig.tracker.sigma, 1e3 * m.h0, 1e3 * m.h1, *(1e3 * np.asarray(m.block_size)),
            np.round(tr.X[:3, 3], 6).tolist()))

@@ -90,6 +90,7 @@ class MCTResult:
     X_std: np.ndarray | None = None
     tracker_sigma: float | None = None
     height_sigma: float | None = None
+    dh_sigma: tuple = (0.0, 0.0)
     cov_terms: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
 
@@ -342,7 +343,8 @@ def _tracker_sigma(arc, line, faces) -> float:
 
 
 def mct_covariance(data, chain: DHChain, scan: BlockScanFit, perm, X, *, tracker_sigma: float,
-                   height_sigma: float, step: float = 1e-7) -> tuple[np.ndarray, dict]:
+                   height_sigma: float, dh_sigma: tuple[float, float] = (0.0, 0.0),
+                   step: float = 1e-7) -> tuple[np.ndarray, dict]:
     """First-order covariance (6, 6) of the MCT hand-eye matrix ``X`` (seed 004 eq. 5).
 
     ``X`` is a function of every tracker point (arc, line, block faces), of
@@ -355,6 +357,12 @@ def mct_covariance(data, chain: DHChain, scan: BlockScanFit, perm, X, *, tracker
     for ``(h0, h1)`` and the scan fit's own covariance. Coordinates as
     :attr:`MCTResult.X_cov`. Returns ``(cov, terms)``, ``terms`` the per-group
     contributions to the standard deviations (for the report).
+
+    ``dh_sigma = (length m, angle rad)``: uncertainty of P3's own D-H row
+    (``alpha, a, theta, d`` of the last link), the only part of the arm MCT
+    uses (eqs. 6-7); its errors otherwise pass into X unseen (the seed
+    comparison's 0.3 mm / 0.1 deg arm errors give a 0.3 mm error of X). A
+    fourth group ``"D-H row of P3"`` when non-zero.
     """
     q2, q3 = np.asarray(data.q_arc)[:, -2], np.asarray(data.q_line)[:, -1]
     q30 = float(np.asarray(data.q_scan0)[-1])
@@ -404,11 +412,26 @@ def mct_covariance(data, chain: DHChain, scan: BlockScanFit, perm, X, *, tracker
     cov = C_tr + C_h + C_s
     terms = {"tracker": np.sqrt(np.diag(C_tr)), "heights": np.sqrt(np.diag(C_h)),
              "block scan": np.sqrt(np.diag(C_s))}
+    if any(dh_sigma):
+        last = chain.n_links
+        names = [f"{k}_{last}" for k in ("alpha", "a", "theta", "d")]
+        sig = np.array([dh_sigma[1] if k in ("alpha", "theta") else dh_sigma[0]
+                        for k in ("alpha", "a", "theta", "d")])
+        J_dh = []
+        for name in names:
+            params = chain.params.copy()
+            params[chain.param_names.index(name)] += step
+            J_dh.append(column(_compose(arc_T, q2, line_T, q3, h[0], h[1], faces, scan.T_L_B, perm,
+                                        chain.with_params(params), q30)[0]))
+        J_dh = np.array(J_dh).T
+        C_dh = (J_dh * sig**2) @ J_dh.T
+        cov = cov + C_dh
+        terms["D-H row of P3"] = np.sqrt(np.diag(C_dh))
     return cov, terms
 
 
 def mct_calibrate(data, chain: DHChain, *, tracker_sigma: float | None = None, height_sigma: float = 0.02e-3,
-                  covariance: bool = True) -> MCTResult:
+                  dh_sigma: tuple[float, float] = (0.0, 0.0), covariance: bool = True) -> MCTResult:
     """Hand-eye matrix by the MCT method (seed 004 eqs. 5-12) from :class:`~.simulate.MCTData`-like input.
 
     ``data`` needs: ``q_arc`` (n, 3), ``arc_T`` (n, 3), ``q_line`` (k, 3),
@@ -416,9 +439,10 @@ def mct_calibrate(data, chain: DHChain, *, tracker_sigma: float | None = None, h
     (3 arrays), ``block_size``, ``scan_q3`` (S,), ``scan_profiles``.
 
     ``tracker_sigma`` (m per axis; default: pooled from the arc, line and
-    face fits) and ``height_sigma`` (m, the measured ``h0`` and ``h1``) set
-    the covariance of ``X`` (:func:`mct_covariance`); ``covariance=False``
-    skips it (Monte Carlo loops).
+    face fits), ``height_sigma`` (m, the measured ``h0`` and ``h1``) and
+    ``dh_sigma`` ((m, rad) of P3's D-H row; default: taken as exact) set the
+    covariance of ``X`` (:func:`mct_covariance`); ``covariance=False`` skips
+    it (Monte Carlo loops).
     """
     if chain.dof < 2 or chain.joint_types[-2:] != ("revolute", "prismatic"):
         raise InputError(f"MCT needs a chain ending in a revolute then a prismatic joint, got {chain.joint_types}")
@@ -467,11 +491,14 @@ def mct_calibrate(data, chain: DHChain, *, tracker_sigma: float | None = None, h
                     scan_rms=scan.rms, n_scan_points=scan.n_points, scan_residuals=scan.residuals, warnings=warnings)
     if covariance:
         sig = _tracker_sigma(arc, line, data.block_faces_T) if tracker_sigma is None else float(tracker_sigma)
-        if not np.isfinite(sig) or sig < 0 or not np.isfinite(height_sigma) or height_sigma < 0:
-            raise InputError(f"tracker and height sigmas must be finite and >= 0, got {sig!r} and {height_sigma!r}")
-        cov, terms = mct_covariance(data, chain, scan, perm, X, tracker_sigma=sig, height_sigma=float(height_sigma))
+        dh_sigma = tuple(float(v) for v in dh_sigma)
+        if not all(np.isfinite(v) and v >= 0 for v in (sig, height_sigma, *dh_sigma)) or len(dh_sigma) != 2:
+            raise InputError(f"tracker, height and D-H sigmas must be finite and >= 0 (dh_sigma a (length, angle) "
+                             f"pair), got {sig!r}, {height_sigma!r} and {dh_sigma!r}")
+        cov, terms = mct_covariance(data, chain, scan, perm, X, tracker_sigma=sig, height_sigma=float(height_sigma),
+                                    dh_sigma=dh_sigma)
         res.X_cov, res.X_std, res.cov_terms = cov, np.sqrt(np.diag(cov)), terms
-        res.tracker_sigma, res.height_sigma = sig, float(height_sigma)
+        res.tracker_sigma, res.height_sigma, res.dh_sigma = sig, float(height_sigma), dh_sigma
         bad = [lab for lab, v in zip(_X_LABELS, res.X_std) if not np.isfinite(v)]
         if bad:
             warnings.append(Diagnostic("rank_deficient", "no standard deviation for " + ", ".join(bad) +
