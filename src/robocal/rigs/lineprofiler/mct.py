@@ -296,29 +296,35 @@ def fit_block_scan(profiles, q3, q30: float, size, *, u0=(0.0, -1.0, 0.0), tol: 
                         ls.x.copy(), unpack)
 
 
-def _block_permutation(T_T_B, scan: BlockScanFit, n_B) -> tuple[int, ...]:
+def _block_permutation(T_T_B, T_L_B, u_L, n_B) -> tuple[int, ...]:
     """A cube corner looks the same after a 120 deg turn about its diagonal, so the
     scan alone cannot say which face is x_B: the cyclic relabelling that maps P3's
-    direction in L (u) onto the tracker's ``n_B``."""
+    direction in L (``u_L``) onto the tracker's ``n_B``."""
     best = None
     for perm in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
-        R_T_L = T_T_B[:3, :3] @ scan.T_L_B[:3, perm].T
-        score = (R_T_L @ scan.u) @ n_B
+        R_T_L = T_T_B[:3, :3] @ T_L_B[:3, perm].T
+        score = (R_T_L @ u_L) @ n_B
         if best is None or score > best[0]:
             best = (score, perm)
     return best[1]
 
 
-def _compose(arc_T, q2_arc, line_T, q3_line, h0, h1, faces, T_L_B, perm, chain, q30):
-    """Eqs. 6, 7, 12, 5 from the measurements: ``(X, T_T_2, T_T_E, T_T_B, T_L_B (relabelled), T_T_L, fits)``."""
+def _compose(arc_T, q2_arc, line_T, q3_line, h0, h1, faces, T_L_B, perm, chain, q30, u_L=None):
+    """Eqs. 6, 7, 12, 5 from the measurements: ``(X, T_T_2, T_T_E, T_T_B, T_L_B (relabelled), T_T_L, fits)``.
+
+    ``perm=None`` chooses the block's face labelling (:func:`_block_permutation`,
+    needs ``u_L``); ``fits`` ends with the permutation used.
+    """
     T_T_2, O_A, n_A, n_B, arc, line = frame2_in_tracker(arc_T, q2_arc, line_T, q3_line, h0, h1, chain)
     T_T_E = T_T_2 @ _link(chain, chain.n_links - 1, q30) @ chain.T_tool  # eq. 7
     T_T_B, block_rms = block_frame_from_planes(faces)
+    if perm is None:
+        perm = _block_permutation(T_T_B, T_L_B, u_L, n_B)
     T_L_B = T_L_B.copy()
     T_L_B[:3, :3] = T_L_B[:3, perm]
     T_T_L = T_T_B @ invert_transform(T_L_B)  # eq. 12
     X = invert_transform(T_T_E) @ T_T_L  # eq. 5
-    return X, T_T_2, T_T_E, T_T_B, T_L_B, T_T_L, (O_A, n_A, n_B, arc, line, block_rms)
+    return X, T_T_2, T_T_E, T_T_B, T_L_B, T_T_L, (O_A, n_A, n_B, arc, line, block_rms, perm)
 
 
 def _x_delta(X, X0) -> np.ndarray:
@@ -326,19 +332,16 @@ def _x_delta(X, X0) -> np.ndarray:
     return np.r_[rotvec_from_matrix(X[:3, :3] @ X0[:3, :3].T), X[:3, 3] - X0[:3, 3]]
 
 
-def _tracker_sigma(arc, line, faces) -> float:
+def _tracker_sigma(arc, line, block_rms: float, n_face_points: int) -> float:
     """Per-axis tracker noise (m) pooled from the arc, line and face-plane fits.
 
     A point's distance to a fitted circle or line has two noise components,
-    to a plane one; the fits use 6 (circle), 4 (line) and 3 (each plane)
-    degrees of freedom.
+    to a plane one; the fits use 6 (circle), 4 (line) and 3 x 3 (the three
+    planes) degrees of freedom. ``block_rms`` is the planes' RMS over their
+    ``n_face_points`` points (:func:`block_frame_from_planes`).
     """
-    ss = np.sum(arc.residuals ** 2) + np.sum(line.residuals ** 2)
-    dof = 2 * len(arc.residuals) - 6 + 2 * len(line.residuals) - 4
-    for f in faces:
-        fp = fit_plane(f)
-        ss += np.sum(fp.residuals ** 2)
-        dof += len(f) - 3
+    ss = np.sum(arc.residuals ** 2) + np.sum(line.residuals ** 2) + block_rms ** 2 * n_face_points
+    dof = 2 * len(arc.residuals) - 6 + 2 * len(line.residuals) - 4 + n_face_points - 9
     return float(np.sqrt(ss / dof)) if dof > 0 else float("nan")
 
 
@@ -370,7 +373,7 @@ def mct_covariance(data, chain: DHChain, scan: BlockScanFit, perm, X, *, tracker
     faces = [np.asarray(f, float) for f in data.block_faces_T]
     h = np.array([data.h0, data.h1], float)
 
-    _, _, T_T_E0, T_T_B0, T_L_B0, T_T_L0, (_, _, _, arc0, line0, _) = _compose(
+    _, _, T_T_E0, T_T_B0, T_L_B0, T_T_L0, (_, _, _, arc0, line0, _, _) = _compose(
         arc_T, q2, line_T, q3, h[0], h[1], faces, scan.T_L_B, perm, chain, q30)
     A_tool = _link(chain, chain.n_links - 1, q30) @ chain.T_tool
 
@@ -468,13 +471,9 @@ def mct_calibrate(data, chain: DHChain, *, tracker_sigma: float | None = None, h
     q30 = float(q_scan0[-1])
     # P3 direction in L starts from the nominal scan axis of the profiler
     scan = fit_block_scan(data.scan_profiles, data.scan_q3, q30, data.block_size, u0=(0.0, -1.0, 0.0))
-    T_T_B, _ = block_frame_from_planes(data.block_faces_T)
-    _, _, n_B, _, _, _ = frame2_in_tracker(data.arc_T, q_arc[:, -2], data.line_T, q_line[:, -1], data.h0, data.h1,
-                                           chain)
-    perm = _block_permutation(T_T_B, scan, n_B)
-    X, T_T_2, T_T_E, T_T_B, T_L_B, T_T_L, (O_A, n_A, n_B, arc, line, block_rms) = _compose(
+    X, T_T_2, T_T_E, T_T_B, T_L_B, T_T_L, (O_A, n_A, n_B, arc, line, block_rms, perm) = _compose(
         data.arc_T, q_arc[:, -2], data.line_T, q_line[:, -1], data.h0, data.h1, data.block_faces_T, scan.T_L_B,
-        perm, chain, q30)
+        None, chain, q30, u_L=scan.u)
     ball = line.point + n_B * ((O_A - line.point) @ n_B)
     y_K = n_B - (n_B @ n_A) * n_A
     y_K /= np.linalg.norm(y_K)
@@ -490,7 +489,8 @@ def mct_calibrate(data, chain: DHChain, *, tracker_sigma: float | None = None, h
                     n_A=n_A, O_A=O_A, n_B=n_B, arc_rms=arc.rms, line_rms=line.rms, block_rms=block_rms,
                     scan_rms=scan.rms, n_scan_points=scan.n_points, scan_residuals=scan.residuals, warnings=warnings)
     if covariance:
-        sig = _tracker_sigma(arc, line, data.block_faces_T) if tracker_sigma is None else float(tracker_sigma)
+        n_face = sum(len(f) for f in data.block_faces_T)
+        sig = _tracker_sigma(arc, line, block_rms, n_face) if tracker_sigma is None else float(tracker_sigma)
         dh_sigma = tuple(float(v) for v in dh_sigma)
         if not all(np.isfinite(v) and v >= 0 for v in (sig, height_sigma, *dh_sigma)) or len(dh_sigma) != 2:
             raise InputError(f"tracker, height and D-H sigmas must be finite and >= 0 (dh_sigma a (length, angle) "
