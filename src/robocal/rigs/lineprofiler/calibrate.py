@@ -48,7 +48,7 @@ from robocal.rigs.lineprofiler.io import (
     load_profiles_csv,
     load_tracker_csv,
 )
-from robocal.rigs.lineprofiler.mct import MCTResult, mct_calibrate
+from robocal.rigs.lineprofiler.mct import _X_LABELS, MCTResult, mct_calibrate
 from robocal.rigs.lineprofiler.model import p1r2p3_chain
 from robocal.rigs.lineprofiler.refine import RefineResult, refine_sphere
 
@@ -218,8 +218,7 @@ def _finite_or_none(v):
 def _mct_result(cal: MCTCalibration, inputs=None) -> CalibrationResult:
     r = cal.mct
     std = {"T_E_L.rotvec": _finite_or_none(r.X_std[:3]), "T_E_L.translation": _finite_or_none(r.X_std[3:])}
-    undetermined = [lab for lab, v in zip(("X.rx", "X.ry", "X.rz", "X.tx", "X.ty", "X.tz"), r.X_std)
-                    if not np.isfinite(v)]
+    undetermined = [lab for lab, v in zip(_X_LABELS, r.X_std) if not np.isfinite(v)]
     terms = {k: {"T_E_L.rotvec": _finite_or_none(v[:3]), "T_E_L.translation": _finite_or_none(v[3:])}
              for k, v in r.cov_terms.items()}
     return CalibrationResult(
@@ -234,7 +233,7 @@ def _mct_result(cal: MCTCalibration, inputs=None) -> CalibrationResult:
         diagnostics={"frames": "T_E_L: laser frame L -> end-effector frame E (hand-eye X); T: laser tracker; "
                                "B: block corner; all at the scan's reference pose",
                      "undetermined": undetermined,
-                     "covariance": {"labels": ["X.rx", "X.ry", "X.rz", "X.tx", "X.ty", "X.tz"],
+                     "covariance": {"labels": list(_X_LABELS),
                                     "rotation": "rotation vector of R_perturbed R^T (rad)",
                                     "matrix": [_finite_or_none(row) for row in r.X_cov],
                                     "std_by_source": terms},
@@ -279,10 +278,8 @@ def _mct_report(result: CalibrationResult, cal: MCTCalibration | None, extra_sec
         fig, ax = new_figure(1, 2, size=(10, 3.4))
         ax[0].hist(cal.mct.scan_residuals * 1e6, bins=60)
         ax[0].set_xlabel("block scan: point-to-face residual [um]")
-        arc = np.asarray(cal.data.arc_T)
-        ax[1].plot(np.rad2deg(np.asarray(cal.data.q_arc)[:, -2]),
-                   1e6 * (np.linalg.norm(arc - cal.mct.O_A, axis=1)
-                          - np.mean(np.linalg.norm(arc - cal.mct.O_A, axis=1))), "o")
+        radius = np.linalg.norm(np.asarray(cal.data.arc_T) - cal.mct.O_A, axis=1)
+        ax[1].plot(np.rad2deg(np.asarray(cal.data.q_arc)[:, -2]), 1e6 * (radius - radius.mean()), "o")
         ax[1].set_xlabel("R2 [deg]")
         ax[1].set_ylabel("arc radius deviation [um]")
         rep.section("Residuals").figure(fig, "block-scan fit residuals (all points) and tracker arc")
