@@ -26,6 +26,7 @@ from scipy.optimize import least_squares
 
 from robocal.diagnostics import Diagnostic
 from robocal.errors import ConvergenceError, DegenerateGeometryError, InputError, NotEnoughDataError, ShapeError
+from robocal.geometry._registration import _scalar  # 0-d -> float: unbatched fits keep float fields
 from robocal.geometry._so3 import matrix_from_rotvec
 from robocal.validation import check_array
 
@@ -182,11 +183,6 @@ def _orient(v: np.ndarray) -> np.ndarray:
     """Deterministic sign, batched over leading axes: largest-magnitude component positive."""
     big = np.take_along_axis(v, np.argmax(np.abs(v), axis=-1)[..., None], axis=-1)
     return np.where(big >= 0, v, -v)
-
-
-def _scalar(x):
-    """A 0-d result as a Python float (unbatched fits keep their float fields)."""
-    return float(x) if np.ndim(x) == 0 else x
 
 
 def _lsq_cov(J: np.ndarray, r: np.ndarray, n_params: int) -> np.ndarray:
