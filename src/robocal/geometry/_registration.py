@@ -78,6 +78,16 @@ def _scalar(x: np.ndarray):
     return float(x) if np.ndim(x) == 0 else x
 
 
+def _check_weights(weights, n: int) -> np.ndarray | None:
+    """Non-negative weights of shape (..., n), or None when none were given."""
+    if weights is None:
+        return None
+    w = check_array(weights, "weights", shape=(n,))
+    if np.any(w < 0):
+        raise InputError(f"weights must be >= 0, got {float(w[w < 0].reshape(-1)[0])!r}")
+    return w
+
+
 def _check_pair(a, b, name_a: str, name_b: str, weights):
     a = check_array(a, name_a, shape=("N", 3), min_ndim=2)
     b = check_array(b, name_b, shape=("N", 3), min_ndim=2)
@@ -88,12 +98,10 @@ def _check_pair(a, b, name_a: str, name_b: str, weights):
     except ValueError:
         raise ShapeError(f"batch shapes of {name_a} {a.shape[:-2]} and {name_b} {b.shape[:-2]} do not broadcast") from None
     n = a.shape[-2]
-    if weights is None:
+    w = _check_weights(weights, n)
+    if w is None:
         w = np.ones(lead + (n,))
     else:
-        w = check_array(weights, "weights", shape=(n,))
-        if np.any(w < 0):
-            raise InputError(f"weights must be >= 0, got {float(w[w < 0].reshape(-1)[0])!r}")
         try:
             lead = np.broadcast_shapes(lead, w.shape[:-1])
         except ValueError:
@@ -275,9 +283,9 @@ def _check_model(points_from, sigma, weights):
     if np.any(~(sigma > 0)):
         raise InputError(f"sigma must be > 0, got {sigma.tolist()!r}")
     n = x.shape[-2]
-    w = np.ones(n) if weights is None else check_array(weights, "weights", shape=(n,))
-    if np.any(w < 0):
-        raise InputError(f"weights must be >= 0, got {float(w[w < 0].reshape(-1)[0])!r}")
+    w = _check_weights(weights, n)
+    if w is None:
+        w = np.ones(n)
     try:
         lead = np.broadcast_shapes(x.shape[:-2], w.shape[:-1], sigma.shape)
     except ValueError:
