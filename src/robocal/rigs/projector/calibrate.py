@@ -71,6 +71,7 @@ __all__ = [
     "calibrate",
     "yaw_of",
     "floor_pose_jacobian",
+    "floor_prediction_columns",
     "rotation_error",
     "beyond_tilt_limit",
 ]
@@ -515,6 +516,39 @@ def closed_form(points_W, points_0, *, sigma: float | None = None) -> ExtrinsicE
 EXTRA_PARAMS = ("h", "pan_offset", "tilt_offset")
 
 
+def floor_prediction_columns(yaw: float, t_xy, *, spots_xy=None, theta=None, h: float | None = None,
+                             offsets=(0.0, 0.0)) -> dict:
+    """``d pred / d p`` (M, 2) per parameter of the floor prediction ``pred = Rz(-yaw) (f - t)_xy`` (seed eqs. 1, 6).
+
+    Either the spots ``f_xy`` (M, 2) in {0} are given (columns ``yaw``, ``t_x``,
+    ``t_y``), or joint angles ``theta`` (M, 2) with ``h`` and ``offsets``: then
+    ``f = h tan(a2) (sin a1, cos a1)`` with ``a = theta + offsets`` (seed eq. 6)
+    and the columns ``h``, ``pan_offset``, ``tilt_offset`` are added. One source
+    for the residual Jacobian of :func:`nonlinear` and the error map's
+    propagation (:func:`robocal.rigs.projector.evaluate.floor_prediction_jacobian`).
+    """
+    c, s = math.cos(yaw), math.sin(yaw)
+    cols = {}
+    if theta is not None:
+        a1 = theta[:, 0] + offsets[0]
+        a2 = theta[:, 1] + offsets[1]
+        ta, s1, c1 = np.tan(a2), np.sin(a1), np.cos(a1)
+        rho = h * ta
+        spots_xy = np.column_stack([rho * s1, rho * c1])
+
+        def rot(v):  # Rz(-yaw) applied to floor vectors
+            return np.column_stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1]])
+
+        cols["h"] = rot(np.column_stack([ta * s1, ta * c1]))
+        cols["pan_offset"] = rot(np.column_stack([rho * c1, -rho * s1]))
+        cols["tilt_offset"] = rot((h / np.cos(a2) ** 2)[:, None] * np.column_stack([s1, c1]))
+    d = np.asarray(spots_xy, dtype=float) - np.asarray(t_xy, dtype=float)[:2]
+    cols["yaw"] = np.column_stack([-s * d[:, 0] + c * d[:, 1], -c * d[:, 0] - s * d[:, 1]])
+    cols["t_x"] = np.tile([-c, s], (len(d), 1))
+    cols["t_y"] = np.tile([-s, -c], (len(d), 1))
+    return cols
+
+
 def nonlinear(points_W, *, theta=None, points_0=None, model: ProjectorModel | None = None, estimate=(),
               sigma: float | None = None, x0: ExtrinsicEstimate | None = None, absolute_sigma: bool = False,
               loss: str = "linear") -> ExtrinsicEstimate:
@@ -596,36 +630,17 @@ def nonlinear(points_W, *, theta=None, points_0=None, model: ProjectorModel | No
         pred = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
         return target - pred
 
-    def jacobian(q):
-        c, s = math.cos(q["R"][2]), math.sin(q["R"][2])
-        out = {}
+    def jacobian(q):  # residual = target - pred
         if th is None:
-            sp = p0[:, :2]
+            cols = floor_prediction_columns(q["R"][2], q["t"], spots_xy=p0[:, :2])
         else:
-            a1 = th[:, 0] + q["offsets"][0]
-            a2 = th[:, 1] + q["offsets"][1]
-            h = q["h"][0]
-            ta = np.tan(a2)
-            rho = h * ta
-            sp = np.column_stack([rho * np.sin(a1), rho * np.cos(a1)])
-            dsp_dh = np.column_stack([ta * np.sin(a1), ta * np.cos(a1)])
-            dsp_d1 = np.column_stack([rho * np.cos(a1), -rho * np.sin(a1)])
-            dsp_d2 = np.column_stack([h / np.cos(a2) ** 2 * np.sin(a1), h / np.cos(a2) ** 2 * np.cos(a1)])
-
-            def rot(v):
-                return np.column_stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1]])
-
-            out["h"] = -rot(dsp_dh).reshape(-1, 1)
-            out["offsets"] = -np.stack([rot(dsp_d1), rot(dsp_d2)], axis=-1).reshape(-1, 2)
-        d = sp - q["t"][:2]
-        dpred_dyaw = np.column_stack([-s * d[:, 0] + c * d[:, 1], -c * d[:, 0] - s * d[:, 1]])
-        JR = np.zeros((2 * n, 3))
-        JR[:, 2] = -dpred_dyaw.reshape(-1)
-        Jt = np.zeros((n, 2, 3))
-        Jt[:, 0, 0], Jt[:, 0, 1] = c, s
-        Jt[:, 1, 0], Jt[:, 1, 1] = -s, c
-        out["R"] = JR
-        out["t"] = Jt.reshape(-1, 3)
+            cols = floor_prediction_columns(q["R"][2], q["t"], theta=th, h=q["h"][0], offsets=q["offsets"])
+        out = {"R": np.zeros((2 * n, 3)), "t": np.zeros((2 * n, 3))}
+        out["R"][:, 2] = -cols["yaw"].reshape(-1)
+        out["t"][:, 0], out["t"][:, 1] = -cols["t_x"].reshape(-1), -cols["t_y"].reshape(-1)
+        if th is not None:
+            out["h"] = -cols["h"].reshape(-1, 1)
+            out["offsets"] = -np.stack([cols["pan_offset"], cols["tilt_offset"]], axis=-1).reshape(-1, 2)
         return out
 
     prob.add_residuals(residuals, name="floor", jacobian=jacobian, residual_dim=2,

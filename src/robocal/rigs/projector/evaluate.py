@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from robocal.errors import InputError, RobocalError
+from robocal.rigs.projector.calibrate import floor_prediction_columns
 from robocal.rigs.projector.model import NearSingularityWarning, ProjectorModel
 from robocal.rigs.projector.published import TABLE2_DESIRED, TABLE2_MEASURED_A, TABLE2_MEASURED_B
 from robocal.validation import check_array
@@ -156,29 +157,12 @@ def floor_prediction_jacobian(model: ProjectorModel, theta, labels=MAP_PARAMS) -
     ``p`` are the parameters named in ``labels`` (yaw, pan/tilt offsets in rad;
     ``t_x, t_y, h`` in m), evaluated at ``model`` (its yaw, ``t_0_W``, ``h = H -
     d1`` and offsets). The same derivatives as the residual Jacobian of
-    :func:`robocal.rigs.projector.calibrate.nonlinear`, with the opposite sign.
+    :func:`robocal.rigs.projector.calibrate.nonlinear`, with the opposite sign
+    (both from :func:`robocal.rigs.projector.calibrate.floor_prediction_columns`).
     """
     th = np.atleast_2d(np.asarray(theta, dtype=float))
     yaw = float(np.arctan2(model.R_0_W[1, 0], model.R_0_W[0, 0]))
-    c, s = np.cos(yaw), np.sin(yaw)
-    a1 = th[:, 0] + model.offsets[0]
-    a2 = th[:, 1] + model.offsets[1]
-    ta = np.tan(a2)
-    rho = model.h * ta
-    s1, c1 = np.sin(a1), np.cos(a1)
-    d = np.column_stack([rho * s1, rho * c1]) - model.t_0_W[:2]
-
-    def rot(v):  # Rz(-yaw) applied to floor vectors
-        return np.column_stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1]])
-
-    cols = {
-        "yaw": np.column_stack([-s * d[:, 0] + c * d[:, 1], -c * d[:, 0] - s * d[:, 1]]),
-        "t_x": np.tile([-c, s], (len(th), 1)),
-        "t_y": np.tile([-s, -c], (len(th), 1)),
-        "h": rot(np.column_stack([ta * s1, ta * c1])),
-        "pan_offset": rot(np.column_stack([rho * c1, -rho * s1])),
-        "tilt_offset": rot((model.h / np.cos(a2) ** 2)[:, None] * np.column_stack([s1, c1])),
-    }
+    cols = floor_prediction_columns(yaw, model.t_0_W, theta=th, h=model.h, offsets=model.offsets)
     unknown = [lab for lab in labels if lab not in cols]
     if unknown:
         raise InputError(f"labels: unknown parameter(s) {unknown} (known: {', '.join(MAP_PARAMS)})")
