@@ -140,8 +140,7 @@ def _clipped_variance(q, dims, m, rank, n_sigma, max_iter=20) -> float:
         return 0.0
     udims, which = np.unique(dims, return_inverse=True)
     t_u = np.array([outlier_threshold(n_sigma, int(d)) for d in udims])
-    # chi2.cdf(t, k) = P(k/2, t/2), the regularised lower incomplete gamma function
-    c_u = special.gammainc(udims / 2 + 1, t_u / 2) / special.gammainc(udims / 2, t_u / 2)
+    c_u = special.chdtr(udims + 2, t_u) / special.chdtr(udims, t_u)  # chi2.cdf, without scipy.stats
     t, c = t_u[which], c_u[which]
     inl = None
     for _ in range(max_iter):

@@ -403,7 +403,7 @@ def plausibility_warnings(body_points_r, T_r_c, body_residuals, sigma_px: float 
     dof = r.size - 6
     if sigma_px is not None and dof > 0:
         chi2 = float(np.sum(r**2) / sigma_px**2)
-        p = float(special.gammaincc(dof / 2.0, chi2 / 2.0))
+        p = float(special.chdtrc(dof, chi2))  # chi2.sf
         if p < CHI2_P_MIN:
             out.append(Diagnostic("inconsistent_data", f"{name}: body points fit worse than sigma_px = "
                                   f"{sigma_px:.3g} px allows: chi2 = {chi2:.4g} on {dof} dof (p = {p:.2g}); check "
@@ -793,9 +793,9 @@ def _consensus_choice(singles, camera, rectangle, body_points_r, obs_list, sigma
 
 def _consistency_warnings(camera, rectangle, P_all, singles, obs_list, T_r_c, sigma_px):
     """Flag images whose own estimate disagrees with the joint one beyond its predicted covariance."""
-    from scipy import special  # chi2.isf(p, 6) = 2 gammainccinv(3, p), without scipy.stats' 0.5 s import
+    from scipy import special  # chi2.isf = chdtri, without scipy.stats' 0.5 s import
 
-    limit = 2.0 * float(special.gammainccinv(3.0, 1e-3))
+    limit = float(special.chdtri(6, 1e-3))
     bad = []
     for k, (s, o) in enumerate(zip(singles, obs_list)):
         sig = sigma_px if sigma_px is not None else s.sigma_px
