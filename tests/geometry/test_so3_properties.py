@@ -264,3 +264,14 @@ def test_wrong_shapes_raise(fn, bad):
 def test_zero_quaternion_raises():
     with pytest.raises(DegenerateGeometryError, match="zero norm"):
         matrix_from_quaternion([0.0, 0.0, 0.0, 0.0])
+
+
+def test_wrap_angle_range_and_representative():
+    from robocal.geometry import wrap_angle
+
+    a = np.array([-np.pi, np.pi, 3 * np.pi, 4.0, -7.0, 0.0])
+    w = wrap_angle(a)
+    assert np.all((w > -np.pi) & (w <= np.pi)) and w[0] == w[1] == w[2] == np.pi
+    np.testing.assert_allclose(np.exp(1j * w), np.exp(1j * a), atol=1e-12)
+    ref = np.radians(270.0)
+    assert np.isclose(ref + wrap_angle(np.radians(-88.7) - ref), np.radians(271.3))  # near the reference

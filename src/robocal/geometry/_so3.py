@@ -37,6 +37,7 @@ __all__ = [
     "rotation_distance",
     "project_to_rotation",
     "small_rotation_update",
+    "wrap_angle",
 ]
 
 
@@ -239,3 +240,11 @@ def small_rotation_update(R, omega, *, left: bool = True) -> np.ndarray:
     """Apply a rotation-vector increment: ``exp([w]x) R`` (left) or ``R exp([w]x)``."""
     dR = matrix_from_rotvec(omega)
     return dR @ R if left else R @ dR
+
+
+def wrap_angle(a):
+    """Wrap angles (rad) to ``(-pi, pi]``, elementwise; ``ref + wrap_angle(a - ref)`` is the
+    representative of ``a`` within half a turn of ``ref``."""
+    a = np.asarray(a, dtype=float)
+    w = np.mod(a + np.pi, 2.0 * np.pi) - np.pi
+    return np.where(w == -np.pi, np.pi, w)

@@ -39,6 +39,7 @@ import numpy as np
 
 from robocal.diagnostics import Diagnostic
 from robocal.errors import InputError, NotEnoughDataError
+from robocal.geometry import wrap_angle
 from robocal.estimation import Problem, solve
 from robocal.rigs.flow.kernel_bias import displacement_bias
 from robocal.rigs.flow.model import SensorArray, rot2
@@ -198,6 +199,12 @@ class ArrayCalibration:
         return {k: {"R": "m", "psi": "rad", "phi": "rad", "scale": "1"}[k.split(".")[-1]] for k in self.estimate_dict()}
 
 
+def _near(ref, angles) -> np.ndarray:
+    """``angles`` (rad) wrapped to within half a turn of ``ref`` (270 deg stays 270, not -90)."""
+    ref = np.asarray(ref, dtype=float)
+    return ref + wrap_angle(np.asarray(angles, dtype=float) - ref)
+
+
 def _problem(M, dP, dth, names, x0s, keep):
     """The windowed model of the module doc over the windows ``keep[i]`` of each sensor."""
     prob = Problem()
@@ -301,7 +308,7 @@ def calibrate_array(steps: SensorSteps, t_ref, poses_ref, nominal: SensorArray, 
             reps = np.array(reps)
             d = reps - np.concatenate(x_full)[None, :]
             ang = np.array([lab.split(".")[1] in ("psi", "phi") for lab in labels])
-            d[:, ang] = np.angle(np.exp(1j * d[:, ang]))
+            d[:, ang] = wrap_angle(d[:, ang])
             d = d - d.mean(axis=0)
             sd = np.sqrt((G - 1) / G * np.sum(d**2, axis=0))
             std_jk = {lab: (None if lab in undetermined else float(sd[j])) for j, lab in enumerate(labels)}
@@ -329,12 +336,11 @@ def calibrate_array(steps: SensorSteps, t_ref, poses_ref, nominal: SensorArray, 
                 est_deb[nominal.names[nm]][k] = est[nominal.names[nm]][k]
                 continue
             d = est[nominal.names[nm]][k] - est_deb[nominal.names[nm]][k]
-            systematic[lab] = float(abs(np.angle(np.exp(1j * d)) if k in (1, 2) else d))
+            systematic[lab] = float(abs(wrap_angle(d) if k in (1, 2) else d))
     arr = nominal.copy(
         R=np.array([est[nm][0] for nm in nominal.names]),
-        # angles wrapped to within 180 deg of the nominal ones (270 stays 270, not -90)
-        psi=np.array([nominal.psi[i] + np.angle(np.exp(1j * (est[nm][1] - nominal.psi[i]))) for i, nm in enumerate(nominal.names)]),
-        phi=np.array([nominal.phi[i] + np.angle(np.exp(1j * (est[nm][2] - nominal.phi[i]))) for i, nm in enumerate(nominal.names)]),
+        psi=_near(nominal.psi, [est[nm][1] for nm in nominal.names]),
+        phi=_near(nominal.phi, [est[nm][2] for nm in nominal.names]),
         scale=np.array([est[nm][3] for nm in nominal.names]),
     )
     arr_deb = None
@@ -343,8 +349,8 @@ def calibrate_array(steps: SensorSteps, t_ref, poses_ref, nominal: SensorArray, 
     elif est_deb is not None:
         arr_deb = arr.copy(
             R=np.array([est_deb[nm][0] for nm in nominal.names]),
-            psi=np.array([arr.psi[i] + np.angle(np.exp(1j * (est_deb[nm][1] - arr.psi[i]))) for i, nm in enumerate(nominal.names)]),
-            phi=np.array([arr.phi[i] + np.angle(np.exp(1j * (est_deb[nm][2] - arr.phi[i]))) for i, nm in enumerate(nominal.names)]),
+            psi=_near(arr.psi, [est_deb[nm][1] for nm in nominal.names]),
+            phi=_near(arr.phi, [est_deb[nm][2] for nm in nominal.names]),
             scale=np.array([est_deb[nm][3] for nm in nominal.names]),
         )
     warnings = list(res.warnings)

@@ -11,6 +11,7 @@ import numpy as np
 from robocal.cli import DemoContext, DemoOutcome, Rig
 from robocal.cli._common import RawHelp, add_out_argument, add_seed_argument, examples_epilog, prepare_out_dir, progress, write_run
 from robocal.errors import InputError
+from robocal.geometry import wrap_angle
 from robocal.io import CalibrationResult, atomic_write_text
 from robocal.report import Report
 from robocal.rigs.flow.evaluate import evaluate_trajectory
@@ -365,7 +366,7 @@ def demo(ctx: DemoContext) -> DemoOutcome:
     hs = np.asarray(simA.height_scale)
     tot = cal.total_std()
     rows = [{"sensor": nm, "R err [mm]": (cal.array.R[i] - true.R[i]) * 1e3,
-             "psi err [deg]": np.degrees(np.angle(np.exp(1j * (cal.array.psi[i] - true.psi[i])))),
+             "psi err [deg]": np.degrees(wrap_angle(cal.array.psi[i] - true.psi[i])),
              "phi err [deg]": np.degrees(cal.array.phi[i] - true.phi[i]), "scale err [%]": (cal.array.scale[i] * hs[i] - 1) * 100,
              "R err / total std": (cal.array.R[i] - true.R[i]) / tot[f"{nm}.R"],
              "scale err / total std": (cal.array.scale[i] * hs[i] - 1) / hs[i] / tot[f"{nm}.scale"]}

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from robocal.errors import InputError, NotEnoughDataError
+from robocal.geometry import wrap_angle
 
 __all__ = ["TrajectoryErrors", "align_trajectory", "ate", "rpe_per_distance", "evaluate_trajectory", "plot_trajectories"]
 
@@ -148,7 +149,7 @@ def evaluate_trajectory(est, ref, *, lengths=(0.25, 0.5, 1.0)) -> TrajectoryErro
     a, al, _, method = ate(est, ref)
     dist = float(np.sum(np.linalg.norm(np.diff(ref[:, :2], axis=0), axis=1)))
     fe = float(np.linalg.norm(est[-1, :2] - ref[-1, :2]))
-    he = float(np.angle(np.exp(1j * (est[-1, 2] - ref[-1, 2]))))
+    he = float(wrap_angle(est[-1, 2] - ref[-1, 2]))
     return TrajectoryErrors(a, fe, he, rpe_per_distance(est, ref, lengths), al, method, dist)
 
 

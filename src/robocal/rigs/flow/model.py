@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from robocal.errors import DegenerateGeometryError, InputError, NotEnoughDataError
+from robocal.geometry import wrap_angle
 from robocal.validation import check_array
 
 __all__ = ["SensorArray", "seed_array", "rot2", "se2_exp", "se2_log", "integrate_twists", "relative_twists"]
@@ -210,5 +211,5 @@ def relative_twists(poses):
     p = np.asarray(poses, float)
     d = p[1:, :2] - p[:-1, :2]
     c, s = np.cos(p[:-1, 2]), np.sin(p[:-1, 2])
-    rel = np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], np.angle(np.exp(1j * (p[1:, 2] - p[:-1, 2])))], 1)
+    rel = np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], wrap_angle(p[1:, 2] - p[:-1, 2])], 1)
     return se2_log(rel)

@@ -35,6 +35,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from robocal.errors import InputError, SingularConfigurationError
+from robocal.geometry import wrap_angle  # re-exported: part of this module's API
 from robocal.kinematics import DHChain
 from robocal.validation import check_array, check_rotation_matrix
 
@@ -63,13 +64,6 @@ class NearSingularityWarning(UserWarning):
 
 class UnreachablePointError(InputError):
     """A floor point lies outside the projector's reachable disc (tilt limit)."""
-
-
-def wrap_angle(a):
-    """Wrap angles to ``(-pi, pi]``."""
-    a = np.asarray(a, dtype=float)
-    w = np.mod(a + np.pi, 2.0 * np.pi) - np.pi
-    return np.where(w == -np.pi, np.pi, w)
 
 
 def _first(mask) -> tuple:
