@@ -149,6 +149,8 @@ def _points(points, dims: tuple[int, ...], min_count: int, what: str, *, batched
         raise ShapeError(f"points must have shape {want}, got {tuple(arr.shape)}")
     if arr.shape[-2] < min_count:
         raise NotEnoughDataError(f"{what} needs at least {min_count} points, got {arr.shape[-2]}")
+    if arr.size == 0:
+        raise NotEnoughDataError(f"{what} got an empty batch of point sets, shape {tuple(arr.shape)}")
     return arr
 
 
