@@ -71,7 +71,7 @@ def test_demo_reports_failed_checks(tmp_path):
 def test_user_error_is_one_line_exit_2(tmp_path, capsys, monkeypatch):
     import robocal.cli.main as m
 
-    monkeypatch.setattr(m, "discover_rigs", lambda: [_toy_rig()])
+    monkeypatch.setattr(m, "discover_rigs", lambda names=None: [_toy_rig()])
     code = main(["toy", "calibrate", "in.yaml"])
     err = capsys.readouterr().err
     assert code == 2
@@ -107,7 +107,7 @@ def test_help_shows_only_meaningful_defaults(capsys):
 def test_out_that_is_a_file_or_cannot_be_made_is_one_line_exit_2(tmp_path, capsys, monkeypatch):
     import robocal.cli.main as m
 
-    monkeypatch.setattr(m, "discover_rigs", lambda: [_toy_rig()])
+    monkeypatch.setattr(m, "discover_rigs", lambda names=None: [_toy_rig()])
     afile = tmp_path / "f"
     afile.write_text("")
     for out in (afile, afile / "sub"):
@@ -127,7 +127,7 @@ def test_library_error_is_prefixed_with_the_input_file(capsys, monkeypatch):
         c.add_argument("input")
         c.set_defaults(func=lambda a: (_ for _ in ()).throw(InputError("points 0 and 1 coincide")))
 
-    monkeypatch.setattr(m, "discover_rigs", lambda: [Rig("toy", "t", "t", add_commands, rig.demo)])
+    monkeypatch.setattr(m, "discover_rigs", lambda names=None: [Rig("toy", "t", "t", add_commands, rig.demo)])
     assert main(["toy", "calibrate", "in.yaml"]) == 2
     assert capsys.readouterr().err == "robocal: error: in.yaml: points 0 and 1 coincide\n"
 
@@ -135,7 +135,7 @@ def test_library_error_is_prefixed_with_the_input_file(capsys, monkeypatch):
 def test_usage_error_in_a_rig_subcommand_is_one_line_exit_2(capsys, monkeypatch):
     import robocal.cli.main as m
 
-    monkeypatch.setattr(m, "discover_rigs", lambda: [_toy_rig()])
+    monkeypatch.setattr(m, "discover_rigs", lambda names=None: [_toy_rig()])
     with pytest.raises(SystemExit) as e:
         main(["toy", "calibrate"])  # missing INPUT: argparse's error, through the sub-parsers
     assert e.value.code == 2
@@ -147,7 +147,7 @@ def test_usage_error_in_a_rig_subcommand_is_one_line_exit_2(capsys, monkeypatch)
 def test_results_record_the_cli_command_and_api_results_none(tmp_path, monkeypatch):
     import robocal.cli.main as m
 
-    monkeypatch.setattr(m, "discover_rigs", lambda: [_toy_rig()])
+    monkeypatch.setattr(m, "discover_rigs", lambda names=None: [_toy_rig()])
     assert main(["demo", "--out", str(tmp_path / "d d"), "--no-progress"]) == 0
     res = json.loads((tmp_path / "d d" / "toy" / "result.json").read_text())
     assert res["command"] == f"robocal demo --out '{tmp_path / 'd d'}' --no-progress"  # quoted, re-runnable
@@ -167,3 +167,19 @@ def test_a_rig_that_fails_to_import_is_skipped_with_a_warning(capsys, monkeypatc
     assert [x.name for x in rigs] == ["projector"]
     err = capsys.readouterr().err
     assert err.startswith("robocal: warning: rig 'broken' could not be loaded (") and err.count("\n") == 1
+
+
+def test_a_rig_command_loads_only_that_rig(monkeypatch, capsys):
+    import robocal.cli.main as m
+
+    asked = []
+    real = m.discover_rigs
+    monkeypatch.setattr(m, "discover_rigs", lambda names=None: asked.append(names) or real(names))
+    with pytest.raises(SystemExit):
+        main(["projector", "--help"])
+    assert asked == [["projector"]]
+    assert "calibrate" in capsys.readouterr().out
+    # anything else (the top-level help, demo, a misspelt rig) loads every rig
+    assert m._invoked_rig(["--help"]) is None and m._invoked_rig(["demo"]) is None
+    assert m._invoked_rig(["projektor", "calibrate"]) is None
+    assert m._invoked_rig(["-h", "flow"]) == ["flow"]

@@ -16,7 +16,7 @@ import numpy as np
 
 import robocal
 from robocal.cli._common import OneLineErrorParser, RawHelp, examples_epilog, prepare_out_dir
-from robocal.cli._rig import DemoContext, discover_rigs
+from robocal.cli._rig import DemoContext, discover_rigs, registered_rig_names
 from robocal.errors import InputError, RobocalError
 from robocal.io import set_command_line, write_result
 from robocal.report import Report
@@ -139,6 +139,16 @@ def _print_table(rows) -> None:
         print(f"{r['rig']:{w_rig}s}  {r['status']:{w_st}s}  {r['time [s]']:6.1f}s  {r['figures']}")
 
 
+def _invoked_rig(argv) -> list[str] | None:
+    """``[name]`` when the command is a registered rig, else None (load every rig).
+
+    The top-level options (``-h``, ``--version``) take no value, so the first
+    word not starting with ``-`` is the command.
+    """
+    command = next((a for a in argv if not a.startswith("-")), None)
+    return [command] if command in registered_rig_names() else None
+
+
 def main(argv=None) -> int:
     args = None
     argv = sys.argv[1:] if argv is None else list(argv)
@@ -147,7 +157,7 @@ def main(argv=None) -> int:
         return 0
     set_command_line(argv)
     try:
-        parser = build_parser()
+        parser = build_parser(discover_rigs(_invoked_rig(argv)))
         args = parser.parse_args(argv)
         if getattr(args, "func", None) is None:
             parser.print_help()
