@@ -31,7 +31,7 @@ def test_rotation_and_transform_checks():
 def test_nonfinite_and_nonnumeric():
     with pytest.raises(NonFiniteError, match=r"x contains NaN or infinity \(first at index \(1,\)\)"):
         check_array([1.0, np.nan], "x")
-    with pytest.raises(InputError, match="must be numeric"):
+    with pytest.raises(InputError, match=r"x must contain numbers only, got a string \('a'\) at index \(0,\)"):
         check_array(["a"], "x")
     with pytest.raises(InputError, match="must be > 0"):
         check_positive([1.0, 0.0], "h")
@@ -82,6 +82,24 @@ def test_booleans_are_not_numbers(x, message):
     assert str(info.value) == message
     with pytest.raises(InputError, match="boolean"):
         check_positive(x, "x")
+
+
+@pytest.mark.parametrize(
+    "x, message",
+    [
+        ("2.9", "x must be a number, got a string ('2.9')"),
+        (np.str_("1e3"), "x must be a number, got a string ('1e3')"),
+        ([1.0, "2"], "x must contain numbers only, got a string ('2') at index (1,)"),
+        ([[1.0, 2.0], (3.0, b"4")], "x must contain numbers only, got a string ('4') at index (1, 1)"),
+        (np.array(["1.0", "2.0"]), "x must be numeric, got an array of strings (dtype <U3)"),
+    ],
+)
+def test_strings_are_not_numbers(x, message):
+    # A quoted "2.9" from a file must not become 2.9 by numpy's string parsing.
+    with pytest.raises(InputError) as info:
+        check_array(x, "x")
+    assert str(info.value) == message
+    assert check_array(x, "x", dtype=object) is not None  # a non-numeric target dtype is not refused
 
 
 def test_boolean_arrays_and_numbers_still_convert():

@@ -33,6 +33,15 @@ def _bool_text(v) -> str:
     return "true" if v else "false"
 
 
+def _is_text(v) -> bool:
+    return isinstance(v, (str, bytes))  # np.str_ / np.bytes_ are subclasses
+
+
+def _text(v) -> str:
+    """``v`` as a plain ``str`` (for messages: no ``np.str_(...)`` or ``b'...'`` wrapper)."""
+    return v.decode("utf-8", "replace") if isinstance(v, bytes) else str(v)
+
+
 def _first_leaf(x, match) -> tuple[int, ...] | None:
     """Index of the first leaf of nested lists/tuples ``x`` for which ``match(leaf)`` is true.
 
@@ -100,16 +109,21 @@ def check_array(
     Booleans (``True``, ``np.True_``, or inside lists) are not numbers and are
     rejected when ``dtype`` is numeric: a YAML ``true`` must not become 1.0.
     A boolean *ndarray* is an explicit mask and is converted as numpy does.
+    Text is not a number either: ``"2.9"`` (alone, inside lists, or as a
+    string ndarray) is rejected rather than parsed.
     """
-    if np.issubdtype(dtype, np.number) and (isinstance(x, (list, tuple)) or _is_bool(x)):
-        where = _first_leaf(x, _is_bool)
-        if where == ():
-            raise InputError(f"{name} must be a number, got a boolean ({_bool_text(x)})")
+    if np.issubdtype(dtype, np.number) and (isinstance(x, (list, tuple)) or _is_bool(x) or _is_text(x)):
+        where = _first_leaf(x, lambda v: _is_bool(v) or _is_text(v))
         if where is not None:
             leaf = x
             for i in where:
                 leaf = leaf[i]
-            raise InputError(f"{name} must contain numbers only, got a boolean ({_bool_text(leaf)}) at index {where}")
+            got = f"a boolean ({_bool_text(leaf)})" if _is_bool(leaf) else f"a string ({_text(leaf)!r})"
+            if where == ():
+                raise InputError(f"{name} must be a number, got {got}")
+            raise InputError(f"{name} must contain numbers only, got {got} at index {where}")
+    if np.issubdtype(dtype, np.number) and isinstance(x, np.ndarray) and x.dtype.kind in "US":
+        raise InputError(f"{name} must be numeric, got an array of strings (dtype {x.dtype})")
     try:
         arr = np.asarray(x, dtype=dtype)
     except (TypeError, ValueError, OverflowError) as exc:

@@ -174,6 +174,110 @@ def test_booleans_are_not_numbers(suffix, text, match):
         doc.array("H")
 
 
+@pytest.mark.parametrize(
+    "suffix, text, match",
+    [
+        (".yaml", 'units: {length: m}\nH: "2.9"\n', r"^x.yaml: field 'H': is a quoted string \('2.9'\), expected a number$"),
+        (".yaml", "units: {length: m}\nH: '1e3'\n", r"^x.yaml: field 'H': is a quoted string \('1e3'\), expected a number$"),
+        (".yaml", 'H: {value: "2.9", unit: m}\n', r"^x.yaml: field 'H': is a quoted string \('2.9'\), expected a number$"),
+        (".yaml", 'units: {length: m}\nH: [[1, 2], [3, "4"]]\n',
+         r"^x.yaml: field 'H': contains a quoted string \('4'\) at index \(1, 1\), expected a number$"),
+        (".json", '{"units": {"length": "m"}, "H": "2.9"}', r"^x.json: field 'H': is a quoted string \('2.9'\), expected a number$"),
+        (".json", '{"units": {"length": "m"}, "H": [1.0, "-0.5"]}',
+         r"^x.json: field 'H': contains a quoted string \('-0.5'\) at index \(1,\), expected a number$"),
+        (".yaml", "units: {length: m}\nH: tall\n", r"^x.yaml: field 'H': is a string \('tall'\), expected a number$"),
+        (".yaml", "units: {length: m}\nH: [1, nan]\n",
+         r"^x.yaml: field 'H': contains a string \('nan'; YAML spells these \.nan, \.inf, -\.inf\) at index \(1,\), expected a number$"),
+    ],
+)
+def test_quoted_numbers_are_not_numbers(suffix, text, match):
+    """A quoted "2.9" is text: refused in one line naming file and field, never parsed."""
+    doc = parse_document(text, suffix=suffix, source=f"x{suffix}")
+    with pytest.raises(FileFormatError, match=match) as info:
+        doc.array("H", kind="length")
+    assert "\n" not in str(info.value)
+    with pytest.raises(FileFormatError, match="string"):
+        doc.array("H")  # also without a kind
+    with pytest.raises(FileFormatError, match="string"):
+        doc.float("H", kind="length")
+
+
+def test_quoted_integer_and_sub_document_fields_are_named():
+    doc = parse_document('rig:\n  count: "3"\n  items: [{x: "0.1"}]\n', source="x.yaml")
+    with pytest.raises(FileFormatError, match=r"x.yaml: field 'rig.count': is a quoted string \('3'\), expected an integer"):
+        doc.sub("rig").int("count")
+    with pytest.raises(FileFormatError, match=r"x.yaml: field 'rig.items\[0\].x': is a quoted string \('0.1'\)"):
+        doc.sub("rig").items_list("items")[0].float("x")
+
+
+@pytest.mark.parametrize("text, value", [("1e3", 1e3), ("2E-3", 2e-3), ("1.0e3", 1e3), ("-.5e+2", -50.0), ("1_000e-3", 1.0),
+                                         ("1.5", 1.5), ("0x10", 16.0), (".inf", np.inf)])
+def test_unquoted_numbers_in_any_yaml_notation_are_numbers(text, value):
+    # YAML 1.1 (PyYAML) would read '1e3' and '1.0e3' as text; written unquoted they are numbers
+    doc = parse_document(f"H: {text}\n", source="x.yaml")
+    assert doc.array("H", finite=False) == value
+    assert parse_document(f'H: "{text}"\n').raw("H") == text  # quoted stays text
+
+
+@pytest.mark.parametrize(
+    "quantity, match",
+    [
+        ("{value: 2.9, unit: m, sigma: 0.1}",
+         r"^x.yaml: field 'H': unknown key 'sigma' in a quantity mapping \(allowed: value, unit\)$"),
+        ("{value: 2.9, units: m}",
+         r"^x.yaml: field 'H': unknown key 'units' in a quantity mapping \(allowed: value, unit\); did you mean 'unit'\?$"),
+        ("{valeu: 2.9, unit: m}", r"unknown key 'valeu' .*did you mean 'value'\?$"),
+        ("{value: 2.9, unit: m, std: 0.1, note: x}", r"unknown keys 'std', 'note' in a quantity mapping \(allowed: value, unit\)$"),
+    ],
+)
+def test_unknown_keys_in_a_quantity_mapping_are_refused(quantity, match):
+    doc = parse_document(f"H: {quantity}\nP: [{quantity}]\n", source="x.yaml")
+    with pytest.raises(FileFormatError, match=match):
+        doc.float("H", kind="length")
+    with pytest.raises(FileFormatError, match="unknown key"):
+        doc.array("H")  # kind or not
+    with pytest.raises(FileFormatError, match=r"field 'rig.H': unknown key"):
+        parse_document(f"rig: {{H: {quantity}}}\n", source="x.yaml").sub("rig").float("H", kind="length")
+
+
+_finite = st.floats(allow_nan=False, allow_infinity=False)
+
+
+@settings(max_examples=150, deadline=None)
+@given(_finite, st.sampled_from(["yaml-repr", "yaml-dump", "json"]))
+def test_property_a_number_written_as_a_number_reads_back_exactly_and_quoted_is_refused(v, how):
+    if how == "yaml-repr":
+        number, quoted, suffix = f"H: {v!r}\n", f'H: "{v!r}"\n', ".yaml"
+    elif how == "yaml-dump":
+        number, quoted, suffix = yaml.safe_dump({"H": v}), f"H: '{v}'\n", ".yaml"
+    else:
+        number, quoted, suffix = json.dumps({"H": v}), json.dumps({"H": repr(v)}), ".json"
+    assert parse_document(number, suffix=suffix).float("H") == v
+    with pytest.raises(FileFormatError, match=r"field 'H': is a quoted string \('.*'\), expected a number"):
+        parse_document(quoted, suffix=suffix, source=f"x{suffix}").float("H")
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(_finite, min_size=1, max_size=6), st.data())
+def test_property_one_quoted_entry_is_named_by_its_index(values, data):
+    i = data.draw(st.integers(0, len(values) - 1))
+    raw = list(values)
+    raw[i] = repr(values[i])
+    doc = parse_document(json.dumps({"P": raw}), suffix=".json", source="x.json")
+    with pytest.raises(FileFormatError, match=rf"x.json: field 'P': contains a quoted string .* at index \({i},\)"):
+        doc.array("P")
+    np.testing.assert_array_equal(parse_document(json.dumps({"P": values}), suffix=".json").array("P"), values)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.text(min_size=1, max_size=8).filter(lambda k: k not in ("value", "unit")), st.sampled_from([0.1, "m", None, [1]]))
+def test_property_any_extra_quantity_key_is_named(key, extra):
+    doc = parse_document(json.dumps({"H": {"value": 2.9, "unit": "m", key: extra}}), suffix=".json", source="x.json")
+    with pytest.raises(FileFormatError, match=r"field 'H': unknown key") as info:
+        doc.float("H", kind="length")
+    assert repr(key) in str(info.value) and "(allowed: value, unit)" in str(info.value)
+
+
 def test_null_is_reported_as_empty_not_as_nan():
     doc = parse_document("units: {length: m}\nH: null\nP: [[1, 2], [3, null]]\nQ: {value: null, unit: m}\n", source="x.yaml")
     with pytest.raises(FileFormatError, match=r"x.yaml: field 'H': is empty \(null\), expected a number"):
@@ -287,8 +391,11 @@ def _exercise(doc):
             continue
         assert np.all(np.isfinite(arr))
         raw = doc.raw(key)
+        if isinstance(raw, dict):
+            assert set(raw) <= {"value", "unit"}  # no key of a quantity mapping is silently ignored
         value = raw["value"] if isinstance(raw, dict) else raw
         assert not _has(value, lambda v: isinstance(v, bool))
+        assert not _has(value, lambda v: isinstance(v, str))  # nor was a number read from text
     try:
         pts = doc.array("points", kind="length", shape=("N", 3))
     except RobocalError:

@@ -233,6 +233,24 @@ def test_bad_construction_raises_named_errors():
         DHChain([])
 
 
+def test_convention_and_frames_are_keyword_only():
+    """STYLE: convention flags are keyword-only, so 'standard' can never land in T_base's slot by position."""
+    links = [DHLink(0.3, 0.1, 0.2, 0.05), DHLink(-0.4, 0.2, 0.0, 0.1, joint="prismatic")]
+    with pytest.raises(TypeError):
+        DHChain(links, "standard")
+    with pytest.raises(TypeError):
+        DHChain(links, "modified", np.eye(4))
+    std = DHChain(links, convention="standard", T_base=transform_from(rotz(0.3), [1.0, 0.0, 0.0]))
+    mod = DHChain(links, convention="modified")
+    assert "standard" in repr(std) and "modified" in repr(DHChain(links))
+    q = np.array([0.4, 0.02])
+    assert not np.allclose(std.fk(q), mod.fk(q))
+    # with_params keeps the convention and the base (it re-calls the constructor by keyword)
+    np.testing.assert_allclose(std.with_params(std.params).fk(q), std.fk(q), atol=1e-14)
+    with pytest.raises(InputError, match="convention must be 'modified' or 'standard', got 'craig'"):
+        DHChain(links, convention="craig")
+
+
 def test_within_limits():
     chain = DHChain.from_table([[0, 0, 0, 0], [0, 0.1, 0, 0]], limits=[(-1, 1), None])
     q = np.array([[0.5, 9.0], [1.5, 0.0], [-1.0, -9.0]])

@@ -7,20 +7,47 @@ term and observation it came from, and never reaches the solver.
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
+import scipy
 import scipy.sparse as sp
 
-# SciPy's finite-difference engine (the one least_squares itself uses, with
-# bound handling and column grouping for sparse Jacobians). It is private but
-# has kept this signature since SciPy 0.17; we call it ourselves so that every
-# Jacobian evaluation passes through one place, which is how the cost of each
-# accepted iterate is recorded for every method (see _solve.py).
-from scipy.optimize._numdiff import approx_derivative, group_columns
-
 from robocal.errors import InputError, NonFiniteError, ShapeError
+
+# SciPy's finite-difference engine (the one least_squares itself uses, with
+# bound handling, one-sided steps at bounds and column grouping for sparse
+# Jacobians). It is *private* API, kept here on purpose: we call it ourselves so
+# that every Jacobian evaluation passes through one place, which is how the cost
+# of each accepted iterate is recorded for every method (see _solve.py), and a
+# hand-written copy of its bounds and grouping logic would be more code to get
+# wrong than the risk it removes. Its signature has been stable since SciPy 0.17.
+# The import is guarded: if a SciPy release moves or changes it, analytic
+# Jacobians keep working and asking for finite differences raises an ImportError
+# that says what is missing and what to do (tests/estimation/test_estimation_numdiff.py
+# checks the names and keywords used here against the installed SciPy).
+_NUMDIFF_KEYWORDS = ("method", "rel_step", "f0", "bounds", "sparsity")
+try:
+    from scipy.optimize._numdiff import approx_derivative, group_columns
+except ImportError as _exc:  # pragma: no cover - depends on the installed SciPy
+    approx_derivative = group_columns = None
+    _NUMDIFF_PROBLEM: str | None = f"cannot import it ({_exc})"
+else:
+    _missing_kw = [k for k in _NUMDIFF_KEYWORDS if k not in inspect.signature(approx_derivative).parameters]
+    _NUMDIFF_PROBLEM = f"its signature lacks the keyword(s) {', '.join(_missing_kw)}" if _missing_kw else None
+
+
+def _require_numdiff(jac: str) -> None:
+    """Raise a clear ImportError if SciPy's private finite-difference engine is unusable."""
+    if _NUMDIFF_PROBLEM is not None:
+        raise ImportError(
+            f"jac={jac!r} (finite differences) uses scipy.optimize._numdiff.approx_derivative, a private "
+            f"SciPy function, and with SciPy {scipy.__version__} {_NUMDIFF_PROBLEM}. Give every residual "
+            f"term an analytic jacobian (jac='analytic'), or install a SciPy robocal is tested with "
+            f"(see pyproject.toml)."
+        )
 
 __all__ = ["Evaluator", "TermInfo", "JAC_METHODS"]
 
@@ -86,6 +113,8 @@ class Evaluator:
             raise InputError(f"jac must be one of {', '.join(JAC_METHODS)}, got {jac!r}")
         if jac == "analytic" and missing:
             raise InputError(f"jac='analytic' but residual term(s) {', '.join(missing)} have no jacobian")
+        if jac != "analytic":
+            _require_numdiff(jac)
         self.jac_mode = jac
         self.sparse = bool(sparse)
         self.diff_step = diff_step

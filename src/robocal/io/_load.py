@@ -2,7 +2,14 @@
 
 Every error names the file and the field at fault, e.g.
 ``room.yaml: field 'points.world': must have shape (N, 2), got (3,)``.
-YAML is read with ``yaml.safe_load`` only (no object construction).
+YAML is read with PyYAML's ``SafeLoader`` only (no object construction),
+extended so that an unquoted ``1e-3`` is a number as in YAML 1.2 (YAML 1.1
+reads a float without a dot as text).
+
+Numbers must be written as numbers: a quoted ``"2.9"`` is text, and reading it
+where a number is expected is an error, as is a boolean or ``null``. A
+quantity mapping holds exactly ``value`` and ``unit``: any other key (a typo
+such as ``units:``, or an unsupported ``sigma:``) is an error, not ignored.
 
 Quantities carry units in the file, in one of two forms::
 
@@ -23,8 +30,10 @@ mark (Excel's "CSV UTF-8"); errors name the data row and the file line.
 from __future__ import annotations
 
 import csv
+import difflib
 import json
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -56,12 +65,53 @@ def _read_text(path: Path, source: str) -> str:
         raise FileFormatError(f"cannot read file ({exc})", source=source) from None
 
 
+class _SafeLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that also resolves YAML 1.2 floats without a dot.
+
+    YAML 1.1 (PyYAML) reads ``1e-3`` and ``2E5`` as *strings*; with the
+    string-versus-number check in :meth:`Document.array` that would refuse an
+    unquoted number. Quoted scalars never go through implicit resolvers, so
+    ``"1e-3"`` stays a string. No other tag is added: this loader constructs
+    only plain Python data, like ``yaml.safe_load``.
+    """
+
+
+_SafeLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9][0-9_]*)[eE][-+]?[0-9]+$"),
+    list("-+.0123456789"),
+)
+
+#: keys allowed in an inline quantity mapping ``{value: ..., unit: ...}``
+_QUANTITY_KEYS = ("value", "unit")
+
+
+def _is_text(v) -> bool:
+    return isinstance(v, (str, bytes))
+
+
+def _describe_text(v) -> str:
+    """``"a quoted string ('2.9')"`` for number-like text, ``"a string ('abc')"`` otherwise.
+
+    ``nan`` / ``inf`` are text even unquoted in YAML (which spells them
+    ``.nan`` / ``.inf``), so they get that hint instead of "quoted".
+    """
+    text = v.decode("utf-8", "replace") if isinstance(v, bytes) else v
+    if text.strip().lower().lstrip("+-") in ("nan", "inf", "infinity"):
+        return f"a string ({text!r}; YAML spells these .nan, .inf, -.inf)"
+    try:
+        float(text)
+    except ValueError:
+        return f"a string ({text!r})"
+    return f"a quoted string ({text!r})"
+
+
 def _parse_text(text: str, suffix: str, source: str) -> Any:
     text = text.removeprefix("\ufeff")
     try:
         if suffix == ".json":
             return json.loads(text)
-        return yaml.safe_load(text)
+        return yaml.load(text, Loader=_SafeLoader)  # noqa: S506 - a SafeLoader subclass
     except json.JSONDecodeError as exc:
         raise FileFormatError(f"invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}", source=source) from None
     except yaml.YAMLError as exc:
@@ -170,6 +220,15 @@ class Document:
 
     def _unit_for(self, key: str, kind: str | None, value):
         if isinstance(value, dict):
+            extra = [k for k in value if k not in _QUANTITY_KEYS]
+            if extra:
+                names = ", ".join(repr(k) for k in extra)
+                hints = [h for k in extra if isinstance(k, str) for h in difflib.get_close_matches(k, _QUANTITY_KEYS, n=1)]
+                hint = f"; did you mean {hints[0]!r}?" if len(extra) == 1 and hints else ""
+                raise self.error(
+                    key, f"unknown key{'s' if len(extra) > 1 else ''} {names} in a quantity mapping "
+                    f"(allowed: {', '.join(_QUANTITY_KEYS)}){hint}"
+                )
             if "value" not in value:
                 raise self.error(key, "a quantity mapping needs 'value' and 'unit'")
             unit = value.get("unit")
@@ -195,7 +254,10 @@ class Document:
             Reject NaN, infinity and ``null``; with ``finite=False`` a ``null``
             reads as NaN (JSON has no NaN).
 
-        Booleans are not numbers: ``true`` where a number is expected is an error.
+        Booleans are not numbers: ``true`` where a number is expected is an
+        error. Nor is text: ``"2.9"`` (a quoted string) is refused with a
+        message naming the field and the index of the string.
+        An inline quantity mapping may hold only ``value`` and ``unit``.
         """
         if key not in self.data and default is not _MISSING:
             return default
@@ -210,6 +272,14 @@ class Document:
                 raise self.error(key, f"is empty (null), expected {want}")
             if where is not None:
                 raise self.error(key, f"contains an empty value (null) at index {where}, expected numbers")
+        where = _first_leaf(value, _is_text)
+        if where == ():
+            raise self.error(key, f"is {_describe_text(value)}, expected a number", FileFormatError)
+        if where is not None:
+            leaf = value
+            for i in where:
+                leaf = leaf[i]
+            raise self.error(key, f"contains {_describe_text(leaf)} at index {where}, expected a number", FileFormatError)
         try:
             arr = check_array(value, "value", shape=shape, finite=finite)
             if shape is not None and arr.ndim != len(shape):
@@ -249,6 +319,8 @@ class Document:
 
     def int(self, key: str, *, default=_MISSING, minimum: int | None = None) -> int:
         val = self.raw(key, default)
+        if _is_text(val):
+            raise self.error(key, f"is {_describe_text(val)}, expected an integer")
         if isinstance(val, bool) or not isinstance(val, int):
             raise self.error(key, f"must be an integer, got {val!r}")
         if minimum is not None and val < minimum:

@@ -123,12 +123,14 @@ class DHChain:
     Parameters
     ----------
     links : sequence of DHLink
-    convention : {'modified', 'standard'}
-    T_base : array_like, shape (4, 4), optional
+    convention : {'modified', 'standard'}, keyword-only
+        D-H convention of the table (default ``'modified'``, Craig's proximal
+        form); keyword-only so a call reads ``DHChain(links, convention="standard")``.
+    T_base : array_like, shape (4, 4), optional, keyword-only
         ``T_world_0``: pose of the chain's frame 0 in the world (base) frame.
-    T_tool : array_like, shape (4, 4), optional
+    T_tool : array_like, shape (4, 4), optional, keyword-only
         ``T_n_tool``: tool frame in the last link frame.
-    base_params, tool_params : bool
+    base_params, tool_params : bool, keyword-only
         Add ``T_base`` / ``T_tool`` as six calibration parameters each
         (``x, y, z, roll, pitch, yaw`` with URDF's ``Trans(xyz) Rz Ry Rx``)
         to :attr:`params`.
@@ -147,10 +149,10 @@ class DHChain:
     def __init__(
         self,
         links: Sequence[DHLink],
+        *,
         convention: str = "modified",
         T_base=None,
         T_tool=None,
-        *,
         base_params: bool = False,
         tool_params: bool = False,
     ):
@@ -211,7 +213,8 @@ class DHChain:
                    limits=None if limits is None else limits[i])
             for i in range(n)
         ]
-        return cls(links, convention, T_base, T_tool, base_params=base_params, tool_params=tool_params)
+        return cls(links, convention=convention, T_base=T_base, T_tool=T_tool, base_params=base_params,
+                   tool_params=tool_params)
 
     # -- description -------------------------------------------------------------------
     @property
@@ -309,7 +312,7 @@ class DHChain:
             m += 6
         if self._tool_params:
             T_tool = transform_from_xyz_rpy(p[m:m + 3], p[m + 3:m + 6])
-        return DHChain(links, self._convention, T_base, T_tool,
+        return DHChain(links, convention=self._convention, T_base=T_base, T_tool=T_tool,
                        base_params=self._base_params, tool_params=self._tool_params)
 
     def __repr__(self) -> str:

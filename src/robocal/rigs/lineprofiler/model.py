@@ -47,7 +47,7 @@ def p1r2p3_chain(a2: float = 0.10, *, convention: str = "modified") -> DHChain:
             DHLink(0.0, 0.0, 0.0, 0.0, joint="revolute", name="R2", limits=(-np.pi, np.pi)),
             DHLink(-np.pi / 2, a2, 0.0, 0.0, joint="prismatic", name="P3", limits=(0.0, 0.3)),
         ],
-        convention,
+        convention=convention,
     )
 
 
