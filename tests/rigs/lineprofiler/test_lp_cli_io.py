@@ -11,7 +11,13 @@ from robocal.cli.main import main
 from robocal.errors import FileFormatError, InputError
 from robocal.geometry import matrix_from_rotvec, transform_from
 from robocal.rigs.lineprofiler.cli import HANDEYE, RIG
-from robocal.rigs.lineprofiler.io import interpolate_poses, load_poses, load_profiles_csv, write_poses_csv
+from robocal.rigs.lineprofiler.io import (
+    interpolate_poses,
+    load_block_faces_csv,
+    load_poses,
+    load_profiles_csv,
+    write_poses_csv,
+)
 
 EX = Path(__file__).resolve().parents[3] / "examples" / "lineprofiler"
 
@@ -68,6 +74,26 @@ def test_profiles_csv_round_trip_and_errors(tmp_path):
         load_profiles_csv(f)
 
 
+def test_csv_errors_name_the_file_line(tmp_path):
+    """Comments and blank lines before the data: messages name the file line, not the data row."""
+    head = "# exported by the tracker\n\n"
+    f = tmp_path / "faces.csv"
+    f.write_text(head + "face, x [mm], y [mm], z [mm]\n0, 1, 2, 3\n# probe re-seated\n4, 1, 2, 3\n")
+    with pytest.raises(FileFormatError, match=r"row 2 \(line 6\): column 'face' must be 0, 1 or 2"):
+        load_block_faces_csv(f)
+    f = tmp_path / "poses.csv"
+    f.write_text(head + "x [m], y [m], z [m], qx, qy, qz, qw\n0, 0, 0, 0, 0, 0, 1\n0, 0, 0, 0, 0, 0.5, 0.5\n")
+    with pytest.raises(FileFormatError, match=r"row 2 \(line 5\): quaternion"):
+        load_poses(f)
+    f = tmp_path / "prof.csv"
+    f.write_text(head + "profile, x [mm], z [mm], q1 [mm]\n0, 1, 2, 3\n\n0, 1, 2, 4\n-1, 1, 2, 4\n")
+    with pytest.raises(FileFormatError, match=r"row 3 \(line 7\): column 'profile'"):
+        load_profiles_csv(f)
+    f.write_text(head + "profile, x [mm], z [mm], q1 [mm]\n0, 1, 2, 3\n\n0, 1, 2, 4\n")
+    with pytest.raises(FileFormatError, match=r"row 2 \(line 6\) against its first, row 1 \(line 4\)"):
+        load_profiles_csv(f)
+
+
 def test_slerp_interpolation_between_streams(tmp_path):
     t = np.array([0.0, 1.0, 2.0])
     T = transform_from(matrix_from_rotvec([[0, 0, 0], [0, 0, 0.4], [0, 0, 0.8]]), [[0, 0, 0], [1, 0, 0], [2, 0, 0]])
@@ -98,7 +124,11 @@ def test_calibrate_mct_example(tmp_path, capsys):
     assert np.all((st > 5e-6) & (st < 3e-4))
     assert np.all(np.abs(t - [0.035, 0.06, 0.12]) < 4 * st)  # simulated truth in the file's comment
     assert "+/-" in capsys.readouterr().out
+    d = res["diagnostics"]
+    assert d["encoder_sigma_m"] == 5e-6  # the documented default
+    assert set(d["covariance"]["std_by_source"]) == {"tracker", "heights", "block scan", "P3 encoder"}
     assert main(["lineprofiler", "report", str(tmp_path / "result.json"), "--out", str(tmp_path / "r")]) == 0
+    assert "P3 encoder sigma per scan profile 5.0 um" in (tmp_path / "r" / "report.html").read_text()
 
 
 def _mct_copy(tmp_path):
@@ -116,6 +146,10 @@ def _mct_copy(tmp_path):
     ("mct_input.yaml", lambda s: s.replace("block_size: [60.000", "block_size: [0"), "block_size"),
     ("mct_input.yaml", lambda s: s.replace("method: mct", "method: tracker"), "method"),
     ("mct_input.yaml", lambda s: s.replace("# arm_sigma: {length: 0.3", "arm_sigma: {length: -0.3"), "arm_sigma"),
+    ("mct_input.yaml", lambda s: s.replace("# encoder_sigma: 0.005", "encoder_sigma: -0.005"), "encoder_sigma"),
+    ("mct_scan.csv", lambda s: s.replace("\n0, ", "\n0.5, ", 1), "line 2"),
+    ("mct_scan.csv", lambda s: s.replace("q3 [mm]", "q3 [deg]"), "joint 3 is prismatic"),
+    ("mct_arc.csv", lambda s: "\n".join(s.splitlines()[:3]) + "\n", "mct_arc.csv: 2 tracker reading(s)"),
 ])
 def test_mct_input_errors_are_one_line(tmp_path, capsys, file, edit, message):
     yaml_path = _mct_copy(tmp_path)

@@ -1,5 +1,7 @@
 """FPDP, geometric refinement, MCT and the seed's error measures on simulated data with known truth."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -9,8 +11,8 @@ from robocal.kinematics import DHChain
 from robocal.rigs.lineprofiler.compare import axis_angle_translation, repeatability_errors, run_comparison
 from robocal.rigs.lineprofiler.fpdp import fpdp_calibrate
 from robocal.rigs.lineprofiler.handeye import transform_error
-from robocal.rigs.lineprofiler.mct import _x_delta, block_frame_from_planes, mct_calibrate
-from robocal.rigs.lineprofiler.model import Block, ProfilerModel, Sphere, default_rig
+from robocal.rigs.lineprofiler.mct import _x_delta, block_frame_from_planes, fit_block_scan, mct_calibrate
+from robocal.rigs.lineprofiler.model import Block, LaserTracker, ProfilerModel, Sphere, default_rig
 from robocal.rigs.lineprofiler.refine import refine_sphere
 from robocal.rigs.lineprofiler.simulate import perturbed_chain, simulate_fpdp, simulate_mct
 
@@ -96,6 +98,23 @@ def test_refine_jacobian_matches_finite_differences():
     assert prob.check_jacobian().max_rel_error < 1e-5
 
 
+def test_refine_names_outlier_points_by_profile_and_the_unidentifiable_pair():
+    """On ``robocal.estimation.solve``: gross points are named by index and by profile, and without
+    ``hold`` the core finds what the P1R2P3 poses cannot determine (X.ty with the sphere's Q.z)."""
+    d, _ = simulate_fpdp(RIG, np.random.default_rng(1), n_poses=8)
+    f = fpdp_calibrate(d.q, d.profiles, RIG.chain, d.sphere_radius)
+    profiles = [p.copy() for p in d.profiles]
+    profiles[2][10:15, 1] += 1e-3  # five points 1 mm deep into the sphere
+    g = refine_sphere(d.q, profiles, RIG.chain, d.sphere_radius, f.X, f.Q)
+    first = sum(len(p) for p in profiles[:2])
+    out = [w for w in g.warnings if w.code == "outliers"]
+    assert len(out) == 1 and set(range(first + 10, first + 15)) <= set(out[0].indices)
+    assert "2 (5)" in out[0].message
+    assert {"X.ty", "Q.z"} <= set(g.undetermined) and g.std["X.ty"] is None
+    assert any(w.code == "rank_deficient" and "X.ty" in w.params for w in g.warnings)
+    assert g.lsq.success and np.all(np.isfinite(g.cov[np.ix_([0, 1, 2], [0, 1, 2])]))
+
+
 def test_mct_is_exact_on_noise_free_data():
     # the block-scan fit relabels points until the labels settle: a single
     # relabelling left edge points on the wrong face (85 urad, 25 um of bias)
@@ -116,36 +135,80 @@ def test_mct_recovers_X_within_its_standard_deviations():
     assert abs(r.tracker_sigma / RIG.tracker.sigma - 1) < 0.3  # pooled from ~80 residual degrees of freedom
 
 
-def test_mct_covariance_matches_monte_carlo():
-    """Normalised estimation error squared: mean over trials of e^T C^-1 e is 6 for a
-    consistent 6-dof covariance; 24 trials give it a standard error of 0.118 x 6."""
+def test_mct_covariance_with_encoder_noise_matches_monte_carlo():
+    """All sources on, P3's encoder made the largest (50 um per reading against a 2 um tracker),
+    24 trials. Per component RMSE / predicted std ~ sqrt(chi2_24 / 24): standard error
+    1 / sqrt(2 * 24) = 0.144, so 3 standard errors is 0.57 .. 1.43; mean NEES / 6 has standard
+    error sqrt(2 / (6 * 24)) = 0.118. The covariance is taken once (stated sigmas: it changes with
+    the noise only through the fits' geometry) so the trials need no propagation."""
+    n = 24
+    rig = replace(RIG, tracker=LaserTracker(sigma=2e-6))
     rng = np.random.default_rng(7)
-    nees, err, std = [], [], []
-    for _ in range(24):
-        d, _ = simulate_mct(RIG, rng, n_scan=15)
-        r = mct_calibrate(d, RIG.chain)
-        e = _x_delta(r.X, RIG.X)
-        nees.append(e @ np.linalg.solve(r.X_cov, e))
-        err.append(e)
-        std.append(r.X_std)
-    assert 0.65 < np.mean(nees) / 6 < 1.35
-    ratio = np.sqrt(np.mean(np.square(err), 0) / np.mean(np.square(std), 0))
-    assert np.all((ratio > 0.55) & (ratio < 1.45)), ratio  # per component, 3 sigma for 24 trials
+    err = []
+    for k in range(n):
+        d, _ = simulate_mct(rig, rng, n_scan=15, sigma_q3=50e-6)
+        r = mct_calibrate(d, rig.chain, tracker_sigma=2e-6, encoder_sigma=50e-6, covariance=k == 0)
+        if k == 0:
+            C, terms = r.X_cov, r.cov_terms
+        err.append(_x_delta(r.X, rig.X))
+    err = np.array(err)
+    std = np.sqrt(np.diag(C))
+    band = 3 / np.sqrt(2 * n)
+    ratio = np.sqrt(np.mean(err**2, 0)) / std
+    assert np.all(np.abs(ratio - 1) < band), ratio
+    nees = np.mean([e @ np.linalg.solve(C, e) for e in err]) / 6
+    assert abs(nees - 1) < 3 * np.sqrt(2 / (6 * n)), nees
+    # the test has power: without the encoder term the errors are far beyond the prediction
+    without = np.sqrt(np.mean(err**2, 0)) / np.sqrt(std**2 - terms["P3 encoder"] ** 2)
+    assert without.max() > 1 + 2 * band, without
+    assert set(terms) == {"tracker", "heights", "block scan", "P3 encoder"}
+
+
+def test_block_scan_encoder_sensitivity_matches_refit():
+    """``dx_dq3`` (implicit function theorem) against refitting with one P3 reading moved by 0.2 um
+    (small: a larger step can move a point across the fit's face/outlier thresholds)."""
+    d, _ = simulate_mct(RIG, np.random.default_rng(4), n_scan=9)
+    q30 = float(d.q_scan0[-1])
+    scan = fit_block_scan(d.scan_profiles, d.scan_q3, q30, d.block_size)
+    h = 2e-7
+    for i in (0, 4):
+        q3 = d.scan_q3.copy()
+        q3[i] += h
+        moved = fit_block_scan(d.scan_profiles, q3, q30, d.block_size)
+        T_pred, u_pred = scan.perturbed(h * scan.dx_dq3[:, i])
+        rot, t = transform_error(moved.T_L_B, T_pred)
+        rot0, t0 = transform_error(moved.T_L_B, scan.T_L_B)
+        assert t0 > 0.1 * h and t < 0.02 * t0 and rot < 0.02 * rot0
+        assert np.linalg.norm(moved.u - u_pred) < 0.02 * np.linalg.norm(moved.u - scan.u)
+
+
+def test_encoder_term_is_reported_by_source_and_defaults_to_5_um():
+    d, _ = simulate_mct(RIG, np.random.default_rng(3), n_scan=9)
+    r = mct_calibrate(d, RIG.chain)
+    assert r.encoder_sigma == 5e-6 and "P3 encoder" in r.cov_terms
+    # independent sources: the variances by source add up to the diagonal
+    assert np.allclose(sum(v**2 for v in r.cov_terms.values()), np.diag(r.X_cov), rtol=1e-9)
+    with pytest.raises(InputError, match="encoder"):
+        mct_calibrate(d, RIG.chain, encoder_sigma=-1e-6)
 
 
 def test_mct_covariance_with_arm_errors_matches_monte_carlo():
     """An arm whose D-H rows are off by 0.3 mm / 0.1 deg (the seed comparison's errors): MCT takes P3's
     row as exact, so X errs by ~0.3 mm, 5x its tracker-only std; stating ``dh_sigma`` makes the
-    covariance cover it (mean NEES / 6 = 1; 16 trials: standard error 0.14)."""
+    covariance cover it (mean NEES / 6 = 1; 16 trials: standard error 0.14). Stated sigmas: the
+    covariance is taken once."""
     rng = np.random.default_rng(11)
     nees = []
-    for _ in range(16):
+    for k in range(16):
         d, _ = simulate_mct(RIG, rng, n_scan=15, true_chain=perturbed_chain(RIG.chain, rng))
-        r = mct_calibrate(d, RIG.chain, dh_sigma=(0.3e-3, np.deg2rad(0.1)))
+        r = mct_calibrate(d, RIG.chain, tracker_sigma=RIG.tracker.sigma, encoder_sigma=0.0,
+                          dh_sigma=(0.3e-3, np.deg2rad(0.1)), covariance=k == 0)
+        if k == 0:
+            C, terms = r.X_cov, r.cov_terms
         e = _x_delta(r.X, RIG.X)
-        nees.append(e @ np.linalg.solve(r.X_cov, e))
+        nees.append(e @ np.linalg.solve(C, e))
     assert 0.55 < np.mean(nees) / 6 < 1.45
-    assert r.cov_terms["D-H row of P3"][3] > 3 * r.cov_terms["tracker"][3]  # the arm dominates t_x
+    assert terms["D-H row of P3"][3] > 3 * terms["tracker"][3]  # the arm dominates t_x
 
 
 def test_block_faces_must_be_right_handed():

@@ -25,6 +25,7 @@ Input (YAML, units stated)::
     arm_sigma: {length: 0.3, angle: 0.1}        # optional: uncertainty of P3's D-H row (default: exact)
     block_size: [50, 50, 50]
     scan: mct_scan.csv           # profiles of the block corner during a P3 stroke (profile, x, z, q1..qn)
+    encoder_sigma: 0.005         # optional: P3 read-out noise of each scan profile (default 0.005 mm; 0: exact)
 
 The block scan's reference pose is its first profile's joint values.
 """
@@ -48,7 +49,7 @@ from robocal.rigs.lineprofiler.io import (
     load_profiles_csv,
     load_tracker_csv,
 )
-from robocal.rigs.lineprofiler.mct import _X_LABELS, MCTResult, mct_calibrate
+from robocal.rigs.lineprofiler.mct import _X_LABELS, ENCODER_SIGMA, MCTResult, mct_calibrate
 from robocal.rigs.lineprofiler.model import p1r2p3_chain
 from robocal.rigs.lineprofiler.refine import RefineResult, refine_sphere
 
@@ -124,8 +125,13 @@ def load_mct_file(doc, chain: DHChain):
 
     tr = doc.sub("tracker")
     arc_path, line_path, faces_path = tr.path("arc"), tr.path("line"), tr.path("block_faces")
-    q_arc, arc_T = load_tracker_csv(arc_path, dof=chain.dof)
-    q_line, line_T = load_tracker_csv(line_path, dof=chain.dof)
+    q_arc, arc_T = load_tracker_csv(arc_path, dof=chain.dof, joint_types=chain.joint_types)
+    q_line, line_T = load_tracker_csv(line_path, dof=chain.dof, joint_types=chain.joint_types)
+    for path, pts, need, what in ((arc_path, arc_T, 3, "a 3D circle needs 3 or more (9 or more over 20-60 deg "
+                                   "of R2 recommended)"), (line_path, line_T, 2, "a line needs 2 or more "
+                                                            "(9 or more recommended)")):
+        if len(pts) < need:
+            raise FileFormatError(f"{len(pts)} tracker reading(s): {what}", source=str(path))
     faces = load_block_faces_csv(faces_path)
     heights = doc.sub("heights")
     h0 = heights.float("h0", kind="length")
@@ -140,7 +146,7 @@ def load_mct_file(doc, chain: DHChain):
         raise FileFormatError(f"field 'block_size' must hold 3 positive edge lengths, got {size.tolist()} m",
                               source=doc.source)
     scan_path = doc.path("scan")
-    profiles, q_scan, _ = load_profiles_csv(scan_path, dof=chain.dof)
+    profiles, q_scan, _ = load_profiles_csv(scan_path, dof=chain.dof, joint_types=chain.joint_types)
     if q_scan is None:
         raise FileFormatError("the block scan needs the joint columns q1..qn of every profile", source=str(scan_path))
     if len(profiles) < 3:
@@ -148,6 +154,10 @@ def load_mct_file(doc, chain: DHChain):
                               "recommended) is needed", source=str(scan_path))
     data = MCTData(q_arc, arc_T, q_line, line_T, h0, h1, q_scan[0].copy(), faces, tuple(size), q_scan[:, -1],
                    profiles)
+    enc_sigma = doc.float("encoder_sigma", kind="length", default=ENCODER_SIGMA)
+    if not (np.isfinite(enc_sigma) and enc_sigma >= 0):
+        raise FileFormatError(f"field 'encoder_sigma' must be >= 0 (P3 read-out noise per scan profile), "
+                              f"got {enc_sigma:g} m", source=doc.source)
     dh_sigma = (0.0, 0.0)
     if "arm_sigma" in doc:
         arm_sigma = doc.sub("arm_sigma")
@@ -156,7 +166,7 @@ def load_mct_file(doc, chain: DHChain):
         if min(dh_sigma) < 0:
             raise FileFormatError(f"field 'arm_sigma' must hold lengths/angles >= 0, got {dh_sigma}",
                                   source=doc.source)
-    return data, [arc_path, line_path, faces_path, scan_path], t_sigma, h_sigma, dh_sigma
+    return data, [arc_path, line_path, faces_path, scan_path], t_sigma, h_sigma, dh_sigma, enc_sigma
 
 
 def calibrate_file(path) -> tuple[SphereCalibration | MCTCalibration, dict]:
@@ -165,12 +175,13 @@ def calibrate_file(path) -> tuple[SphereCalibration | MCTCalibration, dict]:
     chain = load_arm(doc)
     method = doc.str("method", default="fpdp", choices=("fpdp", "mct"))
     if method == "mct":
-        data, files, t_sigma, h_sigma, dh_sigma = load_mct_file(doc, chain)
-        res = mct_calibrate(data, chain, tracker_sigma=t_sigma, height_sigma=h_sigma, dh_sigma=dh_sigma)
+        data, files, t_sigma, h_sigma, dh_sigma, enc_sigma = load_mct_file(doc, chain)
+        res = mct_calibrate(data, chain, tracker_sigma=t_sigma, height_sigma=h_sigma, dh_sigma=dh_sigma,
+                            encoder_sigma=enc_sigma)
         return MCTCalibration(res, data, chain), hash_inputs([path, *files])
     R = doc.float("sphere_radius", kind="length", positive=True)
     prof_path = doc.path("profiles")
-    profiles, q, t = load_profiles_csv(prof_path, dof=chain.dof)
+    profiles, q, t = load_profiles_csv(prof_path, dof=chain.dof, joint_types=chain.joint_types)
     files = [path, prof_path]
     if "robot_poses" in doc:
         pose_path = doc.path("robot_poses")
@@ -239,6 +250,7 @@ def _mct_result(cal: MCTCalibration, inputs=None) -> CalibrationResult:
                                     "std_by_source": terms},
                      "tracker_sigma_m": r.tracker_sigma, "height_sigma_m": r.height_sigma,
                      "arm_dh_sigma": {"length_m": r.dh_sigma[0], "angle_rad": r.dh_sigma[1]},
+                     "encoder_sigma_m": r.encoder_sigma,
                      "fit_rms_m": {"arc": r.arc_rms, "line": r.line_rms, "block_faces": r.block_rms,
                                    "block_scan": r.scan_rms},
                      "n_scan_points": r.n_scan_points})
@@ -269,9 +281,12 @@ def _mct_report(result: CalibrationResult, cal: MCTCalibration | None, extra_sec
             vals = list(v["T_E_L.rotvec"]) + list(v["T_E_L.translation"])
             srows.append({"source": src, **{lab: (None if x is None else 1e3 * x) for lab, x in zip(labels, vals)}})
         arm = d.get("arm_dh_sigma") or {}
+        enc = d.get("encoder_sigma_m")
         s.table(srows, digits=3, caption=f"standard deviation of X by source (tracker sigma "
                 f"{1e6 * (d.get('tracker_sigma_m') or 0):.1f} um, heights sigma "
-                f"{1e6 * (d.get('height_sigma_m') or 0):.1f} um, P3's D-H row "
+                f"{1e6 * (d.get('height_sigma_m') or 0):.1f} um, P3 encoder sigma per scan profile "
+                + (f"{1e6 * enc:.1f} um" if enc else "0 (readings taken as exact)" if enc == 0 else "not recorded")
+                + ", P3's D-H row "
                 + (f"{1e3 * arm['length_m']:.3g} mm / {np.rad2deg(arm['angle_rad']):.3g} deg)"
                    if arm and any(arm.values()) else "taken as exact: errors of the arm model are not included)"))
     if cal is not None and cal.mct.scan_residuals is not None:

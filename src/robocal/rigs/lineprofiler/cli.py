@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,30 @@ from robocal.io import CalibrationResult, atomic_write_text, hash_inputs
 from robocal.report import Report, Section
 
 EXAMPLES = Path("examples/lineprofiler")
+
+
+def _int_at_least(minimum: int, why: str):
+    """argparse type: an integer >= ``minimum`` (``why`` says what needs it)."""
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if v < minimum:
+            raise argparse.ArgumentTypeError(f"must be >= {minimum} ({why}), got {v}")
+        return v
+    return parse
+
+
+def _length_mm(text: str) -> float:
+    """argparse type: a finite length >= 0 in mm."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of mm, got {text!r}") from None
+    if not (np.isfinite(v) and v >= 0):
+        raise argparse.ArgumentTypeError(f"must be a finite length >= 0 in mm, got {text}")
+    return v
 
 
 # ----------------------------------------------------------------------------- lineprofiler
@@ -65,7 +90,8 @@ def _write_mct(out: Path, rig, rng, args) -> None:
     from robocal.rigs.lineprofiler.io import write_block_faces_csv, write_profiles_csv, write_tracker_csv
     from robocal.rigs.lineprofiler.simulate import simulate_mct
 
-    m, tr = simulate_mct(rig, rng, n_scan=args.scan_profiles, noise=not args.noise_free)
+    m, tr = simulate_mct(rig, rng, n_scan=args.scan_profiles, sigma_q3=1e-3 * args.encoder_sigma,
+                         noise=not args.noise_free)
     write_tracker_csv(out / "mct_arc.csv", m.q_arc, m.arc_T, angle_joints=(1,))
     write_tracker_csv(out / "mct_line.csv", m.q_line, m.line_T, angle_joints=(1,))
     write_block_faces_csv(out / "mct_block.csv", m.block_faces_T)
@@ -76,11 +102,15 @@ def _write_mct(out: Path, rig, rng, args) -> None:
         "# robocal lineprofiler calibrate input, MCT method (simulated, seed %d)\nmethod: mct\n"
         "units: {length: mm, angle: deg}\narm: p1r2p3\n"
         "tracker:\n  arc: mct_arc.csv\n  line: mct_line.csv\n  block_faces: mct_block.csv\n"
-        "  # sigma: %.4f  # per-axis tracker noise; default: pooled from the arc, line and face fits\nheights: {h0: %.4f, h1: %.4f, sigma: 0.02}\n"
+        "  # sigma: %.4f  # per-axis tracker noise; default: pooled from the arc, line and face fits\n"
+        "heights: {h0: %.4f, h1: %.4f, sigma: 0.02}\n"
         "# arm_sigma: {length: 0.3, angle: 0.1}  # uncertainty of P3's D-H row; default: taken as exact\n"
         "block_size: [%.3f, %.3f, %.3f]\n"
-        "scan: mct_scan.csv\n# truth: T_E_L translation [m] = %s\n")
+        "scan: mct_scan.csv\n%s\n# truth: T_E_L translation [m] = %s\n")
         % (args.seed, 1e3 * rig.tracker.sigma, 1e3 * m.h0, 1e3 * m.h1, *(1e3 * np.asarray(m.block_size)),
+           (f"encoder_sigma: {args.encoder_sigma:g}  # P3 read-out noise per scan profile (simulated)"
+            if args.encoder_sigma > 0 and not args.noise_free else
+            "# encoder_sigma: 0.005  # P3 read-out noise per scan profile; default 0.005 (0: exact readings)"),
            np.round(tr.X[:3, 3], 6).tolist()))
 
 
@@ -150,9 +180,13 @@ def _add_lineprofiler(parser) -> None:
                        epilog=examples_epilog("robocal lineprofiler simulate --out sim --seed 1"))
     add_out_argument(p)
     add_seed_argument(p)
-    p.add_argument("--poses", type=int, default=16, help="number of arm poses")
+    p.add_argument("--poses", type=_int_at_least(5, "FPDP fits X and the sphere centre from 5 or more"),
+                   default=16, help="number of arm poses of the FPDP sphere scan")
     p.add_argument("--noise-free", action="store_true", help="no measurement noise")
-    p.add_argument("--scan-profiles", type=int, default=31, help="profiles in the MCT block scan")
+    p.add_argument("--scan-profiles", type=_int_at_least(3, "MCT's block scan needs a P3 stroke of 3 or more"),
+                   default=31, help="profiles in the MCT block scan")
+    p.add_argument("--encoder-sigma", type=_length_mm, default=0.0, metavar="MM",
+                   help="P3 encoder read-out noise of the MCT scan and line readings, in mm (default 0: exact)")
     p.set_defaults(func=_simulate)
     p = sub.add_parser("calibrate", help="FPDP + geometric refinement, or MCT, from an input YAML",
                        formatter_class=RawHelp,
@@ -164,15 +198,17 @@ def _add_lineprofiler(parser) -> None:
     p.set_defaults(func=_calibrate)
     p = sub.add_parser("report", help="re-render report.html from a result.json", formatter_class=RawHelp,
                        epilog=examples_epilog("robocal lineprofiler report out/result.json --out out2"))
-    p.add_argument("result", type=Path)
+    p.add_argument("result", type=Path, help="result.json written by 'robocal lineprofiler calibrate'")
     add_out_argument(p)
     p.set_defaults(func=_report)
     p = sub.add_parser("compare", help="simulated re-run of the seed's FPDP vs MCT comparison",
                        formatter_class=RawHelp, epilog=examples_epilog("robocal lineprofiler compare --out cmp"))
     add_out_argument(p)
     add_seed_argument(p)
-    p.add_argument("--runs", type=int, default=3)
-    p.add_argument("--poses", type=int, default=16)
+    p.add_argument("--runs", type=_int_at_least(2, "the spread of repeated calibrations needs 2 or more"),
+                   default=3, help="repeated experiments (the seed's 3); e_v, e_theta, e_p against their mean")
+    p.add_argument("--poses", type=_int_at_least(5, "FPDP fits X and the sphere centre from 5 or more"),
+                   default=16, help="arm poses per FPDP experiment (the seed's 16)")
     p.set_defaults(func=_compare)
 
 
@@ -206,7 +242,7 @@ RIG = Rig(name="lineprofiler", help="hand-eye calibration of an arm-mounted line
                           "robocal lineprofiler simulate --out sim",
                           f"robocal lineprofiler calibrate {EXAMPLES}/fpdp_input.yaml --out out",
                           f"robocal lineprofiler calibrate {EXAMPLES}/mct_input.yaml --out mct",
-                          "robocal lineprofiler report out/result.json --out out",
+                          "robocal lineprofiler report out/result.json --out out2",
                           "robocal lineprofiler compare --out cmp"),
           add_commands=_add_lineprofiler, demo=_demo)
 
@@ -253,7 +289,9 @@ def _handeye_calibrate(args) -> int:
     s.diagnostics(res.warnings)
     out = prepare_out_dir(args.out, "handeye")
     write_run(out, result, rep)
-    print("T_gripper_cam translation [mm]: " + ", ".join(f"{1e3 * v:.3f}" for v in res.X[:3, 3]))
+    st = [res.std.get(k) for k in ("tx", "ty", "tz")] if res.std else [None] * 3
+    print(f"T_gripper_cam translation [mm] ({res.method}): " + ", ".join(
+        f"{1e3 * v:.3f}" + ("" if s is None else f" +/- {1e3 * s:.3f}") for v, s in zip(res.X[:3, 3], st)))
     return 0
 
 
@@ -308,7 +346,8 @@ def _add_handeye(parser) -> None:
                            f"robocal handeye calibrate {EXAMPLES}/gripper_poses.csv {EXAMPLES}/target_poses.csv "
                            "--method park --out he"))
     _pose_list_arguments(p)
-    p.add_argument("--method", default="tsai", choices=["tsai", "park", "horaud", "andreff", "daniilidis"])
+    p.add_argument("--method", default="tsai", choices=["tsai", "park", "horaud", "andreff", "daniilidis"],
+                   help="closed-form AX = XB solver (then refined unless --no-refine)")
     p.add_argument("--no-refine", action="store_true", help="closed form only (no covariance)")
     add_out_argument(p)
     p.set_defaults(func=_handeye_calibrate)
@@ -326,5 +365,7 @@ HANDEYE = Rig(name="handeye", help="AX = XB hand-eye solvers (Tsai, Park, Horaud
                                    "robot-world AX = ZB, with refinement",
               description="Classic hand-eye calibration from pose lists (see docs/rigs/lineprofiler.md).\n\n"
                           + examples_epilog(f"robocal handeye calibrate {EXAMPLES}/gripper_poses.csv "
-                                            f"{EXAMPLES}/target_poses.csv --method park --out he"),
+                                            f"{EXAMPLES}/target_poses.csv --method park --out he",
+                                            f"robocal handeye robot-world {EXAMPLES}/gripper_poses.csv "
+                                            f"{EXAMPLES}/target_poses.csv --out rw"),
               add_commands=_add_handeye)

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from robocal.errors import InputError
 from robocal.geometry import rotvec_from_matrix
 from robocal.rigs.lineprofiler.fpdp import fpdp_calibrate
 from robocal.rigs.lineprofiler.mct import mct_calibrate
@@ -68,9 +69,13 @@ def run_comparison(rig: LineProfilerRig, rng: np.random.Generator, *, n_runs: in
 
     The real arm differs from its model by D-H errors (``sigma_length``,
     ``sigma_angle``, drawn once: the same arm in every run) and each joint
-    reading carries encoder/backlash noise ``sigma_q``. FPDP moves all joints
-    and uses the whole model; MCT moves only R2 and P3 and uses link 3's row.
+    reading carries encoder/backlash noise ``sigma_q`` (for MCT: P3's, on the
+    line and block-scan readings). FPDP moves all joints and uses the whole
+    model; MCT moves only R2 and P3 and uses link 3's row.
     """
+    if int(n_runs) < 2:
+        raise InputError(f"n_runs must be >= 2: the error measures are spreads about the mean of the runs, "
+                         f"got {n_runs}")
     true_chain = perturbed_chain(rig.chain, rng, sigma_length=sigma_length, sigma_angle=sigma_angle)
     X = {"FPDP": [], "FPDP+refine": [], "MCT": []}
     und = ()
@@ -81,7 +86,7 @@ def run_comparison(rig: LineProfilerRig, rng: np.random.Generator, *, n_runs: in
         und = f.undetermined
         g = refine_sphere(d.q, d.profiles, rig.chain, d.sphere_radius, f.X, f.Q,
                           hold=[k for k in f.undetermined if k.startswith("X.")])
-        m, _ = simulate_mct(rig, rng, true_chain=true_chain)
+        m, _ = simulate_mct(rig, rng, true_chain=true_chain, sigma_q3=float(np.asarray(sigma_q, float)[-1]))
         mr = mct_calibrate(m, rig.chain, covariance=False)  # repeatability study: spread, not std
         X["FPDP"].append(f.X)
         X["FPDP+refine"].append(g.X)

@@ -43,19 +43,31 @@ __all__ = ["load_profiles_csv", "write_profiles_csv", "load_poses", "write_poses
            "load_tracker_csv", "write_tracker_csv", "load_block_faces_csv", "write_block_faces_csv"]
 
 
-def _joint_columns(tab, dof: int | None, src: str):
-    """``q1 .. qn`` columns in SI (m or rad by their header unit), or None when the file has none."""
+def _joint_columns(tab, dof: int | None, src: str, joint_types=None):
+    """``q1 .. qn`` columns in SI (m or rad by their header unit), or None when the file has none.
+
+    With ``joint_types`` (``"revolute"`` / ``"prismatic"`` per joint) each
+    column's unit must be an angle or a length accordingly: ``q3 [deg]`` on a
+    prismatic joint is a file error, not 1.57 m.
+    """
     qcols = sorted([c for c in tab.columns if c.startswith("q") and c[1:].isdigit()], key=lambda c: int(c[1:]))
     if dof is not None and qcols and len(qcols) != dof:
         raise FileFormatError(f"the arm has {dof} joints but the file has joint columns {qcols}", source=src)
     if not qcols:
         return None
     cols = []
-    for c in qcols:
+    for j, c in enumerate(qcols):
         unit = tab.units.get(c)
         if unit is None:
             raise FileFormatError(f"column '{c}' needs a unit, e.g. '{c} [mm]' or '{c} [deg]'", source=src)
-        cols.append(to_si(tab.columns[c], unit, unit_kind(unit), name=f"column '{c}'"))
+        kind = unit_kind(unit)
+        if joint_types is not None:
+            want = "angle" if joint_types[j] == "revolute" else "length"
+            if kind != want:
+                raise FileFormatError(f"column '{c} [{unit}]': joint {j + 1} is {joint_types[j]}, so its values "
+                                      f"need {'an' if want == 'angle' else 'a'} {want} unit (e.g. "
+                                      f"'{c} [{'deg' if want == 'angle' else 'mm'}]'), got {kind}", source=src)
+        cols.append(to_si(tab.columns[c], unit, kind, name=f"column '{c}'"))
     return np.column_stack(cols)
 
 
@@ -67,16 +79,21 @@ def _joint_text(q, angle_joints) -> list[str]:
     return [f"{np.rad2deg(v) if j in angle_joints else 1e3 * v:.6f}" for j, v in enumerate(q)]
 
 
-def load_profiles_csv(path, *, dof: int | None = None):
-    """Read profiles; returns ``(profiles list of (M, 2) in m, q (N, dof) in m/rad or None, t (N,) or None)``."""
+def load_profiles_csv(path, *, dof: int | None = None, joint_types=None):
+    """Read profiles; returns ``(profiles list of (M, 2) in m, q (N, dof) in m/rad or None, t (N,) or None)``.
+
+    ``joint_types`` (the chain's): check each joint column's unit kind against its joint.
+    """
     tab = load_csv(path, required=("profile", "x", "z"))
     src = str(path)
     x = tab.column("x", kind="length")
     z = tab.column("z", kind="length")
     idx = tab.column("profile")
-    if np.any(idx != np.round(idx)) or np.any(idx < 0):
-        raise FileFormatError("column 'profile' must hold non-negative integers", source=src)
-    q = _joint_columns(tab, dof, src)
+    bad = np.flatnonzero((idx != np.round(idx)) | (idx < 0))
+    if bad.size:
+        raise FileFormatError(f"{tab.where(bad[0])}: column 'profile' must hold non-negative integers, "
+                              f"got {idx[bad[0]]:g}", source=src)
+    q = _joint_columns(tab, dof, src, joint_types)
     t = tab.column("t", kind="time") if "t" in tab else None
     if q is None and t is None:
         raise FileFormatError("need joint columns q1..qn or a timestamp column 't [s]'", source=src)
@@ -89,8 +106,12 @@ def load_profiles_csv(path, *, dof: int | None = None):
             if arr is None:
                 continue
             a = arr[rows]
-            if np.ptp(a, axis=0).max() > 1e-12:
-                raise FileFormatError(f"profile {i}: {name} differ between its rows", source=src)
+            diff = np.flatnonzero(np.abs(a - a[0]).reshape(len(a), -1).max(axis=1) > 1e-12)
+            if diff.size:
+                first, other = np.flatnonzero(rows)[[0, diff[0]]]
+                raise FileFormatError(f"profile {i}: {name} differ between its rows ({tab.where(other)} against "
+                                      f"its first, {tab.where(first)}); every row of a profile must repeat them",
+                                      source=src)
             out.append(a[0])
     return profiles, (np.array(qs) if q is not None else None), (np.array(ts) if t is not None else None)
 
@@ -114,12 +135,14 @@ def write_profiles_csv(path, profiles, q=None, t=None, *, angle_joints=()) -> Pa
     return atomic_write_text(path, "\n".join(lines) + "\n")
 
 
-def _rotations_from_quats(qs, src: str):
+def _rotations_from_quats(qs, src: str, where=None):
+    """Rotation matrices of scalar-last quaternions; ``where(i)`` names entry ``i`` in messages."""
     qs = np.asarray(qs, float)
     n = np.linalg.norm(qs, axis=1)
     bad = np.flatnonzero(np.abs(n - 1) > 1e-3)
     if bad.size:
-        raise FileFormatError(f"row {bad[0] + 1}: quaternion (qx, qy, qz, qw) has norm {n[bad[0]]:.6g}, "
+        at = where(bad[0]) if where is not None else f"row {bad[0] + 1}"
+        raise FileFormatError(f"{at}: quaternion (qx, qy, qz, qw) has norm {n[bad[0]]:.6g}, "
                               "expected a unit quaternion (scalar-last)", source=src)
     return Rotation.from_quat(qs).as_matrix()
 
@@ -131,7 +154,8 @@ def load_poses(path):
     if path.suffix.lower() == ".csv":
         tab = load_csv(path, required=("x", "y", "z", "qx", "qy", "qz", "qw"))
         p = np.column_stack([tab.column(c, kind="length") for c in "xyz"])
-        R = _rotations_from_quats(np.column_stack([tab.column(c) for c in ("qx", "qy", "qz", "qw")]), src)
+        R = _rotations_from_quats(np.column_stack([tab.column(c) for c in ("qx", "qy", "qz", "qw")]), src,
+                                  tab.where)
         t = tab.column("t", kind="time") if "t" in tab else None
         return transform_from(R, p), t
     doc = load_document(path)
@@ -142,7 +166,7 @@ def load_poses(path):
     for k, it in enumerate(items):
         p = it.array("p", kind="length", shape=(3,))
         if "q" in it:
-            R = _rotations_from_quats(it.array("q", shape=(4,))[None], f"{src}: poses[{k}]")[0]
+            R = _rotations_from_quats(it.array("q", shape=(4,))[None], src, lambda _, k=k: f"poses[{k}].q")[0]
         elif "R" in it:
             try:
                 R = check_rotation_matrix(it.array("R", shape=(3, 3)), f"poses[{k}].R", atol=1e-4)
@@ -191,11 +215,11 @@ def interpolate_poses(t_src, T_src, t_query) -> np.ndarray:
     return transform_from(R, p)
 
 
-def load_tracker_csv(path, *, dof: int | None = None):
+def load_tracker_csv(path, *, dof: int | None = None, joint_types=None):
     """Tracker readings with joint values; returns ``(q (n, dof) m/rad, p_T (n, 3) m)``."""
     tab = load_csv(path, required=("x", "y", "z"))
     src = str(path)
-    q = _joint_columns(tab, dof, src)
+    q = _joint_columns(tab, dof, src, joint_types)
     if q is None:
         raise FileFormatError("need the joint columns q1..qn (with units) of every tracker reading", source=src)
     return q, np.column_stack([tab.column(c, kind="length") for c in "xyz"])
@@ -215,7 +239,7 @@ def load_block_faces_csv(path) -> list[np.ndarray]:
     face = tab.column("face")
     if not np.all(np.isin(face, (0, 1, 2))):
         bad = int(np.flatnonzero(~np.isin(face, (0, 1, 2)))[0])
-        raise FileFormatError(f"row {bad + 1}: column 'face' must be 0, 1 or 2 (x_B = 0, y_B = 0, z_B = 0), "
+        raise FileFormatError(f"{tab.where(bad)}: column 'face' must be 0, 1 or 2 (x_B = 0, y_B = 0, z_B = 0), "
                               f"got {face[bad]:g}", source=src)
     p = np.column_stack([tab.column(c, kind="length") for c in "xyz"])
     faces = [p[face == k] for k in range(3)]

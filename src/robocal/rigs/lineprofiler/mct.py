@@ -46,7 +46,7 @@ from robocal.kinematics import DHChain
 from robocal.validation import check_array, check_points
 
 __all__ = ["MCTResult", "BlockScanFit", "frame2_in_tracker", "block_frame_from_planes", "fit_block_scan",
-           "mct_calibrate"]
+           "mct_calibrate", "mct_covariance", "ENCODER_SIGMA"]
 
 _X_LABELS = ("X.rx", "X.ry", "X.rz", "X.tx", "X.ty", "X.tz")
 
@@ -65,8 +65,11 @@ class MCTResult:
     ``R_perturbed R_X^T``, rad, as in :func:`.refine.refine_sphere`) and
     ``X.tx, X.ty, X.tz`` (m), ``X_std`` its root diagonal: first-order
     propagation of the tracker noise (``tracker_sigma``, m per axis), the
-    height errors (``height_sigma``, m) and the block-scan fit's covariance
-    (see :func:`mct_covariance`). NaN where the data do not determine X.
+    height errors (``height_sigma``, m), the block-scan fit's covariance,
+    the P3 encoder's read-out noise of the scan profiles
+    (``encoder_sigma``, m per reading) and, when stated, P3's D-H row
+    (``dh_sigma``); ``cov_terms`` the standard deviations by source (see
+    :func:`mct_covariance`). NaN where the data do not determine X.
     """
 
     X: np.ndarray
@@ -91,6 +94,7 @@ class MCTResult:
     tracker_sigma: float | None = None
     height_sigma: float | None = None
     dh_sigma: tuple = (0.0, 0.0)
+    encoder_sigma: float | None = None
     cov_terms: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
 
@@ -104,7 +108,10 @@ class BlockScanFit:
     identifiability (covariance over ``u.a, u.b, B.rx, B.ry, B.rz, B.tx,
     B.ty, B.tz`` scaled by the residual variance). :meth:`perturbed` maps a
     step in those 8 parameters to ``(T_L_B, u)`` -- what error propagation
-    differentiates.
+    differentiates. ``dx_dq3`` (8, S): first-order change of those
+    parameters per metre of error in each profile's P3 reading ``q3[i]``
+    (implicit-function theorem on the fit's normal equations), for the
+    encoder term of :func:`mct_covariance`.
     """
 
     T_L_B: np.ndarray
@@ -115,6 +122,7 @@ class BlockScanFit:
     ident: object
     x: np.ndarray
     _unpack: object = field(repr=False, default=None)
+    dx_dq3: np.ndarray | None = None
 
     def perturbed(self, dx) -> tuple[np.ndarray, np.ndarray]:
         u, R, t = self._unpack(self.x + np.asarray(dx, float))
@@ -187,26 +195,34 @@ def block_frame_from_planes(face_points) -> tuple[np.ndarray, float]:
     return transform_from(R, corner), rms
 
 
-def _segment(cloud: np.ndarray, n_planes: int = 3, tol: float = 0.3e-3, iters: int = 300):
-    """Greedy deterministic RANSAC: label each point with one of ``n_planes`` planes (-1: none)."""
+def _segment(cloud: np.ndarray, n_planes: int = 3, tol: float = 0.3e-3, iters: int = 300, n_score: int = 2000):
+    """Greedy deterministic RANSAC: label each point with one of ``n_planes`` planes (-1: none).
+
+    All ``iters`` hypotheses of a plane are scored at once on a fixed random
+    subset of at most ``n_score`` points (a count, not a fit: the subset ranks
+    them as the full cloud would, to within its sampling noise); the best one
+    then labels every point. :func:`fit_block_scan` relabels by the fitted
+    corner afterwards, so the segmentation only has to be roughly right.
+    """
     labels = np.full(len(cloud), -1)
     rest = np.arange(len(cloud))
     rng = np.random.default_rng(12345)  # fixed: segmentation must be repeatable, not random
     for k in range(n_planes):
         if len(rest) < 3:
             break
-        best = None
         P = cloud[rest]
-        for _ in range(iters):
-            s = rng.choice(len(P), 3, replace=False)
-            n = np.cross(P[s[1]] - P[s[0]], P[s[2]] - P[s[0]])
-            nn = np.linalg.norm(n)
-            if nn < 1e-12:
-                continue
-            n /= nn
-            inl = np.abs((P - P[s[0]]) @ n) < tol
-            if best is None or inl.sum() > best.sum():
-                best = inl
+        sub = P[rng.choice(len(P), n_score, replace=False)] if len(P) > n_score else P
+        s = rng.integers(0, len(P), (iters, 3))  # repeated indices give a zero normal: skipped
+        n = np.cross(P[s[:, 1]] - P[s[:, 0]], P[s[:, 2]] - P[s[:, 0]])
+        nn = np.linalg.norm(n, axis=1)
+        ok = nn > 1e-12
+        if not np.any(ok):
+            break
+        n = n[ok] / nn[ok, None]
+        d = np.einsum("ij,ij->i", n, P[s[ok, 0]])
+        score = np.sum(np.abs(sub @ n.T - d) < tol, axis=0)
+        j = int(np.argmax(score))
+        best = np.abs(P @ n[j] - d[j]) < tol
         labels[rest[best]] = k
         rest = rest[~best]
     return labels
@@ -227,13 +243,15 @@ def fit_block_scan(profiles, q3, q30: float, size, *, u0=(0.0, -1.0, 0.0), tol: 
     BlockScanFit
     """
     q3 = check_array(q3, "scan q3", shape=(len(profiles),))
-    m, s = [], []
+    m, s, pid = [], [], []
     for i, p in enumerate(profiles):
         p = check_array(p, f"scan profile {i}", shape=("M", 2))
         m.append(np.column_stack([p[:, 0], np.zeros(len(p)), p[:, 1]]))
         s.append(np.full(len(p), q3[i] - q30))
+        pid.append(np.full(len(p), i))
     m = np.concatenate(m)
     s = np.concatenate(s)
+    pid = np.concatenate(pid)
     if len(m) < 30:
         raise NotEnoughDataError(f"the block scan has {len(m)} points; at least 30 on the three faces are needed")
     u0 = np.asarray(u0, float) / np.linalg.norm(u0)
@@ -292,8 +310,14 @@ def fit_block_scan(profiles, q3, q30: float, size, *, u0=(0.0, -1.0, 0.0), tol: 
     s2 = float(r @ r / max(len(r) - 8, 1))
     ident = analyze_jacobian(ls.jac, ["u.a", "u.b", "B.rx", "B.ry", "B.rz", "B.tx", "B.ty", "B.tz"],
                              residual_variance=s2)
+    # a reading error e_i of q3[i] moves profile i's points by e_i u: each
+    # residual (the point's coordinate along its face normal R[:, lab]) by
+    # e_i u.R[:, lab]; the fit answers with dx = -J^+ dr
+    D = np.zeros((len(lu), len(profiles)))
+    D[np.arange(len(lu)), pid[use]] = (u @ R)[lu]
+    dx_dq3 = -np.linalg.pinv(ls.jac) @ D
     return BlockScanFit(transform_from(R, t), u, float(np.sqrt(np.mean(r * r))), r.copy(), int(use.sum()), ident,
-                        ls.x.copy(), unpack)
+                        ls.x.copy(), unpack, dx_dq3)
 
 
 def _block_permutation(T_T_B, T_L_B, u_L, n_B) -> tuple[int, ...]:
@@ -346,7 +370,7 @@ def _tracker_sigma(arc, line, block_rms: float, n_face_points: int) -> float:
 
 
 def mct_covariance(data, chain: DHChain, scan: BlockScanFit, perm, X, *, tracker_sigma: float,
-                   height_sigma: float, dh_sigma: tuple[float, float] = (0.0, 0.0),
+                   height_sigma: float, dh_sigma: tuple[float, float] = (0.0, 0.0), encoder_sigma: float = 0.0,
                    step: float = 1e-7) -> tuple[np.ndarray, dict]:
     """First-order covariance (6, 6) of the MCT hand-eye matrix ``X`` (seed 004 eq. 5).
 
@@ -365,7 +389,23 @@ def mct_covariance(data, chain: DHChain, scan: BlockScanFit, perm, X, *, tracker
     (``alpha, a, theta, d`` of the last link), the only part of the arm MCT
     uses (eqs. 6-7); its errors otherwise pass into X unseen (the seed
     comparison's 0.3 mm / 0.1 deg arm errors give a 0.3 mm error of X). A
-    fourth group ``"D-H row of P3"`` when non-zero.
+    group ``"D-H row of P3"`` when non-zero.
+
+    ``encoder_sigma`` (m): random read-out error of P3's encoder, independent
+    for each scan profile's ``q3`` (eq. 9 places profile ``i`` at
+    ``(q3_i - q30) u``, so an error ``e_i`` shifts it by ``e_i u``). It
+    enters through the block-scan fit (:attr:`BlockScanFit.dx_dq3`, exact to
+    first order), as the group ``"P3 encoder"`` when non-zero. ``q30`` itself
+    is only the reference at which both the laser frame and ``T_T_E`` are
+    taken (eqs. 7, 9): a common offset of every reading cancels in X, and a
+    constant encoder offset is part of P3's D-H row (``d``), covered by
+    ``dh_sigma``. R2's encoder and the P3 readings of the tracker line do
+    not enter (the arc and line are fitted geometrically; their readings
+    only orient the axes). The scan fit's own covariance (``"block scan"``)
+    is scaled by its residual variance, which already holds the encoder's
+    share as if it were independent point noise -- a double count of
+    ``(encoder_sigma |u . n|)^2`` against the profiler's point noise
+    (a few % in variance for 10 um vs 37 um).
     """
     q2, q3 = np.asarray(data.q_arc)[:, -2], np.asarray(data.q_line)[:, -1]
     q30 = float(np.asarray(data.q_scan0)[-1])
@@ -415,6 +455,11 @@ def mct_covariance(data, chain: DHChain, scan: BlockScanFit, perm, X, *, tracker
     cov = C_tr + C_h + C_s
     terms = {"tracker": np.sqrt(np.diag(C_tr)), "heights": np.sqrt(np.diag(C_h)),
              "block scan": np.sqrt(np.diag(C_s))}
+    if encoder_sigma > 0:
+        J_q = J_s @ scan.dx_dq3  # (6, S): X per metre of error in each scan reading
+        C_q = encoder_sigma ** 2 * J_q @ J_q.T
+        cov = cov + C_q
+        terms["P3 encoder"] = np.sqrt(np.diag(C_q))
     if any(dh_sigma):
         last = chain.n_links
         names = [f"{k}_{last}" for k in ("alpha", "a", "theta", "d")]
@@ -433,8 +478,14 @@ def mct_covariance(data, chain: DHChain, scan: BlockScanFit, perm, X, *, tracker
     return cov, terms
 
 
+#: Default P3 encoder read-out noise per scan profile (m): 5 um, a linear axis's repeatability and
+#: trigger jitter at scan speed; state the real figure (``encoder_sigma``), 0 for exact readings.
+ENCODER_SIGMA = 5e-6
+
+
 def mct_calibrate(data, chain: DHChain, *, tracker_sigma: float | None = None, height_sigma: float = 0.02e-3,
-                  dh_sigma: tuple[float, float] = (0.0, 0.0), covariance: bool = True) -> MCTResult:
+                  dh_sigma: tuple[float, float] = (0.0, 0.0), encoder_sigma: float = ENCODER_SIGMA,
+                  covariance: bool = True) -> MCTResult:
     """Hand-eye matrix by the MCT method (seed 004 eqs. 5-12) from :class:`~.simulate.MCTData`-like input.
 
     ``data`` needs: ``q_arc`` (n, 3), ``arc_T`` (n, 3), ``q_line`` (k, 3),
@@ -442,10 +493,12 @@ def mct_calibrate(data, chain: DHChain, *, tracker_sigma: float | None = None, h
     (3 arrays), ``block_size``, ``scan_q3`` (S,), ``scan_profiles``.
 
     ``tracker_sigma`` (m per axis; default: pooled from the arc, line and
-    face fits), ``height_sigma`` (m, the measured ``h0`` and ``h1``) and
-    ``dh_sigma`` ((m, rad) of P3's D-H row; default: taken as exact) set the
-    covariance of ``X`` (:func:`mct_covariance`); ``covariance=False`` skips
-    it (Monte Carlo loops).
+    face fits), ``height_sigma`` (m, the measured ``h0`` and ``h1``),
+    ``encoder_sigma`` (m, read-out noise of each scan profile's P3 value;
+    default :data:`ENCODER_SIGMA` = 5 um) and ``dh_sigma`` ((m, rad) of
+    P3's D-H row; default: taken as exact) set the covariance of ``X``
+    (:func:`mct_covariance`); ``covariance=False`` skips it (Monte Carlo
+    loops).
     """
     if chain.dof < 2 or chain.joint_types[-2:] != ("revolute", "prismatic"):
         raise InputError(f"MCT needs a chain ending in a revolute then a prismatic joint, got {chain.joint_types}")
@@ -492,13 +545,16 @@ def mct_calibrate(data, chain: DHChain, *, tracker_sigma: float | None = None, h
         n_face = sum(len(f) for f in data.block_faces_T)
         sig = _tracker_sigma(arc, line, block_rms, n_face) if tracker_sigma is None else float(tracker_sigma)
         dh_sigma = tuple(float(v) for v in dh_sigma)
-        if not all(np.isfinite(v) and v >= 0 for v in (sig, height_sigma, *dh_sigma)) or len(dh_sigma) != 2:
-            raise InputError(f"tracker, height and D-H sigmas must be finite and >= 0 (dh_sigma a (length, angle) "
-                             f"pair), got {sig!r}, {height_sigma!r} and {dh_sigma!r}")
+        if not all(np.isfinite(v) and v >= 0 for v in (sig, height_sigma, encoder_sigma, *dh_sigma)) \
+                or len(dh_sigma) != 2:
+            raise InputError(f"tracker, height, encoder and D-H sigmas must be finite and >= 0 (dh_sigma a "
+                             f"(length, angle) pair), got {sig!r}, {height_sigma!r}, {encoder_sigma!r} and "
+                             f"{dh_sigma!r}")
         cov, terms = mct_covariance(data, chain, scan, perm, X, tracker_sigma=sig, height_sigma=float(height_sigma),
-                                    dh_sigma=dh_sigma)
+                                    dh_sigma=dh_sigma, encoder_sigma=float(encoder_sigma))
         res.X_cov, res.X_std, res.cov_terms = cov, np.sqrt(np.diag(cov)), terms
         res.tracker_sigma, res.height_sigma, res.dh_sigma = sig, float(height_sigma), dh_sigma
+        res.encoder_sigma = float(encoder_sigma)
         bad = [lab for lab, v in zip(_X_LABELS, res.X_std) if not np.isfinite(v)]
         if bad:
             warnings.append(Diagnostic("rank_deficient", "no standard deviation for " + ", ".join(bad) +

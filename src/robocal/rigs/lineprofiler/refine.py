@@ -6,9 +6,13 @@ Minimises the point-to-sphere distance of all profile points,
 
 over ``X = T_E_L`` (rotation-vector increment and translation) and the sphere
 centre ``Q`` jointly. No circle fit, no sign ambiguity (the side of the
-sphere follows from X), and the covariance comes from the estimation layer
-(``s^2 (J^T J)^-1``), with parameters the poses cannot determine (``X.ty`` and
-``Q.z`` on the P1R2P3 arm) named and given no standard deviation.
+sphere follows from X). Solved by :func:`robocal.estimation.solve` (SciPy's
+trust-region reflective method with a robust loss and the analytic
+Jacobian), which also gives the covariance ``s^2 (J^T W J)^+`` (``W`` the
+loss's weights, ``s`` the point noise re-estimated with outlier clipping),
+names the parameters the poses cannot determine (``X.ty`` and ``Q.z`` on the
+P1R2P3 arm: no value or standard deviation) and the outlier points by index;
+the rig adds which profiles they are in.
 """
 
 from __future__ import annotations
@@ -17,11 +21,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from scipy.optimize import least_squares
-
 from robocal.diagnostics import Diagnostic
 from robocal.errors import InputError, NotEnoughDataError
-from robocal.estimation import Problem, analyze_jacobian
+from robocal.estimation import Problem, solve
 from robocal.geometry import matrix_from_rotvec, transform_from
 from robocal.kinematics import DHChain
 from robocal.validation import check_array
@@ -69,6 +71,17 @@ def refine_sphere(q, profiles, chain: DHChain, sphere_radius: float, X0, Q0, *, 
         Labels held at their start value -- pass FPDP's ``undetermined`` so an
         unobservable component does not drift; they are still reported as
         undetermined (no std).
+    return_problem : bool
+        Return the :class:`robocal.estimation.Problem` instead of solving it.
+
+    Returns
+    -------
+    RefineResult
+        ``lsq`` holds the core's :class:`robocal.estimation.LSQResult`
+        (cost history, correlations, observation scores, ``summary()``);
+        ``warnings`` its diagnostics (``rank_deficient``, ``weakly_determined``,
+        ``outliers`` beyond 4 sigma with point indices and profiles,
+        ``not_converged``); ``sigma`` the point noise (m).
     """
     q = chain.check_q(q)
     if len(q) != len(profiles):
@@ -109,12 +122,11 @@ def refine_sphere(q, profiles, chain: DHChain, sphere_radius: float, X0, Q0, *, 
 
     sc = sigma if sigma is not None else max(float(np.sqrt(np.mean(fun({"X": np.r_[0, 0, 0, X0[:3, 3]],
                                                                            "Q": Q0}) ** 2))), 1e-7)
-    prob = Problem()
     labels = list(_LAB) + ["Q.x", "Q.y", "Q.z"]
     hold = set(hold)
-    unknown = hold - set(_LAB) - {"Q.x", "Q.y", "Q.z"}
+    unknown = hold - set(labels)
     if unknown:
-        raise InputError(f"hold: unknown label(s) {sorted(unknown)} (known: {', '.join(_LAB)}, Q.x, Q.y, Q.z)")
+        raise InputError(f"hold: unknown label(s) {sorted(unknown)} (known: {', '.join(labels)})")
     prob = Problem()
     prob.add_block("X", np.r_[0.0, 0.0, 0.0, X0[:3, 3]], labels=list(_LAB), unit=["rad"] * 3 + ["m"] * 3,
                    fixed=np.array([k in hold for k in _LAB]))
@@ -123,50 +135,35 @@ def refine_sphere(q, profiles, chain: DHChain, sphere_radius: float, X0, Q0, *, 
     prob.add_residuals(fun, name="point_to_sphere", jacobian=jac, residual_dim=1)
     if return_problem:
         return prob
-    # Solved with SciPy directly and analysed with robocal.estimation.analyze_jacobian
-    # (written when estimation.solve took a chi-square quantile per observation, seconds
-    # on 10k points; it now takes one per residual size, so moving to solve() is open).
-    free = np.array([k not in hold for k in labels])
-    x0 = np.r_[0.0, 0.0, 0.0, X0[:3, 3], Q0]
-
-    def unpack(x):
-        full = x0.copy()
-        full[free] = x
-        return {"X": full[:6], "Q": full[6:]}
-
-    def jfree(x):
-        J = jac(unpack(x))
-        return np.column_stack([J["X"], J["Q"]])[:, free]
-
-    ls = least_squares(lambda x: fun(unpack(x)), x0[free], jac=jfree, method="trf",
-                       loss=loss, f_scale=3 * sc, x_scale="jac", xtol=1e-12, ftol=1e-12)
-    p = unpack(ls.x)
-    r = fun(p)
-    # noise level from the inliers (3-sigma clipped MAD), so outliers do not inflate it
-    s_rob = 1.4826 * np.median(np.abs(r - np.median(r)))
-    inl = np.abs(r) < 4 * max(s_rob, 1e-12)
-    s2 = float(np.sum(r[inl] ** 2) / max(inl.sum() - free.sum(), 1))
-    ident = analyze_jacobian(jfree(ls.x)[inl], [k for k, f in zip(labels, free) if f], residual_variance=s2)
+    # the robust loss bites at 3 sigma; points beyond 4 sigma (sigma re-estimated with clipping,
+    # so the outliers do not inflate it) are named; the covariance is s^2 (J^T W J)^+ with the
+    # loss's weights W, parameters the poses cannot determine named and given no std
+    lsq = solve(prob, method="trf", loss=loss, f_scale=3 * sc, x_scale="jac", xtol=1e-12, ftol=1e-12,
+                outlier_sigma=4.0)
+    p = lsq.params
+    r = lsq.residuals
+    free = lsq.free_labels
     cov = np.full((9, 9), np.nan)
-    fi = np.flatnonzero(free)
-    cov[np.ix_(fi, fi)] = ident.cov
-    std = {k: None for k in labels}
-    for j, k in zip(fi, ident.labels):
-        v = ident.std[list(ident.labels).index(k)]
-        std[k] = None if not np.isfinite(v) else float(v)
+    fi = [labels.index(k) for k in free]
+    cov[np.ix_(fi, fi)] = lsq.cov
+    std = {k: lsq.std.get(k) for k in labels}  # held labels: None (not determined by this fit)
     per_profile = np.array([np.sqrt(np.mean(r[idx == i] ** 2)) if np.any(idx == i) else 0.0
                             for i in range(len(profiles))])
-    warnings = ident.diagnostics()
-    n_out = int((~inl).sum())
-    if n_out:
-        bad = np.flatnonzero(per_profile > 3 * np.median(per_profile))
-        warnings.append(Diagnostic("outliers", f"{n_out} of {len(r)} points ({100 * n_out / len(r):.2g} %) beyond "
-                                   f"4 sigma (sigma = {np.sqrt(s2):.3g} m) were down-weighted by the {loss} loss"
-                                   + (f"; profiles with high RMS: {bad.tolist()}" if bad.size else ""),
-                                   indices=tuple(int(i) for i in bad)))
-    if not ls.success:
-        warnings.append(Diagnostic("not_converged", f"refinement stopped: {ls.message}"))
+    warnings = []
+    for w in lsq.warnings:
+        if w.code == "outliers" and w.indices:
+            # the core counts observations in weighted-residual units; here they are points and metres
+            pts = list(w.indices)
+            prof, n_in = np.unique(idx[pts], return_counts=True)
+            shown = ", ".join(map(str, pts[:20])) + (", ..." if len(pts) > 20 else "")
+            w = Diagnostic("outliers", f"{len(pts)} of {len(r)} points ({100 * len(pts) / len(r):.2g} %) lie beyond "
+                           f"4 sigma (sigma = {1e6 * np.sqrt(lsq.residual_variance):.3g} um) and were down-weighted "
+                           f"by the {loss} loss: points [{shown}]; by profile (points): "
+                           + ", ".join(f"{int(i)} ({int(c)})" for i, c in zip(prof, n_in)),
+                           params=w.params, indices=w.indices)
+        warnings.append(w)
     X = transform_from(matrix_from_rotvec(p["X"][:3]) @ R0, p["X"][3:])
-    return RefineResult(X=X, Q=p["Q"].copy(), cov=cov, std=std, rms=float(np.sqrt(np.mean(r**2))), residuals=r,
+    return RefineResult(X=X, Q=p["Q"].copy(), cov=cov, std=std, rms=float(lsq.rms), residuals=r,
                         n_points=len(m), undetermined=tuple(k for k in labels if std[k] is None),
-                        warnings=warnings, lsq=ls, per_profile_rms=per_profile, sigma=float(np.sqrt(s2)))
+                        warnings=warnings, lsq=lsq, per_profile_rms=per_profile,
+                        sigma=float(np.sqrt(lsq.residual_variance)))

@@ -152,16 +152,25 @@ def _align(a, b):
 def simulate_mct(rig: LineProfilerRig, rng: np.random.Generator, *, q0=None, true_chain: DHChain | None = None,
                  arc_deg: float = 60.0, n_arc: int = 9, stroke: float = 0.08, n_line: int = 9,
                  sigma_h: float = 0.02e-3, scan_half: float = 0.015, n_scan: int = 31, n_face: int = 20,
-                 block_distance: float = 0.27, noise: bool = True) -> tuple[MCTData, SimTruth]:
+                 block_distance: float = 0.27, sigma_q3: float = 0.0,
+                 noise: bool = True) -> tuple[MCTData, SimTruth]:
     """Simulate the MCT procedure (seed 004 §3, steps 1-5; Figs. 3-4).
 
     Only R2 and P3 move; P1 stays at ``q0[0]``. The block is placed with its
     corner ``block_distance`` in front of the laser and its body diagonal
     pointing back at it, so all three corner faces are lit.
+
+    ``sigma_q3`` (m): P3 encoder read-out noise, added to the recorded P3
+    values of the tracker line and of every scan profile (the profiles are
+    taken at the true positions); default 0, exact readings. It is drawn
+    after every other random number, so the rest of the data does not
+    depend on it. ``q_scan0`` is the exact reference value ``q0``.
     """
     _check_rng(rng)
     chain = rig.chain
     true_chain = true_chain or chain
+    if not (np.isfinite(sigma_q3) and sigma_q3 >= 0):
+        raise InputError(f"sigma_q3 must be finite and >= 0 (m), got {sigma_q3!r}")
     if chain.dof != 3:
         raise InputError(f"MCT needs the last two joints to be R2 and P3 of a 3-joint chain, got dof {chain.dof}")
     q0 = DEFAULT_Q0 if q0 is None else np.asarray(q0, float)
@@ -200,6 +209,9 @@ def simulate_mct(rig: LineProfilerRig, rng: np.random.Generator, *, q0=None, tru
         xz, _ = rig.profiler.measure(rig.T_W_L(q, true_chain), [block], rng, noise=noise)
         profiles.append(xz)
     T_T_L = np.linalg.inv(rig.tracker.T_W_T) @ T_W_L0
+    if noise and sigma_q3 > 0:
+        q_line[:, 2] += rng.normal(size=n_line) * sigma_q3
+        scan_q3 = scan_q3 + rng.normal(size=n_scan) * sigma_q3
     data = MCTData(q_arc, arc_T, q_line, line_T, float(h0), float(h1), q0.copy(), faces, tuple(rig.block_size),
                    scan_q3, profiles)
     return data, SimTruth(X=rig.X.copy(), chain=true_chain, T_W_B=T_W_B, T_T_L=T_T_L,
