@@ -68,8 +68,13 @@ def test_line_through_the_nadir_without_negative_tilt_is_infeasible_with_the_rea
     trc = joint_trajectory(_model(0.0), tc, pc, vc)
     assert not trc.ok and "nadir crossing needs negative tilt" in trc.segments[0]["reason"]
     assert joint_trajectory(_model(-75.0), tc, pc, vc).ok
-    # coarse sampling 2 cm from the nadir: the pan turns ~180 deg between two samples, said so
+    # coarse sampling 2 cm from the nadir: the pan turns ~180 deg between two samples, said so; at 0.3 m/s
+    # finer sampling cannot help (v/d = 859 deg/s), at 0.01 m/s it does (v/d = 29 deg/s < 60 deg/s)
     tc, pc, vc = sample_polyline([[-2.15, 0.02], [2.0, 0.02]], 0.3, 1.0)
+    trc = joint_trajectory(_model(-75.0), tc, pc, vc)
+    assert not trc.ok and "sample it more finely" not in " ".join(trc.reason)
+    assert "v/d = 859 deg/s" in trc.segments[0]["reason"] and trc.segments[0]["nadir_pass"]["snap"] is not None
+    tc, pc, vc = sample_polyline([[-2.15, 0.02], [2.0, 0.02]], 0.01, 30.0)
     trc = joint_trajectory(_model(-75.0), tc, pc, vc)
     assert not trc.ok and "sample it more finely" in " ".join(trc.reason)
 

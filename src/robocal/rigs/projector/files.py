@@ -32,6 +32,11 @@ Path input (``robocal projector path INPUT``)::
                                              # t_0_W z must be -H; 'result' or yaw/t_0_W, not both
     walls: [[x0, y0, x1, y1], ...]           # optional, floor-to-ceiling partitions
     path: {waypoints: [[x, y], ...], speed: 0.3, dt: 0.1}   # or {file: path.csv} with t, x, y
+                                             # dt optional (default 0.05 s)
+
+Unknown keys in a ``projector`` / ``projectors[]`` mapping, at the top of a path
+input and in its ``path`` mapping are an error naming the key (a misspelt
+optional key such as ``tilt_mim`` would otherwise silently take its default).
 """
 
 from __future__ import annotations
@@ -50,8 +55,28 @@ __all__ = ["CalibrationInput", "load_calibration_input", "projector_from_doc", "
            "load_path_input", "PathInput"]
 
 
+#: Keys of a ``projector:`` mapping; with extrinsics also :data:`EXTRINSIC_KEYS`.
+PROJECTOR_KEYS = ("name", "H", "d1", "d2", "offsets", "tilt_limit", "rate_limits", "pan_range", "tilt_min", "units")
+EXTRINSIC_KEYS = ("yaw", "R_0_W", "t_0_W", "result")
+PATH_INPUT_KEYS = ("units", "projectors", "walls", "path")
+PATH_KEYS = ("units", "waypoints", "speed", "dt", "file")
+
+
+def _require_known(doc: Document, allowed) -> None:
+    """Raise naming the first key of ``doc`` not in ``allowed`` (a typo such as ``tilt_mim`` would otherwise
+    be ignored silently and its default used), with the closest known key when there is one."""
+    import difflib
+
+    for key in doc.keys():
+        if key not in allowed:
+            close = difflib.get_close_matches(str(key), allowed, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise doc.error(str(key), f"unknown key{hint}; known keys: {', '.join(allowed)}")
+
+
 def projector_from_doc(doc: Document, *, extrinsics: bool = False) -> ProjectorModel:
     """A :class:`ProjectorModel` from a ``projector:`` mapping (units from the document)."""
+    _require_known(doc, PROJECTOR_KEYS + (EXTRINSIC_KEYS if extrinsics else ()))
     kw = dict(H=doc.float("H", kind="length", positive=True))
     kw["d1"] = doc.float("d1", kind="length", default=0.0)
     kw["d2"] = doc.float("d2", kind="length", default=0.0)
@@ -223,11 +248,13 @@ def load_path_input(path) -> PathInput:
     from robocal.rigs.projector.path import sample_polyline
 
     doc = load_document(path)
+    _require_known(doc, PATH_INPUT_KEYS)
     projs = [projector_from_doc(d, extrinsics=True) for d in doc.items_list("projectors")]
     if not projs:
         raise doc.error("projectors", "must list at least one projector")
     walls = doc.array("walls", kind="length", shape=("W", 4), default=np.zeros((0, 4)))
     pth = doc.sub("path")
+    _require_known(pth, PATH_KEYS)
     files = [path]
     if "file" in pth:
         f = pth.path("file")

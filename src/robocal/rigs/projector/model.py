@@ -158,12 +158,16 @@ class ProjectorModel:
         object.__setattr__(self, "offsets", (float(off[0]), float(off[1])))
         rl = check_array(self.rate_limits, "projector.rate_limits", shape=(2,))
         if rl.ndim != 1 or np.any(rl <= 0):
-            raise InputError(f"projector.rate_limits must be two values > 0 (rad/s), got {rl.tolist()}")
+            raise InputError(f"projector.rate_limits must be two values > 0, got "
+                             f"[{', '.join(f'{v:.4g}' for v in rl.ravel())}] rad/s = "
+                             f"[{', '.join(f'{math.degrees(v):.4g}' for v in rl.ravel())}] deg/s")
         object.__setattr__(self, "rate_limits", (float(rl[0]), float(rl[1])))
         if self.pan_range is not None:
             pr = check_array(self.pan_range, "projector.pan_range", shape=(2,))
             if pr.ndim != 1 or not pr[1] - pr[0] > 0:
-                raise InputError(f"projector.pan_range must be (min, max) with max > min (rad), got {pr.tolist()}")
+                raise InputError(f"projector.pan_range must be (min, max) with max > min, got "
+                                 f"[{', '.join(f'{v:.4g}' for v in pr.ravel())}] rad = "
+                                 f"[{', '.join(f'{math.degrees(v):.4g}' for v in pr.ravel())}] deg")
             object.__setattr__(self, "pan_range", (float(pr[0]), float(pr[1])))
         R = np.eye(3) if self.R_0_W is None else check_rotation_matrix(self.R_0_W, "projector.R_0_W")
         t = np.array([0.0, 0.0, -self.H]) if self.t_0_W is None else check_array(self.t_0_W, "projector.t_0_W",

@@ -32,8 +32,13 @@ from robocal.validation import check_array
 
 #: Distance (m) from the nadir within which a path sample is commanded onto the nadir (pan held).
 NADIR_SNAP = 1e-3
+#: Largest accepted ``nadir_snap`` (m): the spot error near the nadir is up to ``nadir_snap``.
+MAX_NADIR_SNAP = 0.1
+#: ``nadir_snap`` values (m) tried when suggesting one for an infeasible pass near the nadir.
+SNAP_LADDER = (2e-3, 3e-3, 5e-3, 1e-2, 1.5e-2, 2e-2, 3e-2, 5e-2, 0.1)
 
-__all__ = ["NADIR_SNAP", "sample_polyline", "JointTrajectory", "joint_trajectory", "segments_blocked", "MultiPlan",
+__all__ = ["NADIR_SNAP", "MAX_NADIR_SNAP", "check_nadir_snap", "sample_polyline", "JointTrajectory",
+           "joint_trajectory", "segments_blocked", "MultiPlan",
            "plan_multi", "unreachable_samples", "require_reachable_path", "retime"]
 
 
@@ -124,8 +129,18 @@ class JointTrajectory:
         Distance (rad) of the tilt from the nadir and from the tilt limit.
     segments : list of dict
         Infeasible runs: ``start, stop`` (sample indices, inclusive), ``t0, t1``,
-        ``reason``, and ``slowdown`` (factor the path speed must be divided by
-        to respect the rate limits, when speed is the problem).
+        ``reason``, ``slowdown`` (factor the path speed must be divided by
+        to respect the rate limits, when speed is the problem), and
+        ``nadir_pass`` when passing close to the nadir is the cause (see
+        :func:`joint_trajectory`).
+    branches : list of dict
+        Per stretch between nadir crossings: ``start, stop, t0, t1``, ``branch``
+        (0: eq. 8, tilt >= 0; 1: ``(theta1 + pi, -theta2)``), ``ik`` (its name)
+        and ``why`` (crossing followed or not, and what the other branch would
+        cost there).
+    nadir_distance : ndarray, shape (K,)
+        Nearest approach (m) of the path to the nadir around each sample (its
+        own distance and its two steps' chords).
     """
 
     name: str
@@ -137,6 +152,8 @@ class JointTrajectory:
     reason: list
     margin: np.ndarray
     segments: list = field(default_factory=list)
+    branches: list = field(default_factory=list)
+    nadir_distance: np.ndarray | None = None
 
     @property
     def ok(self) -> bool:
@@ -194,6 +211,18 @@ def _branch_theta(model: ProjectorModel, th0: np.ndarray, flips: np.ndarray, b0:
     return theta, branch
 
 
+def check_nadir_snap(nadir_snap) -> float:
+    """``nadir_snap`` (m) as a float in ``[0, MAX_NADIR_SNAP]``, else :class:`~robocal.errors.InputError`."""
+    try:
+        s = float(nadir_snap)
+    except (TypeError, ValueError):
+        raise InputError(f"nadir_snap must be a distance in m, got {nadir_snap!r}") from None
+    if not (math.isfinite(s) and 0.0 <= s <= MAX_NADIR_SNAP):
+        raise InputError(f"nadir_snap must be in [0, {MAX_NADIR_SNAP:g}] m (the spot error there is up to "
+                         f"nadir_snap), got {s!r} m")
+    return s
+
+
 def joint_trajectory(model: ProjectorModel, t, points_W, velocity_W=None, *, nadir_margin: float = math.radians(2),
                      limit_margin: float = 0.0, nadir_snap: float = NADIR_SNAP) -> JointTrajectory:
     """Joint angles and rates that move the spot along a timed world path (seed eqs. 1, 2, 8, 9).
@@ -213,67 +242,248 @@ def joint_trajectory(model: ProjectorModel, t, points_W, velocity_W=None, *, nad
     limit_margin : float
         Tilt (rad) kept free below the tilt limit.
     nadir_snap : float
-        Samples closer than this (m) to the nadir are commanded onto the nadir itself (tilt 0, pan held
-        from the previous sample): the spot error there is at most ``nadir_snap`` (default 1 mm), and a
-        path passing that close counts as going through the nadir whatever the sampling phase.
+        Samples closer than this (m, in ``[0, MAX_NADIR_SNAP]``) to the nadir are commanded onto the
+        nadir itself (tilt 0, pan held from the previous sample): the spot error there is at most
+        ``nadir_snap`` (default 1 mm), and a path passing that close counts as going through the nadir
+        whatever the sampling phase.
 
-    IK branch: eq. (8) (tilt >= 0) is used unless the path crosses the nadir
-    (a step turning the spot's direction by > pi/2 with its chord within
-    ``nadir_snap`` of the nadir). There eq. (8) flips the pan by pi; with
-    ``model.tilt_min < 0`` the trajectory instead switches to the other branch
-    ``(theta1 + pi, -theta2)``, so the pan stays put and the tilt goes through
-    zero. The starting branch (and whether to switch) is the candidate with the
-    most feasible samples (ties: eq. 8, switching). Near the nadir eq. (9)^-1
-    is undefined: with ``tilt_min < 0`` the rates there are finite differences
-    of the continuous joint series and only the rate limits decide; with
-    ``tilt_min = 0`` those samples are infeasible (reason "within ... of the
-    nadir singularity", or "nadir crossing needs negative tilt"). A step whose
-    pan turns by > pi/2 farther from the nadir is infeasible ("pan turns by
-    over 90 deg between two samples"): eq. (9) at its ends cannot see that.
+    IK branch, decided per stretch between nadir crossings. A *crossing* is a
+    step turning the spot's direction by > pi/2 with its chord within
+    ``nadir_snap`` of the nadir; the crossings cut the path into stretches.
+    Each stretch is on eq. (8) (branch 0, tilt >= 0) or on the other branch
+    ``(theta1 + pi, -theta2)`` (branch 1, the same spot by eq. 6, needs
+    ``model.tilt_min < 0``). A crossing between stretches on different
+    branches is *followed*: the pan stays put and the tilt goes through zero.
+    Between stretches on the same branch the pan flips by pi there and the
+    crossing's two samples are infeasible. The branches are chosen by dynamic
+    programming over the stretches: fewest infeasible samples, then fewest
+    unfollowed crossings, then starting on eq. (8); the all-switching and
+    never-switching choices are kept as fall-backs (the pan-range centring is
+    global, so the per-stretch counts are estimates). ``result.branches``
+    says, per stretch, which branch is used and why.
+
+    Near the nadir eq. (9)^-1 is undefined: with ``tilt_min < 0`` the rates
+    there are finite differences of the continuous joint series and only the
+    rate limits decide; with ``tilt_min = 0`` those samples are infeasible
+    (reason "within ... of the nadir singularity", or "nadir crossing needs
+    negative tilt"). A step whose pan turns by > pi/2 farther from the nadir is
+    infeasible ("pan turns by over 90 deg between two samples"): eq. (9) at its
+    ends cannot see that. An infeasible stretch caused by passing close to the
+    nadir (the pan must swing ~pi at up to ``v / d`` rad/s) carries a
+    ``nadir_pass`` record in ``result.segments`` (distance, needed pan rate,
+    limit, and the smallest ``nadir_snap`` found to make it feasible, if any).
 
     The pan is unwrapped along the path; with ``model.pan_range`` the whole
     series is shifted by whole turns to centre it in the range, and samples
     still outside are infeasible ("pan beyond its range").
     """
+    snap = check_nadir_snap(nadir_snap)
     t, p, v = _timed(t, points_W, velocity_W)
+    tr = _trajectory(model, t, p, v, nadir_margin, limit_margin, snap)
+    for seg in tr.segments:
+        note = _nadir_pass(model, tr, seg, t, p, v, nadir_margin, limit_margin, snap)
+        if note is not None:
+            seg["nadir_pass"] = note
+            seg["reason"] += "; " + note["text"]
+    return tr
+
+
+def _trajectory(model, t, p, v, nadir_margin, limit_margin, snap) -> JointTrajectory:
+    """:func:`joint_trajectory` on checked inputs, without the nadir-pass notes."""
+    K = len(t)
     p0 = model.to_projector(p)
     r = np.hypot(p0[:, 0], p0[:, 1])
     tilt_actual = np.arctan2(r, model.h)
     th0 = model.ik(p0, check_reach=False, on_nadir="ignore")
     # within nadir_snap of the nadir the spot is put on the nadir itself (error <= nadir_snap): the pan there is
     # undefined and held, so a path that passes that close is followed through the nadir, not round it
-    defined = r > max(nadir_snap, NADIR_TOL * model.h)
+    thr = max(snap, NADIR_TOL * model.h)
+    defined = r > thr
     th0[:, 0] = _fill_pan(th0[:, 0], defined)
     th0[~defined, 1] = -model.offsets[1]
     turn, closest = _turns(p0, th0[:, 0])
-    crossing = turn & (closest <= max(nadir_snap, NADIR_TOL * model.h))
+    crossing = turn & (closest <= thr)
     jump = turn & ~crossing
     nadir = tilt_actual < nadir_margin
     reach = tilt_actual <= model.tilt_limit - limit_margin
     negative_ok = model.tilt_min < 0.0
-    none = np.zeros(len(t), dtype=bool)
-    candidates = [(0, crossing), (1, crossing), (0, none)] if negative_ok and np.any(crossing) else (
-        [(0, none), (1, none)] if negative_ok else [(0, none)])
-    # how low the tilt would have to go to follow every crossing on the other branch (for the reason text)
-    need = float(np.min(_branch_theta(model, th0, flips=crossing, b0=0)[0][:, 1])) + model.offsets[1]
-    best = None
-    for b0, flips in candidates:
-        res = _evaluate(model, t, p, v, th0, flips, b0, crossing & ~flips, jump, closest, nadir, reach, tilt_actual,
-                        nadir_margin, limit_margin, need)
-        if best is None or int(res[2].sum()) > int(best[2].sum()):
-            best = res
-        if np.all(best[2]):
-            break  # nothing left to gain from the other candidates
+    none = np.zeros(K, dtype=bool)
+    ci = np.flatnonzero(crossing)  # a crossing's end sample starts the next stretch
+    bounds = np.concatenate([[0], ci, [K]]).astype(int)
+    # per sample, the tilt the other branch needs on the stretch after the nearest crossing (for the reason text)
+    need = np.zeros(K)
+    if ci.size:
+        need_c = -np.array([tilt_actual[bounds[j]:bounds[j + 1]].max() for j in range(1, len(bounds) - 1)])
+        i = np.arange(K)
+        k = np.clip(np.searchsorted(ci, i), 0, ci.size - 1)
+        km = np.maximum(k - 1, 0)
+        need = need_c[np.where(np.abs(ci[km] - i) < np.abs(ci[k] - i), km, k)]
+    # nearest approach to the nadir around each sample: its own distance and its two steps' chords (m)
+    near = np.minimum(r, np.minimum(closest, np.append(closest[1:], np.inf)))
+
+    def run(b0, flips):
+        return b0, flips, _evaluate(model, t, p, v, th0, flips, b0, crossing & ~flips, jump, closest, nadir, reach,
+                                    tilt_actual, nadir_margin, limit_margin, need)
+
+    if negative_ok:
+        both = [run(0, crossing)[2], run(1, crossing)[2]]  # every crossing followed: stretch j on branch (b0 + j) % 2
+        b0, flips = _choose_branches([e[2] for e in both], bounds)
+        cands = [run(b0, flips), (0, crossing, both[0]), (1, crossing, both[1])]
+        if ci.size:
+            cands.append(run(0, none))
+    else:
+        both = None
+        cands = [run(0, none)]
+    b0, flips, best = cands[0]
+    for c in cands[1:]:
+        if int(c[2][2].sum()) > int(best[2].sum()):
+            b0, flips, best = c
     theta, rates, feasible, reason, slow_ok, ratio = best
     margin = np.minimum(tilt_actual, model.tilt_limit - tilt_actual)
     segments = []
     for a, b in _runs(~feasible):
-        kinds = sorted({reason[i].split(" (")[0].split(" rate")[0] for i in range(a, b + 1)})
+        kinds = sorted({_kind(reason[i]) for i in range(a, b + 1)})
         seg = dict(start=int(a), stop=int(b), t0=float(t[a]), t1=float(t[b]), reason="; ".join(kinds))
         if np.all(slow_ok[a:b + 1]):
             seg["slowdown"] = float(ratio[a:b + 1].max())
         segments.append(seg)
-    return JointTrajectory(model.name, t, p, theta, rates, feasible, reason, margin, segments)
+    branch = (b0 + np.cumsum(flips)) % 2
+    branches = _branch_report(model, t, bounds, branch, feasible, reason, both)
+    return JointTrajectory(model.name, t, p, theta, rates, feasible, reason, margin, segments, branches, near)
+
+
+def _kind(reason: str) -> str:
+    """The kind of a per-sample reason, for a stretch's summary: its text before the details."""
+    if reason.startswith(("pan rate", "tilt rate")):
+        return reason.split(" rate")[0] + " rate above its limit"
+    return reason.split(" (")[0]
+
+
+def _choose_branches(feasible_by_b0, bounds):
+    """``(b0, flips)``: the branch of each stretch between nadir crossings, by dynamic programming.
+
+    ``feasible_by_b0[b]``: per-sample feasibility (K,) with every crossing followed, starting on branch ``b``
+    (stretch ``j`` on branch ``(b + j) % 2``). Cost, compared in order: infeasible samples (an unfollowed
+    crossing also loses its step's two samples), unfollowed crossings, the first stretch not on eq. (8).
+    """
+    K = int(bounds[-1])
+    nseg = len(bounds) - 1
+
+    def ok(j, b, i):  # sample i of stretch j feasible on branch b
+        return bool(feasible_by_b0[(b + j) % 2][i])
+
+    bad = [[int(np.sum(~feasible_by_b0[(b + j) % 2][bounds[j]:bounds[j + 1]])) for b in (0, 1)] for j in range(nseg)]
+    cost = [(bad[0][b], 0, b) for b in (0, 1)]
+    back = []
+    for j in range(1, nseg):
+        c = int(bounds[j])
+        new, bk = [], []
+        for b in (0, 1):
+            opts = []
+            for a in (0, 1):
+                if a != b:  # followed: pan held, tilt through zero
+                    add = (bad[j][b], 0, 0)
+                else:  # the pan flips by pi: the step's samples c-1, c are lost too
+                    add = (bad[j][b] + ok(j - 1, b, c - 1) + ok(j, b, c), 1, 0)
+                opts.append((tuple(x + y for x, y in zip(cost[a], add)), a))
+            best = min(opts)
+            new.append(best[0])
+            bk.append(best[1])
+        cost = new
+        back.append(bk)
+    b = 0 if cost[0] <= cost[1] else 1
+    seq = [b]
+    for bk in reversed(back):
+        b = bk[b]
+        seq.append(b)
+    seq.reverse()
+    flips = np.zeros(K, dtype=bool)
+    for j in range(1, nseg):
+        flips[bounds[j]] = seq[j] != seq[j - 1]
+    return seq[0], flips
+
+
+_BRANCH_NAMES = ("eq. 8 (tilt >= 0)", "(theta1 + pi, -theta2) (tilt <= 0)")
+
+
+def _branch_report(model, t, bounds, branch, feasible, reason, both) -> list:
+    """Per stretch between nadir crossings: ``start, stop, t0, t1, branch (0/1), ik, why``."""
+    out = []
+    for j in range(len(bounds) - 1):
+        a, b = int(bounds[j]), int(bounds[j + 1]) - 1
+        br = int(branch[a])
+        why = []
+        followed = j > 0 and br != int(branch[a - 1])
+        if j == 0:
+            why.append("path start" + (" (eq. 8, the default)" if br == 0 else ""))
+        else:
+            why.append(f"nadir crossing at t = {t[a]:.3f} s " + (
+                "followed: pan held, tilt through zero" if followed else
+                "not followed: the pan flips by 180 deg there (infeasible)"))
+        if both is None:
+            if j > 0:
+                why.append(f"tilt_min = {math.degrees(model.tilt_min):g} deg: no negative-tilt branch")
+        elif not followed:
+            other = both[(1 - br + j) % 2]
+            n_other = int(np.sum(~other[2][a:b + 1]))
+            n_here = int(np.sum(~feasible[a:b + 1]))
+            next_followed = b + 1 < len(branch) and int(branch[b + 1]) != br
+            if n_other > n_here or (j > 0 and n_other):
+                first = next((other[3][i] for i in range(a, b + 1) if not other[2][i]), "")
+                why.append(f"the other branch would leave {n_other} sample(s) infeasible here "
+                           f"({first.split(' (')[0]})")
+            elif br == 1 and next_followed:
+                why.append(f"so that the nadir crossing at t = {t[b + 1]:.3f} s is followed (the stretch after it "
+                           f"is on eq. 8)")
+        out.append(dict(start=a, stop=b, t0=float(t[a]), t1=float(t[b]), branch=br, ik=_BRANCH_NAMES[br],
+                        why="; ".join(w for w in why if w)))
+    return out
+
+
+def _nadir_pass(model, tr, seg, t, p, v, nadir_margin, limit_margin, snap):
+    """The ``nadir_pass`` record of an infeasible stretch caused by passing close to the nadir, else None.
+
+    Passing at distance ``d`` with speed ``v`` the pan must swing ~pi at up to ``v / d``: when that exceeds the
+    pan's rate limit the stretch is infeasible whatever the sampling. With ``tilt_min < 0`` the larger
+    ``nadir_snap`` values of a short ladder are tried on the stretch (with 50 samples either side) and the first
+    that makes it feasible is suggested; the spot error is then at most that distance near the nadir.
+    """
+    a, b = seg["start"], seg["stop"]
+    if not any(("pan" in tr.reason[i]) for i in range(a, b + 1)):
+        return None
+    d = tr.nadir_distance[a:b + 1]
+    i = a + int(np.argmin(d))
+    dmin = float(d[i - a])
+    speed = float(np.hypot(*v[i]))
+    lim = float(model.rate_limits[0])
+    if not (dmin > max(snap, NADIR_TOL * model.h) and speed / dmin > lim):
+        return None  # within nadir_snap it is a crossing, whose own reason says what is wrong
+    note = dict(distance=dmin, speed=speed, pan_rate=speed / dmin, limit=lim, snap=None)
+    text = (f"the path passes {1000 * dmin:.3g} mm from the nadir at {speed:.3g} m/s: the pan must swing ~180 deg "
+            f"there, at up to v/d = {math.degrees(speed / dmin):.0f} deg/s (limit {math.degrees(lim):.0f} deg/s)")
+    if dmin > MAX_NADIR_SNAP:
+        text += f"; keep the path at least v / limit = {speed / lim:.2g} m from the nadir, or slow it down"
+    elif model.tilt_min < 0.0:
+        lo, hi = max(a - 50, 0), min(b + 51, len(t))
+        ladder = sorted({math.ceil(dmin * 1e4) / 1e4, *SNAP_LADDER})
+        for s in ladder:
+            if s <= snap or s < dmin or s > MAX_NADIR_SNAP:
+                continue
+            trial = _trajectory(model, t[lo:hi], p[lo:hi], v[lo:hi], nadir_margin, limit_margin, s)
+            if np.all(trial.feasible[a - lo:b + 1 - lo]):
+                note["snap"] = s
+                break
+        if note["snap"] is not None:
+            text += (f"; nadir_snap = {1000 * note['snap']:g} mm (--nadir-snap {1000 * note['snap']:g}) takes it "
+                     f"through the nadir instead (spot error up to {1000 * note['snap']:g} mm there)")
+        else:
+            text += (f"; no nadir_snap up to {1000 * MAX_NADIR_SNAP:g} mm helps: keep the path at least "
+                     f"v / limit = {speed / lim:.2g} m from the nadir, or slow it down")
+    else:
+        text += (f"; keep the path at least v / limit = {speed / lim:.2g} m from the nadir, or slow it down "
+                 f"(going through the nadir with a larger nadir_snap needs tilt_min < 0)")
+    note["text"] = text
+    return note
 
 
 def _evaluate(model, t, p, v, th0, flips, b0, unfollowed, jump, closest, nadir, reach, tilt_actual, nadir_margin,
@@ -283,7 +493,8 @@ def _evaluate(model, t, p, v, th0, flips, b0, unfollowed, jump, closest, nadir, 
     ``unfollowed``: nadir crossings (True at the step's end sample) taken on the same branch, i.e. with the
     pan flipping by ~pi; ``jump``: steps whose pan turns by > pi/2 away from the nadir (too coarse a
     sampling: eq. 9 at the samples cannot see the pan's motion between them). Both steps' two samples are
-    infeasible.
+    infeasible. ``need`` (K,): per sample, the signed tilt (rad) the stretch after the nearest crossing would
+    need on the negative-tilt branch (quoted when an unfollowed crossing is for want of negative tilt).
     """
     K = len(t)
     theta, branch = _branch_theta(model, th0, flips, b0)
@@ -325,13 +536,19 @@ def _evaluate(model, t, p, v, th0, flips, b0, unfollowed, jump, closest, nadir, 
         if not reach[i]:
             reason.append(f"outside the reachable floor (tilt {math.degrees(tilt_actual[i]):.1f} deg > "
                           f"{math.degrees(model.tilt_limit - limit_margin):.1f} deg)")
-        elif flipped[i]:
+        elif flipped[i] and (not negative_ok or need[i] < model.tilt_min - 1e-12):
             reason.append(f"nadir crossing needs negative tilt (the eq. 8 pan flips by 180 deg here; following "
-                          f"the path on the (theta1 + pi, -theta2) branch needs tilt down to {math.degrees(need):.1f} "
-                          f"deg, tilt_min = {math.degrees(model.tilt_min):g} deg)")
+                          f"the path on the (theta1 + pi, -theta2) branch needs tilt down to "
+                          f"{math.degrees(need[i]):.1f} deg, tilt_min = {math.degrees(model.tilt_min):g} deg)")
+        elif flipped[i]:
+            reason.append("nadir crossing not followed (the pan flips by 180 deg here: switching the IK branch "
+                          "there would make the next stretch infeasible, see the branch report)")
         elif jumped[i]:
+            d = float(np.min(closest[i:i + 2]))
+            w = float(np.hypot(*v[i])) / max(d, 1e-12)
+            # when v/d is over the pan limit finer sampling cannot help: the stretch's nadir_pass note says so
             reason.append(f"pan turns by over 90 deg between two samples near the nadir (the path passes "
-                          f"{float(np.min(closest[i:i + 2])):.3g} m from it; sample it more finely)")
+                          f"{1000 * d:.3g} mm from it" + ("; sample it more finely)" if w <= lim[0] else ")"))
         elif blocked[i]:
             reason.append(f"within {math.degrees(nadir_margin):g} deg of the nadir singularity (pan undefined; "
                           f"set tilt_min < 0 to pass through it on the (theta1 + pi, -theta2) branch)")
@@ -515,7 +732,8 @@ class MultiPlan:
 
     def to_dict(self) -> dict:
         return dict(names=self.names, ok=self.ok, n_samples=len(self.t), handovers=self.handovers,
-                    segments=self.segments, infeasible=self.infeasible, preaim=self.projector_commands()[1])
+                    segments=self.segments, infeasible=self.infeasible, preaim=self.projector_commands()[1],
+                    branches={tr.name: tr.branches for tr in self.trajectories})
 
 
 def unreachable_samples(projectors, points_W) -> np.ndarray:
@@ -565,7 +783,7 @@ def _peak_rate(tr: JointTrajectory, model: ProjectorModel, a: int, b: int):
 
 
 def plan_multi(projectors, t, points_W, velocity_W=None, *, walls=None, nadir_margin: float = math.radians(2),
-               limit_margin: float = math.radians(2)) -> MultiPlan:
+               limit_margin: float = math.radians(2), nadir_snap: float = NADIR_SNAP) -> MultiPlan:
     """Choose which projector serves each sample of a path and where to hand over.
 
     Rules: a projector is *available* at a sample when its trajectory there is
@@ -579,9 +797,17 @@ def plan_multi(projectors, t, points_W, velocity_W=None, *, walls=None, nadir_ma
     ----------
     projectors : sequence of ProjectorModel
         Calibrated projectors with distinct names.
-    t, points_W, velocity_W : see :func:`joint_trajectory`
+    t, points_W, velocity_W, nadir_margin, nadir_snap : see :func:`joint_trajectory`
+    limit_margin : float
+        Tilt (rad) kept free below each projector's tilt limit.
     walls : array_like, shape (W, 4), optional
         Wall segments ``[x0, y0, x1, y1]`` on the floor (m).
+
+    Each infeasible run lists every projector's reason at its first sample;
+    a speed problem gives the run's peak rate and ``slowdown``, and a pass
+    close to a projector's nadir its distance, the pan rate it needs and the
+    ``nadir_snap`` that would help (``nadir_pass`` of
+    :func:`joint_trajectory`).
     """
     projectors = list(projectors)
     if not projectors:
@@ -589,11 +815,12 @@ def plan_multi(projectors, t, points_W, velocity_W=None, *, walls=None, nadir_ma
     names = [p.name for p in projectors]
     if len(set(names)) != len(names):
         raise InputError(f"projector names must be unique, got {names}")
+    snap = check_nadir_snap(nadir_snap)
     t, p, v = _timed(t, points_W, velocity_W)
     W = np.zeros((0, 4)) if walls is None else check_array(walls, "walls", shape=("W", 4)).reshape(-1, 4)
     trajs, avail, occl, score = [], [], [], []
     for proj in projectors:
-        tr = joint_trajectory(proj, t, p, v, nadir_margin=nadir_margin, limit_margin=limit_margin)
+        tr = joint_trajectory(proj, t, p, v, nadir_margin=nadir_margin, limit_margin=limit_margin, nadir_snap=snap)
         occ = segments_blocked(np.broadcast_to(proj.nadir_world, p.shape), p, W)
         trajs.append(tr)
         occl.append(occ)
@@ -633,6 +860,11 @@ def plan_multi(projectors, t, points_W, velocity_W=None, *, walls=None, nadir_ma
                         # the first sample's rate understates the stretch: report its peak and the fix
                         why[names[k]] = peak[0]
                         slow[names[k]] = peak[1]
+                    note = next((sg["nadir_pass"] for sg in tr.segments if "nadir_pass" in sg
+                                 and sg["start"] <= i - 1 and sg["stop"] >= start), None)
+                    if note is not None and not occl[k, start]:
+                        why[names[k]] = _kind(why[names[k]]) if why[names[k]].startswith("pan turns") else why[names[k]]
+                        why[names[k]] += "; " + note["text"]
                 infeasible.append(dict(start=start, stop=i - 1, t0=float(t[start]), t1=float(t[i - 1]),
                                        reasons=why, **({"slowdown": slow} if slow else {})))
             start = i
@@ -641,7 +873,7 @@ def plan_multi(projectors, t, points_W, velocity_W=None, *, walls=None, nadir_ma
 
 
 def retime(projectors, t, points_W, velocity_W=None, *, walls=None, nadir_margin: float = math.radians(2),
-           limit_margin: float = math.radians(2), max_passes: int = 8):
+           limit_margin: float = math.radians(2), nadir_snap: float = NADIR_SNAP, max_passes: int = 8):
     """Slow a path down where, and only where, the joint rate limits require it.
 
     Joint rates are linear in the spot velocity at a given pose (seed eq. 9^-1),
@@ -659,7 +891,7 @@ def retime(projectors, t, points_W, velocity_W=None, *, walls=None, nadir_margin
     projectors = list(projectors)
     t, p, v = _timed(t, points_W, velocity_W)
     vel = None if velocity_W is None else v
-    kw = dict(walls=walls, nadir_margin=nadir_margin, limit_margin=limit_margin)
+    kw = dict(walls=walls, nadir_margin=nadir_margin, limit_margin=limit_margin, nadir_snap=nadir_snap)
     plan = plan_multi(projectors, t, p, vel, **kw)
     for _ in range(max_passes):
         need = np.ones(len(t))

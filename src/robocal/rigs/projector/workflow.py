@@ -154,9 +154,13 @@ def path_report(plan, projectors, walls, *, title="projector spot path") -> Repo
     ax[1].set_xlabel("t [s]")
     s2.figure(fig, "commands of the serving projector (pan unwrapped)")
     for tr in plan.trajectories:
-        if tr.segments:
-            s2.table([dict(projector=tr.name, **{k: v for k, v in g.items()}) for g in tr.segments[:20]],
-                     caption=f"{tr.name}: samples it cannot serve on its own")
+        if len(tr.branches) > 1 or any(b["branch"] for b in tr.branches):
+            s2.table([{"t0 [s]": b["t0"], "t1 [s]": b["t1"], "IK branch": b["ik"], "why": b["why"]}
+                      for b in tr.branches[:50]],
+                     caption=f"{tr.name}: IK branch per stretch between nadir crossings")
+        if tr.segments:  # the nadir_pass record's text is already in the reason
+            s2.table([dict(projector=tr.name, **{k: v for k, v in g.items() if k != "nadir_pass"})
+                      for g in tr.segments[:20]], caption=f"{tr.name}: samples it cannot serve on its own")
     return rep
 
 
