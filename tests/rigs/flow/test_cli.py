@@ -52,6 +52,23 @@ def test_examples_run(tmp_path, capsys):
     assert ev["flow odometry (calibrated) ATE"] < ev["flow odometry ATE"]
 
 
+def test_raw_frames_example_runs(tmp_path, capsys):
+    # the shipped raw-frames example (frames + gyro + height, no flow log): the kernel computes the flow
+    ex = EX / "frames"
+    assert sum(f.stat().st_size for f in ex.iterdir()) < 2_000_000
+    assert "flow_log" not in (ex / "run.yaml").read_text()
+    code, out, _ = _run(["flow", "odometry", str(ex / "run.yaml"), "--out", str(tmp_path / "odo"), "--no-progress"], capsys)
+    assert code == 0 and "ATE" in out
+    res = json.loads((tmp_path / "odo" / "result.json").read_text())
+    assert res["estimate"]["ate_rmse"] < 0.003 and abs(res["estimate"]["distance"] - 0.119) < 0.005
+    s = res["diagnostics"]["summary"]
+    assert s["bridged_steps"] == 0
+    # a 0.12 m drive: the RPE segments are fractions of its path, and stdout says so
+    assert "short run" in out and "RPE@0.03m" in out
+    ev = res["diagnostics"]["evaluation"]["flow odometry"]
+    assert ev["rpe_headline_m"] == pytest.approx(0.03) and ev["rpe"]["0.03"]["n"] > 50
+
+
 def test_simulate_frames_then_odometry(tmp_path, capsys):
     out = tmp_path / "sim"
     code, text, _ = _run(["flow", "simulate", "--duration", "0.6", "--supersample", "1", "--texture", "grass",
@@ -246,3 +263,47 @@ def test_simulate_rate_and_short_reference(tmp_path, capsys):
     (d / "truth.csv").write_text("\n".join(lines[:200]) + "\n")
     code, _, err = _run(["flow", "evaluate", str(d / "run.yaml"), "--out", str(tmp_path / "e"), "--no-progress"], capsys)
     assert code == 2 and "truth.csv" in err and "reference covers" in err
+
+
+def _frames_run(tmp_path, edit):
+    """A copy of the raw-frames example whose frames.npz is rewritten by ``edit(dict) -> dict | bytes``."""
+    d = tmp_path / "fr"
+    shutil.copytree(EX / "frames", d)
+    with np.load(d / "frames.npz") as z:
+        data = {k: z[k] for k in z.files}
+    new = edit(data)
+    if isinstance(new, bytes):
+        (d / "frames.npz").write_bytes(new)
+    elif isinstance(new, np.ndarray):
+        with open(d / "frames.npz", "wb") as fh:
+            np.save(fh, new)
+    else:
+        np.savez(d / "frames.npz", **new)
+    return d / "run.yaml"
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda d: (EX / "frames" / "frames.npz").read_bytes()[:50_000], "cannot read as .npz"),
+    (lambda d: d["frames"], "single .npy array"),
+    (lambda d: {k: v for k, v in d.items() if k != "height"}, "missing array(s) height (have: frames, t, gyro)"),
+    (lambda d: {**d, "gyro": d["gyro"][:, :-1]}, "gyro must have shape (3, 120, 3)"),
+    (lambda d: {**d, "gyro": np.where(np.arange(3)[None, None] == 0, np.nan, d["gyro"])}, "gyro has 360 NaN"),
+    (lambda d: {**d, "height": -d["height"]}, "height must be > 0 m: sensor 0, interval 0"),
+    (lambda d: {**d, "frames": d["frames"][:, :1], "t": d["t"][:1], "gyro": d["gyro"][:, :0], "height": d["height"][:, :0]},
+     "at least 2 frames"),
+])
+def test_bad_frames_files_name_the_file(tmp_path, capsys, edit, message):
+    run = _frames_run(tmp_path, edit)
+    code, _, err = _run(["flow", "odometry", str(run), "--out", str(tmp_path / "o"), "--no-progress"], capsys)
+    assert code == 2 and message in err and err.startswith(f"robocal: error: {run.parent / 'frames.npz'}")
+    assert err.count("\n") == 1 and err.count("frames.npz") == 1
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--supersample", "0"], "--supersample must be >= 1"),
+    (["--speed", "-0.2"], "--speed must be >= 0 m/s"),
+    (["--duration", "1e6"], "GB of memory to render"),
+])
+def test_simulate_refuses_bad_arguments(tmp_path, capsys, args, message):
+    code, _, err = _run(["flow", "simulate", *args, "--out", str(tmp_path / "s"), "--no-progress"], capsys)
+    assert code == 2 and message in err and err.count("\n") == 1

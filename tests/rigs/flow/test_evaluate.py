@@ -89,3 +89,33 @@ def test_rpe_statistics_and_honest_comparison():
                                                            0.003 * np.sin(np.arange(1999) / 300) + 2e-5], 1)), ref[:2000])
     text = compare_text(good, worse)
     assert "RPE@0.5m" in text and "WORSE" in text
+
+
+def test_short_run_rpe_uses_fractions_of_the_path_and_says_so():
+    from robocal.rigs.flow.evaluate import rpe_lengths
+
+    # 2000 steps of 2 mm: 4 m of path, the fixed lengths all fit (at least two segments each)
+    assert rpe_lengths(4.0) == ((0.25, 0.5, 1.0), 0.5, "")
+    # 1.5 m: the 1 m segments would not fit twice, they are left out and the note says so
+    keep, head, note = rpe_lengths(1.5)
+    assert keep == (0.25, 0.5) and head == 0.5 and "1 m left out" in note
+    ref = _ref(150)                                   # 0.3 m of path: not one 0.5 m segment
+    est = ref.copy()
+    est[:, :2] *= 1.02
+    ev = evaluate_trajectory(est, ref)
+    assert ev.distance == pytest.approx(0.3, abs=1e-3)
+    assert sorted(ev.rpe) == pytest.approx([0.03, 0.075, 0.15], abs=1e-3) and ev.rpe_headline == pytest.approx(0.075, abs=1e-3)
+    assert "short run" in ev.rpe_note and "% of the path" in ev.rpe_note
+    for r in ev.rpe.values():                         # never an empty or NaN RPE
+        assert r["n"] > 50 and r["trans_per_m_median"] == pytest.approx(0.02, rel=0.05)
+    assert ev.rpe_label() == "RPE@0.075m" and ev.to_dict()["rpe_note"] == ev.rpe_note
+    # a reference that never moves has no RPE per distance, and says so
+    still = np.zeros((20, 3))
+    ev0 = evaluate_trajectory(still, still)
+    assert ev0.rpe == {} and ev0.rpe_headline is None and "does not move" in ev0.rpe_note
+    assert np.isnan(ev0.headline_rpe()["trans_per_m"]) and ev0.headline_rpe()["n"] == 0
+    # asked for directly, a length longer than the path gives n = 0 with a note, not a bare NaN
+    r = rpe_per_distance(est, ref, lengths=(1.0,))[1.0]
+    assert r["n"] == 0 and "0.300 m" in r["note"]
+    with pytest.raises(InputError):
+        evaluate_trajectory(est, ref, lengths=())

@@ -12,10 +12,10 @@ from robocal.rigs.flow.kernel import FlowConfig, FrameFlow, compute_flow, match_
 from robocal.rigs.flow.model import SensorArray, seed_array
 from robocal.rigs.flow.odometry import Odometry, SensorSteps, dead_reckon, fuse_steps
 from robocal.rigs.flow.calibrate import ArrayCalibration, calibrate_array
-from robocal.rigs.flow.evaluate import evaluate_trajectory, rpe_per_distance, ate
+from robocal.rigs.flow.evaluate import evaluate_trajectory, rpe_lengths, rpe_per_distance, ate
 
 __all__ = [
     "FlowConfig", "FrameFlow", "compute_flow", "match_blocks", "match_sequence",
     "SensorArray", "seed_array", "Odometry", "SensorSteps", "dead_reckon", "fuse_steps",
-    "ArrayCalibration", "calibrate_array", "evaluate_trajectory", "rpe_per_distance", "ate",
+    "ArrayCalibration", "calibrate_array", "evaluate_trajectory", "rpe_lengths", "rpe_per_distance", "ate",
 ]

@@ -9,7 +9,10 @@
   start ``i`` and every length ``L``, the frame ``j`` where the reference has
   travelled ``L`` further; ``E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j)``; report the
   RMS translation of ``E`` divided by ``L`` (m per m, shown in %) and its
-  rotation per metre (deg/m).
+  rotation per metre (deg/m). A segment length is used only when the run's
+  path is at least twice as long (two independent segments); on a run shorter
+  than twice the headline 0.5 m the lengths become fractions (10, 25, 50 %)
+  of its path instead, and the result says so (:func:`rpe_lengths`).
 
 Written from these definitions (no evo: it is GPL).
 """
@@ -23,7 +26,14 @@ import numpy as np
 from robocal.errors import InputError, NotEnoughDataError
 from robocal.geometry import wrap_angle
 
-__all__ = ["TrajectoryErrors", "align_trajectory", "ate", "rpe_per_distance", "evaluate_trajectory", "plot_trajectories"]
+__all__ = ["TrajectoryErrors", "align_trajectory", "ate", "rpe_lengths", "rpe_per_distance", "evaluate_trajectory",
+           "plot_trajectories", "RPE_LENGTHS", "RPE_HEADLINE", "RPE_FRACTIONS"]
+
+#: fixed segment lengths of the RPE (m) and the one shown in tables and on stdout
+RPE_LENGTHS = (0.25, 0.5, 1.0)
+RPE_HEADLINE = 0.5
+#: segment lengths as fractions of the path on a short run (the middle one is the headline)
+RPE_FRACTIONS = (0.1, 0.25, 0.5)
 
 
 def _se2(p):
@@ -80,6 +90,45 @@ def ate(est, ref):
     return float(np.sqrt(np.mean(err**2))), al, err, method
 
 
+def rpe_lengths(distance: float, lengths=RPE_LENGTHS, *, headline: float = RPE_HEADLINE,
+                fractions=RPE_FRACTIONS):
+    """Segment lengths of the RPE for a run whose reference travels ``distance`` m.
+
+    A length ``L`` gives independent segments only ``distance / L`` times: it is
+    kept when ``L <= distance / 2`` (at least two). When the ``headline`` length
+    does not fit (a run shorter than ``2 * headline``), the lengths become
+    ``fractions`` of the path (rounded to 1 mm), the middle one the headline.
+
+    Returns
+    -------
+    lengths : tuple of float
+        Empty when the reference does not move.
+    headline : float or None
+        The length to show in one-line summaries.
+    note : str
+        ``""`` for the fixed lengths as given, else what was changed and why.
+    """
+    distance = float(distance)
+    lengths = tuple(float(L) for L in lengths)
+    if not np.isfinite(distance) or distance <= 1e-9:
+        return (), None, "the reference does not move: no relative pose error per distance"
+    if headline <= distance / 2:
+        keep = tuple(L for L in lengths if L <= distance / 2)
+        dropped = [L for L in lengths if L > distance / 2]
+        note = (f"segments of {', '.join(f'{L:g}' for L in dropped)} m left out: the {distance:.2f} m path holds "
+                "fewer than two of them") if dropped else ""
+        return keep, headline, note
+    fr = tuple(round(f * distance, 3) for f in fractions)
+    fr = tuple(L for L in fr if L > 0)
+    if not fr:
+        return (), None, f"the reference travels only {distance * 1e3:.2f} mm: no relative pose error per distance"
+    head = fr[len(fr) // 2]
+    note = (f"short run ({distance:.3f} m of path < {2 * headline:g} m): RPE segments are "
+            f"{', '.join(f'{f * 100:g}' for f in fractions)} % of the path ({', '.join(f'{L:g}' for L in fr)} m) "
+            f"instead of {', '.join(f'{L:g}' for L in lengths)} m")
+    return fr, head, note
+
+
 def rpe_per_distance(est, ref, lengths=(0.5, 1.0)):
     """Relative pose error over segments of fixed reference path length.
 
@@ -87,7 +136,10 @@ def rpe_per_distance(est, ref, lengths=(0.5, 1.0)):
     -------
     dict: length -> {"trans_rmse": m, "trans_per_m": 1, "rot_per_m": rad/m, "n": int}
         ``trans_per_m``/``rot_per_m`` are RMS over all segment starts; ``*_mean``
-        (KITTI) and ``*_median`` (Zhang & Scaramuzza 2018) are also given.
+        (KITTI) and ``*_median`` (Zhang & Scaramuzza 2018) are also given. A
+        length longer than the path has no segment: its entry has ``n = 0``,
+        NaN values and a ``"note"`` saying so (:func:`rpe_lengths` picks
+        lengths that fit).
     """
     est = np.asarray(est, float)
     ref = np.asarray(ref, float)
@@ -99,7 +151,8 @@ def rpe_per_distance(est, ref, lengths=(0.5, 1.0)):
         ok = j < len(s)
         i = np.flatnonzero(ok)
         if i.size == 0:
-            out[float(L)] = {"trans_rmse": np.nan, "trans_per_m": np.nan, "rot_per_m": np.nan, "n": 0}
+            out[float(L)] = {"trans_rmse": np.nan, "trans_per_m": np.nan, "rot_per_m": np.nan, "n": 0,
+                             "note": f"no segment of {L:g} m: the reference travels {s[-1]:.3f} m"}
             continue
         j = j[ok]
         Qrel = np.linalg.inv(Tr[i]) @ Tr[j]
@@ -131,15 +184,32 @@ class TrajectoryErrors:
     aligned: np.ndarray
     align_method: str
     distance: float
+    rpe_headline: float | None = None
+    rpe_note: str = ""
+
+    def headline_rpe(self) -> dict:
+        """The RPE entry of the headline length (NaN values and ``n = 0`` when there is none)."""
+        empty = {"trans_per_m": np.nan, "rot_per_m": np.nan, "trans_rmse": np.nan, "n": 0}
+        return self.rpe.get(self.rpe_headline, empty) if self.rpe_headline is not None else empty
+
+    def rpe_label(self) -> str:
+        """``"RPE@0.5m"``; on a short run the length chosen from its path."""
+        return "RPE" if self.rpe_headline is None else f"RPE@{self.rpe_headline:g}m"
 
     def to_dict(self) -> dict:
         return {"ate_rmse_m": self.ate_rmse, "final_position_error_m": self.final_error,
                 "final_heading_error_rad": self.heading_error_final, "distance_m": self.distance,
-                "rpe": {str(k): v for k, v in self.rpe.items()}, "align_method": self.align_method}
+                "rpe": {str(k): v for k, v in self.rpe.items()}, "rpe_headline_m": self.rpe_headline,
+                "rpe_note": self.rpe_note, "align_method": self.align_method}
 
 
-def evaluate_trajectory(est, ref, *, lengths=(0.25, 0.5, 1.0)) -> TrajectoryErrors:
-    """ATE (after alignment), RPE per distance and the raw end-point error of ``est`` vs ``ref`` (both (N, 3))."""
+def evaluate_trajectory(est, ref, *, lengths=RPE_LENGTHS) -> TrajectoryErrors:
+    """ATE (after alignment), RPE per distance and the raw end-point error of ``est`` vs ``ref`` (both (N, 3)).
+
+    The RPE segment lengths are ``lengths`` (m) where the reference path holds at
+    least two of each; on a short run they are fractions of its path
+    (:func:`rpe_lengths`; ``rpe_note`` says what was done).
+    """
     est = np.asarray(est, float)
     ref = np.asarray(ref, float)
     if est.shape != ref.shape or est.ndim != 2 or est.shape[1] != 3:
@@ -150,7 +220,12 @@ def evaluate_trajectory(est, ref, *, lengths=(0.25, 0.5, 1.0)) -> TrajectoryErro
     dist = float(np.sum(np.linalg.norm(np.diff(ref[:, :2], axis=0), axis=1)))
     fe = float(np.linalg.norm(est[-1, :2] - ref[-1, :2]))
     he = float(wrap_angle(est[-1, 2] - ref[-1, 2]))
-    return TrajectoryErrors(a, fe, he, rpe_per_distance(est, ref, lengths), al, method, dist)
+    lengths = sorted(float(L) for L in lengths)
+    if not lengths or not all(np.isfinite(L) and L > 0 for L in lengths):
+        raise InputError(f"RPE segment lengths must be > 0 m, got {lengths}")
+    head = RPE_HEADLINE if RPE_HEADLINE in lengths else lengths[len(lengths) // 2]
+    use, head, note = rpe_lengths(dist, lengths, headline=head)
+    return TrajectoryErrors(a, fe, he, rpe_per_distance(est, ref, use), al, method, dist, head, note)
 
 
 def plot_trajectories(curves: dict, *, ax=None, title: str = "trajectories"):

@@ -59,7 +59,7 @@ __all__ = [
 ]
 
 SUBPIXEL_MODES = ("none", "half", "quarter", "parabolic", "equiangular")
-AGGREGATE_MODES = ("mean", "median", "trimmed")
+AGGREGATE_MODES = ("mean", "median", "trimmed", "tensor")
 
 #: Per-frame flow error (RMS per axis, px) with all 25 blocks in use, by sub-pixel mode, and
 #: with ``refine="lk"``: measured on shifted real photographs (gravel, 2x2 binning,
@@ -92,7 +92,18 @@ class FlowConfig:
     aggregate : str
         How the accepted blocks make the frame's flow: ``"mean"`` (PX4FLOW),
         ``"median"`` (per axis), ``"trimmed"`` (mean of the blocks within
-        ``trim_px`` of the median — rejects single wrong blocks).
+        ``trim_px`` of the median — rejects single wrong blocks), or
+        ``"tensor"``: the same blocks as ``"trimmed"`` (same validity,
+        quality and spread), combined by their gradient structure tensors
+        ``T_b = sum over the block of (g_x, g_y)^T (g_x, g_y)`` in the earlier
+        frame, ``flow = (sum T_b + lambda I)^-1 (sum T_b flow_b + lambda mean)``
+        with ``lambda = 0.02 trace(sum T_b) / 2``: a block that sees only an
+        edge fixes the flow across the edge, not along it (the aperture
+        problem), so it no longer pulls the frame along the edge. Opt-in
+        (measured in docs/rigs/flow.md: on brick floors it cuts the accepted
+        frames that are wrong by > 0.5 px from 8.7 to ~3 %, on gravel and grass
+        the RMS error by ~15 %; the other documented figures are with
+        ``"trimmed"``).
     trim_px : float
         Radius of the ``"trimmed"`` aggregation, pixels.
     feature_threshold : float
@@ -886,6 +897,54 @@ def _aggregate_frames(flow, status, cen, mode, trim, used, out_flow, agreement, 
         spread[k] = math.sqrt(ss / cnt)
 
 
+@njit(cache=True, nogil=True)
+def _tensor_combine(prev, used, bflow, ys, xs, block, reg, out):  # pragma: no cover - compiled
+    """Per frame: the used blocks' flows weighted by their gradient structure tensors (central
+    differences in ``prev``); ``out`` holds the trimmed mean on entry, the pull in the weakly
+    determined direction (``reg`` times the mean eigenvalue)."""
+    n, nb = used.shape
+    for k in range(n):
+        if not (out[k, 0] == out[k, 0]):
+            continue
+        s00 = 0.0
+        s01 = 0.0
+        s11 = 0.0
+        r0 = 0.0
+        r1 = 0.0
+        for b in range(nb):
+            if not used[k, b]:
+                continue
+            a = 0.0
+            c = 0.0
+            d = 0.0
+            for y in range(ys[b], ys[b] + block):
+                for x in range(xs[b], xs[b] + block):
+                    gx = 0.5 * (float(prev[k, y, x + 1]) - float(prev[k, y, x - 1]))
+                    gy = 0.5 * (float(prev[k, y + 1, x]) - float(prev[k, y - 1, x]))
+                    a += gx * gx
+                    c += gx * gy
+                    d += gy * gy
+            s00 += a
+            s01 += c
+            s11 += d
+            r0 += a * bflow[k, b, 0] + c * bflow[k, b, 1]
+            r1 += c * bflow[k, b, 0] + d * bflow[k, b, 1]
+        lam = reg * 0.5 * (s00 + s11)
+        if lam <= 0.0:
+            continue
+        s00 += lam
+        s11 += lam
+        r0 += lam * out[k, 0]
+        r1 += lam * out[k, 1]
+        det = s00 * s11 - s01 * s01
+        out[k, 0] = (s11 * r0 - s01 * r1) / det
+        out[k, 1] = (s00 * r1 - s01 * r0) / det
+
+
+#: ``aggregate="tensor"``: the pull towards the trimmed mean, as a fraction of the mean eigenvalue
+TENSOR_REGULARISATION = 0.02
+
+
 def _aggregate(bm: BlockMatches, config: FlowConfig):
     n, nb = bm.status.shape
     n_acc = (bm.status == 0).sum(axis=1)
@@ -895,7 +954,7 @@ def _aggregate(bm: BlockMatches, config: FlowConfig):
     spread = np.empty(n)
     centroid = np.empty((n, 2))
     cen = bm.centres - (config.window - 1) / 2.0
-    mode = {"mean": 0, "median": 1, "trimmed": 2}[config.aggregate]
+    mode = {"mean": 0, "median": 1, "trimmed": 2, "tensor": 2}[config.aggregate]
     _aggregate_frames(bm.flow, bm.status, np.ascontiguousarray(cen), mode, float(config.trim_px), used, flow,
                       agreement, spread, centroid)
     return n_acc, used, flow, agreement, spread, centroid
@@ -1050,6 +1109,10 @@ def compute_flow_sequence(frames, config: FlowConfig = FlowConfig(), *, gyro=Non
 def _frame_flow(bm, prev, curr, config, gyro, dt, height, focal_px) -> FrameFlow:
     n = bm.flow.shape[0]
     n_acc, used, flow, agreement, spread, centroid = _aggregate(bm, config)
+    if config.aggregate == "tensor" and n:
+        o1 = block_origins(config)
+        _tensor_combine(np.ascontiguousarray(prev), used, np.ascontiguousarray(bm.flow), np.repeat(o1, config.grid),
+                        np.tile(o1, config.grid), config.block, TENSOR_REGULARISATION, flow)
     n_used = used.sum(axis=1)
     # the quantisation of the coarse sub-pixel modes adds its own scatter (RMS of a uniform step in 2D)
     q = {"none": 0.41, "half": 0.2, "quarter": 0.1}.get(config.subpixel, 0.0)

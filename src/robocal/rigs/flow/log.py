@@ -318,20 +318,57 @@ def steps_from_frames(frames, t, gyro, height, focal_px: float, config: FlowConf
 
 
 def read_frames_npz(path):
-    """Load ``frames, t, gyro, height`` from a raw-frames file (see module doc)."""
+    """Load ``frames, t, gyro, height`` from a raw-frames file (see module doc).
+
+    The shapes, the frame count and the finiteness of ``t``, ``gyro`` and
+    ``height`` are checked here, so that every error names this file.
+    """
+    import zipfile
+
     src = str(path)
     try:
-        with np.load(path, allow_pickle=False) as z:
+        z = np.load(path, allow_pickle=False)
+        if not hasattr(z, "files"):
+            raise FileFormatError("is a single .npy array, not an .npz archive of frames, t, gyro, height", source=src)
+        with z:
             missing = [k for k in ("frames", "t", "gyro", "height") if k not in z.files]
             if missing:
-                raise FileFormatError(f"missing array(s) {', '.join(missing)} (have: {', '.join(z.files)})", source=src)
+                raise FileFormatError(f"missing array(s) {', '.join(missing)} (have: {', '.join(z.files) or 'none'})",
+                                      source=src)
             data = {k: z[k] for k in ("frames", "t", "gyro", "height")}
+    except FileFormatError:
+        raise
     except FileNotFoundError:
         raise FileFormatError("file not found", source=src) from None
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as exc:
         raise FileFormatError(f"cannot read as .npz ({exc})", source=src) from None
-    if data["frames"].dtype != np.uint8:
-        raise FileFormatError(f"frames must be uint8 grey levels, got {data['frames'].dtype}", source=src)
+    fr = data["frames"]
+    if fr.dtype != np.uint8:
+        raise FileFormatError(f"frames must be uint8 grey levels, got {fr.dtype}", source=src)
+    if fr.ndim != 4 or fr.shape[2] != fr.shape[3]:
+        raise FileFormatError(f"frames must have shape (n_sensors, T, W, W), got {fr.shape}", source=src)
+    n, T = fr.shape[:2]
+    if T < 2:
+        raise FileFormatError(f"needs at least 2 frames per sensor for a flow, got {T}", source=src)
+    for k, shape in (("t", (T,)), ("gyro", (n, T - 1, 3)), ("height", (n, T - 1))):
+        a = data[k]
+        if a.shape != shape:
+            raise FileFormatError(f"{k} must have shape {shape} for frames of shape {fr.shape}, got {a.shape}", source=src)
+        if not np.issubdtype(a.dtype, np.number):
+            raise FileFormatError(f"{k} must be numbers, got dtype {a.dtype}", source=src)
+        bad = ~np.isfinite(a)
+        if bad.any():
+            raise FileFormatError(f"{k} has {int(bad.sum())} NaN/infinite value(s), first at index "
+                                  f"{tuple(int(i) for i in np.argwhere(bad)[0])}", source=src)
+        data[k] = a.astype(float)
+    if np.any(data["height"] <= 0):
+        i, k = np.argwhere(data["height"] <= 0)[0]
+        raise FileFormatError(f"height must be > 0 m: sensor {i}, interval {k} has {data['height'][i, k]:g}", source=src)
+    d = np.diff(data["t"])
+    if np.any(d <= 0):
+        k = int(np.flatnonzero(d <= 0)[0])
+        raise FileFormatError(f"frame times must increase strictly: t[{k + 1}] = {data['t'][k + 1]:.6f} s follows "
+                              f"t[{k}] = {data['t'][k]:.6f} s", source=src)
     return data
 
 

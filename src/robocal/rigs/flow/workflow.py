@@ -105,29 +105,38 @@ def _traj_section(report: Report, title: str, curves: dict, errors: dict) -> Non
     plot_trajectories(curves, ax=ax, title="true / flow odometry / wheel odometry (cf. seed Fig. 4)")
     sec.figure(fig, "Trajectories in the world frame; dots mark the end.")
     rows = []
+    first = next(iter(errors.values()), None)
+    label = first.rpe_label() if first is not None else "RPE@0.5m"
+    seg = f"{first.rpe_headline:g} m" if first is not None and first.rpe_headline is not None else "0.5 m"
     for name, ev in errors.items():
-        r1 = ev.rpe.get(0.5, {})
+        r1 = ev.headline_rpe()
         rows.append({"trajectory": name, "ATE [mm]": ev.ate_rmse * 1e3, "final error [mm]": ev.final_error * 1e3,
                      "final heading [deg]": np.degrees(ev.heading_error_final),
-                     "RPE@0.5m [%]": r1.get("trans_per_m", np.nan) * 100, "RPE rot [deg/m]": np.degrees(r1.get("rot_per_m", np.nan))})
+                     f"{label} [%]": r1["trans_per_m"] * 100, "RPE rot [deg/m]": np.degrees(r1["rot_per_m"])})
     sec.table(rows, digits=4, caption="ATE: RMS position error after least-squares rigid 2D alignment (Umeyama); "
-              "RPE: RMS over all segment starts of the relative pose error over 0.5 m of travelled path "
-              "(translation error per metre of path, rotation error per metre; mean and median in result.json).")
+              f"RPE: RMS over all segment starts of the relative pose error over {seg} of travelled path "
+              "(translation error per metre of path, rotation error per metre; other lengths, mean and median in "
+              "result.json).")
+    for note in dict.fromkeys(ev.rpe_note for ev in errors.values() if ev.rpe_note):
+        sec.text(f"Note: {note}.")
     cal, nom = errors.get("flow odometry (calibrated)"), errors.get("flow odometry")
     if cal is not None and nom is not None:
         sec.text(compare_text(nom, cal))
 
 
 def compare_text(nom, cal) -> str:
-    """One line: calibrated vs nominal array in ATE and RPE@0.5 m, saying which got worse."""
+    """One line: calibrated vs nominal array in ATE and the headline RPE (0.5 m), saying which got worse."""
     def word(a, b):
         return "better" if b < a else "WORSE" if b > a else "same"
 
-    rn, rc = nom.rpe.get(0.5, {}), cal.rpe.get(0.5, {})
-    tn, tc = rn.get("trans_per_m", np.nan), rc.get("trans_per_m", np.nan)
-    on, oc = np.degrees(rn.get("rot_per_m", np.nan)), np.degrees(rc.get("rot_per_m", np.nan))
-    return (f"calibrated vs nominal array: ATE {nom.ate_rmse * 1e3:.1f} -> {cal.ate_rmse * 1e3:.1f} mm "
-            f"({word(nom.ate_rmse, cal.ate_rmse)}); RPE@0.5m {tn * 100:.2f} -> {tc * 100:.2f} % ({word(tn, tc)}), "
+    rn, rc = nom.headline_rpe(), cal.headline_rpe()
+    tn, tc = rn["trans_per_m"], rc["trans_per_m"]
+    on, oc = np.degrees(rn["rot_per_m"]), np.degrees(rc["rot_per_m"])
+    ate = (f"calibrated vs nominal array: ATE {nom.ate_rmse * 1e3:.1f} -> {cal.ate_rmse * 1e3:.1f} mm "
+           f"({word(nom.ate_rmse, cal.ate_rmse)})")
+    if not (rn["n"] and rc["n"]):
+        return ate + "; no RPE (the reference path is too short)"
+    return (ate + f"; {nom.rpe_label()} {tn * 100:.2f} -> {tc * 100:.2f} % ({word(tn, tc)}), "
             f"{on:.2f} -> {oc:.2f} deg/m ({word(on, oc)})")
 
 
