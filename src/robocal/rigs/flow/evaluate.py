@@ -23,8 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robocal.errors import InputError, NotEnoughDataError
-from robocal.geometry import wrap_angle
+from robocal.errors import DegenerateGeometryError, InputError, NotEnoughDataError
+from robocal.geometry import rigid_fit, wrap_angle
 
 __all__ = ["TrajectoryErrors", "align_trajectory", "ate", "rpe_lengths", "rpe_per_distance", "evaluate_trajectory",
            "plot_trajectories", "RPE_LENGTHS", "RPE_HEADLINE", "RPE_FRACTIONS"]
@@ -51,7 +51,8 @@ def align_trajectory(est, ref):
     Zhang & Scaramuzza (IROS 2018) align for the ATE: with the centred
     positions and ``H = sum e_i r_i^T`` (2x2), the rotation is
     ``atan2(H_01 - H_10, H_00 + H_11)`` (the planar Kabsch solution, a proper
-    rotation by construction) and the translation matches the centroids. It is
+    rotation by construction; :func:`robocal.geometry.rigid_fit` in 2D) and the
+    translation matches the centroids. It is
     well defined for collinear positions (a straight drive); only when every
     estimated position coincides (no motion) is the rotation free, and the
     first poses are aligned instead.
@@ -63,23 +64,17 @@ def align_trajectory(est, ref):
     """
     est = np.asarray(est, float)
     ref = np.asarray(ref, float)
-    me, mr = est[:, :2].mean(axis=0), ref[:, :2].mean(axis=0)
-    e, r = est[:, :2] - me, ref[:, :2] - mr
-    H = e.T @ r
-    a, b = H[0, 0] + H[1, 1], H[0, 1] - H[1, 0]
-    scale = np.sqrt(np.sum(e**2) * np.sum(r**2))
-    if np.hypot(a, b) > 1e-12 * max(scale, 1e-300):
-        yaw = float(np.arctan2(b, a))
-        c, s = np.cos(yaw), np.sin(yaw)
-        t = mr - np.array([[c, -s], [s, c]]) @ me
+    try:
+        fit = rigid_fit(est[:, :2], ref[:, :2], rtol=1e-12)
+        yaw, R, t = fit.angle, fit.R, fit.t
         method = "umeyama"
-    else:
+    except DegenerateGeometryError:
         yaw = ref[0, 2] - est[0, 2]
         c, s = np.cos(yaw), np.sin(yaw)
-        t = ref[0, :2] - np.array([[c, -s], [s, c]]) @ est[0, :2]
+        R = np.array([[c, -s], [s, c]])
+        t = ref[0, :2] - R @ est[0, :2]
         method = "first-pose (the estimate does not move)"
-    c, s = np.cos(yaw), np.sin(yaw)
-    xy = est[:, :2] @ np.array([[c, -s], [s, c]]).T + t
+    xy = est[:, :2] @ R.T + t
     return np.concatenate([xy, (est[:, 2:] + yaw)], 1), method
 
 
