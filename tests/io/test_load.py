@@ -417,3 +417,13 @@ def test_fuzz_mapping_shaped_documents_give_values_or_robocal_errors(data, suffi
             continue
         for d in docs:
             _exercise(d)
+
+
+def test_a_column_without_a_unit_gets_a_hint_of_its_own_kind(tmp_path):
+    p = tmp_path / "t.csv"
+    p.write_text("t,x [mm]\n0,1\n1,2\n")
+    tab = load_csv(p)
+    with pytest.raises(UnitError, match=r"needs a unit of time in its header, e.g. 't \[s\]'"):
+        tab.column("t", kind="time")
+    with pytest.raises(UnitError, match=r"e.g. 't \[rad\]'"):
+        tab.column("t", kind="angle")

@@ -410,7 +410,9 @@ class CsvTable:
         if unit is None:
             if kind in ("dimensionless", "pixel"):
                 return values
-            raise UnitError(f"column '{name}' needs a unit of {kind} in its header, e.g. '{name} [mm]'", source=self.source)
+            example = next((u for u, (k, _) in UNITS.items() if k == kind), "unit")
+            raise UnitError(f"column '{name}' needs a unit of {kind} in its header, e.g. '{name} [{example}]'",
+                            source=self.source)
         try:
             return to_si(values, unit, kind, name=f"column '{name}'")
         except UnitError as exc:
