@@ -149,7 +149,7 @@ def test_K_dist_and_value_semantics(cam):
         (dict(dist=(0.1, 0.2, 0.3)), InputError, r"shape \(4,\) or \(5,\), got shape \(3,\)"),
         (dict(width=0), InputError, "width must be > 0"),
         (dict(height=480.5), InputError, "height must be an integer"),
-        (dict(cx="abc"), InputError, "cx must be numeric"),
+        (dict(cx="abc"), InputError, r"cx must be a number, got a string \(.abc.\)"),
     ],
 )
 def test_constructor_rejects_bad_values(kwargs, err, match):
