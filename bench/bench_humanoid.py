@@ -18,7 +18,8 @@ The Jacobian is dense in the parameters (every corner depends on the camera,
 its leg's 6 joints and its board: 12 of 21 columns), so a sparse solver has
 nothing to gain here and is not offered. The two estimates are checked to
 agree (1e-6 rad) before timing. Ratio = finite differences / analytic
-(> 1: analytic faster). Also timed: rendering and detecting one image.
+(> 1: analytic faster). Also timed: rendering and detecting one image, and
+the robust homography check of its corners (:func:`homography_outliers`).
 
 Run: ``python bench/bench_humanoid.py`` (``--quick``: one repetition).
 """
@@ -35,7 +36,7 @@ import numpy as np
 import robocal
 from robocal.camera import detect_checkerboard
 from robocal.rigs.humanoid.calibrate import calibrate
-from robocal.rigs.humanoid.detect import render_view
+from robocal.rigs.humanoid.detect import homography_outliers, render_view
 from robocal.rigs.humanoid.model import default_model
 from robocal.rigs.humanoid.simulate import simulate_dataset
 
@@ -80,11 +81,13 @@ def main(argv=None) -> int:
     t_r, imgs = best_of(lambda: [render_view(model, th[v], feet[v], data.truth.params, rng)
                                  for v in range(len(th))], reps)
     exp = model.project(th, feet, data.truth.params)
-    t_d, _ = best_of(lambda: [detect_checkerboard(imgs[v], model.board, expected_uv=exp[v])
-                              for v in range(len(th))], reps)
+    t_d, uvs = best_of(lambda: [detect_checkerboard(imgs[v], model.board, expected_uv=exp[v])
+                                for v in range(len(th))], reps)
+    t_h, _ = best_of(lambda: [homography_outliers(model, uv) for uv in uvs], reps)
     print()
     print(f"render one 640x480 view: {1e3 * t_r / len(th):.0f} ms; detect its corners "
-          f"(findChessboardCorners + cornerSubPix; SB only as fallback): {1e3 * t_d / len(th):.0f} ms")
+          f"(findChessboardCorners + cornerSubPix; SB only as fallback): {1e3 * t_d / len(th):.0f} ms; "
+          f"check them against the board's homography: {1e3 * t_h / len(th):.1f} ms")
     return 0
 
 

@@ -63,7 +63,12 @@ def test_full_output_names_corners_whose_refinement_wandered(monkeypatch):
     T = _poses(1, 11)[0]
     img = render_planar_target(CAM, T, BOARD, blur_sigma=0.7)
     clean, info = detect_checkerboard(img, BOARD, method="classic", full_output=True)
-    assert info == {"detector": "classic", "unrefined": ()}
+    assert info["detector"] == "classic" and info["unrefined"] == ()
+    raw = detect_checkerboard(img, BOARD, method="classic", refine=False)
+    # the shift is reported per corner in the returned order: |refined - pixel-level|
+    assert info["refine_shift"].shape == (BOARD.n_corners,)
+    assert np.allclose(info["refine_shift"], np.linalg.norm(clean - raw, axis=1), atol=1e-4)
+    assert info["refine_shift"].max() < 1.0
     real = cv2.cornerSubPix
 
     def wander(image, corners, *a):  # cornerSubPix meets an edge: corner 5 of the detector moves 20 px
@@ -73,11 +78,23 @@ def test_full_output_names_corners_whose_refinement_wandered(monkeypatch):
 
     monkeypatch.setattr(cv2, "cornerSubPix", wander)
     uv, info = detect_checkerboard(img, BOARD, method="classic", full_output=True)
-    raw = detect_checkerboard(img, BOARD, method="classic", refine=False)
     (k,) = info["unrefined"]
+    assert info["refine_shift"][k] > 15.0  # reported although the corner kept the detector's pixel
     assert np.array_equal(uv[k], raw[k]) and not np.array_equal(uv[k], clean[k])  # the detector's pixel
     others = np.delete(np.arange(len(uv)), k)
     assert np.allclose(uv[others], clean[others])
+
+
+def test_order_checkerboard_corners_undoes_any_grid_symmetry():
+    from robocal.camera import order_checkerboard_corners
+
+    T = _poses(1, 11)[0]
+    img = render_planar_target(CAM, T, BOARD, blur_sigma=0.7)
+    uv = detect_checkerboard(img, BOARD)
+    g = uv.reshape(BOARD.rows, BOARD.cols, 2)
+    for h in (g[::-1], g[:, ::-1], g[::-1, ::-1]):
+        assert np.array_equal(order_checkerboard_corners(img, h.reshape(-1, 2), BOARD), uv)
+        assert np.array_equal(order_checkerboard_corners(None, h.reshape(-1, 2), BOARD, expected_uv=uv + 2.0), uv)
 
 
 def test_orientation_of_asymmetric_board_upside_down():

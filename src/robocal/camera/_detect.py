@@ -88,23 +88,29 @@ def _colour_ok(img: np.ndarray, g: np.ndarray) -> bool:
 
 def order_checkerboard_corners(image, corners, board: Checkerboard, expected_uv=None) -> np.ndarray:
     """Re-order detected corners (any grid order) to ``board.object_points()`` order (see module doc)."""
-    rows, cols = board.rows, board.cols
     c = check_array(corners, "corners", shape=(2,)).reshape(-1, 2)
+    return c[_ordering(image, c, board, expected_uv)]
+
+
+def _ordering(image, c: np.ndarray, board: Checkerboard, expected_uv=None) -> np.ndarray:
+    """Index array ``perm`` (rows * cols,) such that ``c[perm]`` is in ``board.object_points()`` order."""
+    rows, cols = board.rows, board.cols
     if c.shape[0] != rows * cols:
         raise InputError(f"corners must hold {rows * cols} points for a {rows}x{cols} board, got {c.shape[0]}")
     cands = _candidates(c.reshape(rows, cols, 2), rows, cols)
+    perms = [p.reshape(-1) for p in _candidates(np.arange(rows * cols).reshape(rows, cols, 1), rows, cols)]
     if expected_uv is not None:
         e = check_array(expected_uv, "expected_uv", shape=(2,)).reshape(-1, 2)
         if e.shape[0] != rows * cols:
             raise InputError(f"expected_uv must have shape ({rows * cols}, 2), got {np.shape(expected_uv)}")
         d = [np.mean(np.sum((g.reshape(-1, 2) - e) ** 2, axis=1)) for g in cands]
-        return cands[int(np.argmin(d))].reshape(-1, 2)
+        return perms[int(np.argmin(d))]
     img = _grey(image)
-    keep = [g for g in cands if _handedness(g) > 0]
-    coloured = [g for g in keep if _colour_ok(img, g)]
+    keep = [k for k, g in enumerate(cands) if _handedness(g) > 0]
+    coloured = [k for k in keep if _colour_ok(img, cands[k])]
     keep = coloured or keep
-    keep.sort(key=lambda g: float(g[0, 0, 0] + g[0, 0, 1]))
-    return keep[0].reshape(-1, 2)
+    keep.sort(key=lambda k: float(cands[k][0, 0, 0] + cands[k][0, 0, 1]))
+    return perms[keep[0]]
 
 
 #: Gaussian pre-smoothing [px] of the refinement image: ``cornerSubPix`` is
@@ -113,9 +119,20 @@ def order_checkerboard_corners(image, corners, board: Checkerboard, expected_uv=
 REFINE_SMOOTHING_PX = 1.0
 #: Largest half-window [px] of the refinement.
 REFINE_MAX_HALF_WINDOW = 7
+#: A refinement that moves a corner by this fraction of the corner spacing or more
+#: has wandered off (the detector's own estimate is kept and the corner named).
+REFINE_MAX_SHIFT = 0.25
 
 
-def _refine_corners(img: np.ndarray, corners: np.ndarray, board: Checkerboard) -> np.ndarray:
+def _refine_corners(img: np.ndarray, corners: np.ndarray, board: Checkerboard):
+    """``cv2.cornerSubPix`` on the smoothed image; returns ``(corners (N, 2), shift (N,) [px],
+    wandered (N,) bool)``.
+
+    ``shift`` is how far the refinement moved each corner. A corner it moves by
+    :data:`REFINE_MAX_SHIFT` x the corner spacing or more met something else (an edge,
+    a reflection, a neighbour): it keeps the detector's estimate (pixel-level for
+    "classic"), and :func:`detect_checkerboard` names it in its ``full_output``.
+    """
     g = corners.reshape(board.rows, board.cols, 2)
     spacing = min(
         np.min(np.linalg.norm(np.diff(g, axis=0), axis=-1)),
@@ -127,11 +144,9 @@ def _refine_corners(img: np.ndarray, corners: np.ndarray, board: Checkerboard) -
     crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 100, 1e-5)
     out = cv2.cornerSubPix(smooth, corners.astype(np.float32).reshape(-1, 1, 2), (win, win), (-1, -1), crit)
     out = out.reshape(-1, 2).astype(np.float64)
-    moved = np.linalg.norm(out - corners, axis=1)
-    # A corner that wanders off by more than a quarter spacing met something else: keep the
-    # detector's (pixel-level for "classic") and say so through detect_checkerboard's full_output.
-    kept = moved >= 0.25 * spacing
-    return np.where(kept[:, None], corners, out), kept
+    shift = np.linalg.norm(out - corners, axis=1)
+    wandered = ~(shift < REFINE_MAX_SHIFT * spacing)  # NaN counts as wandered
+    return np.where(wandered[:, None], corners, out), shift, wandered
 
 
 def detect_checkerboard(
@@ -166,11 +181,14 @@ def detect_checkerboard(
 
     full_output : bool
         Also return a dict: ``"detector"`` (``"classic"`` or ``"sb"``, the one
-        that found the board) and ``"unrefined"`` (indices, in the returned
-        order, of corners whose sub-pixel refinement wandered off by more than
-        a quarter of the corner spacing and that keep the detector's estimate:
-        only pixel-accurate for ``"classic"``; a careful caller drops them or
-        the view).
+        that found the board), ``"unrefined"`` (tuple of indices, in the
+        returned order, of corners whose sub-pixel refinement wandered off by
+        :data:`REFINE_MAX_SHIFT` (a quarter) of the corner spacing or more and
+        that keep the detector's estimate: only pixel-accurate for
+        ``"classic"``; a careful caller drops them or the view) and
+        ``"refine_shift"`` (ndarray (rows * cols,) [px], returned order: how
+        far the refinement moved each corner, the wandered ones included;
+        zeros with ``refine=False``).
 
     Returns
     -------
@@ -206,12 +224,12 @@ def detect_checkerboard(
             f"of size {img.shape[1]}x{img.shape[0]} (method {method!r})"
         )
     corners = corners.reshape(-1, 2).astype(np.float64)
-    kept = np.zeros(len(corners), dtype=bool)
+    shift, wandered = np.zeros(len(corners)), np.zeros(len(corners), dtype=bool)
     if refine:
-        corners, kept = _refine_corners(img, corners, board)
-    ordered = order_checkerboard_corners(img, corners, board, expected_uv)
+        corners, shift, wandered = _refine_corners(img, corners, board)
+    perm = _ordering(img, corners, board, expected_uv)
+    ordered = corners[perm]
     if not full_output:
         return ordered
-    # the ordering only permutes the corners: find where the unrefined ones went
-    unrefined = sorted(int(np.argmin(np.linalg.norm(ordered - c, axis=1))) for c in corners[kept])
-    return ordered, {"detector": detector, "unrefined": tuple(unrefined)}
+    unrefined = tuple(int(i) for i in np.flatnonzero(wandered[perm]))
+    return ordered, {"detector": detector, "unrefined": unrefined, "refine_shift": shift[perm]}

@@ -145,6 +145,31 @@ def test_views_without_a_full_board_are_dropped(model, corner_data):
     assert any(w.code == "dropped" and data.names[2] in w.message for w in cal.warnings)
 
 
+def test_missing_corners_count_nowhere(model, corner_data):
+    # Corners removed at detection (NaN) are left out of their view's residual term: the degrees of
+    # freedom, the residual variance and the measured corner noise count only the kept corners, so
+    # removing half of every view's corners must not halve the variance (as zero rows would).
+    clean = calibrate(model, corner_data)
+    data = corner_data.subset(np.arange(corner_data.n_views))
+    data.corners = data.corners.copy()
+    rng = np.random.default_rng(0)
+    for v in range(data.n_views):
+        data.corners[v, rng.choice(24, 12, replace=False)] = np.nan
+    cal = calibrate(model, data)
+    kept = int(np.isfinite(data.corners[..., 0]).sum())
+    assert cal.keep.sum() == kept == cal.used_residuals.shape[0] and len(cal.missing_corners) == 12 * data.n_views
+    assert sum(t.n_obs * t.dim for t in cal.lsq.terms) == 2 * kept  # one term per view, kept corners only
+    assert cal.lsq.dof == 2 * kept - cal.lsq.rank
+    assert cal.lsq.residual_variance == pytest.approx(clean.lsq.residual_variance, rel=0.15)
+    assert cal.corner_sigma == pytest.approx(clean.corner_sigma, rel=0.1)
+    assert np.isfinite(cal.rms_xy).all() and np.isfinite(cal.view_rms).all()
+    # the stds grow by about sqrt(2) with half the corners, not less (a diluted variance)
+    ratio = [cal.std(lab) / clean.std(lab) for lab in clean.free]
+    assert 1.1 < np.median(ratio) < 1.8
+    # the views' corners that remain are still consistent with their joint records
+    assert not [w for w in cal.warnings if w.code == "inconsistent_data"]
+
+
 def test_too_little_data(model, corner_data):
     left = corner_data.subset([i for i, f in enumerate(corner_data.feet) if f == "left"])
     with pytest.raises(NotEnoughDataError, match="right board"):
@@ -199,7 +224,7 @@ def test_reject_outliers_restores_the_clean_estimate(model, tmp_path):
     assert d["n_corners_used"] == d["n_corners"] - 1
     # nothing to reject: the same calibration
     same = calibrate(model, data, reject_outliers=True)
-    assert same.keep is None and np.array_equal(same.params, clean.params)
+    assert same.keep.all() and same.rejected_corners == [] and np.array_equal(same.params, clean.params)
 
 
 def test_reject_outliers_drops_a_view_with_many_bad_corners(model):

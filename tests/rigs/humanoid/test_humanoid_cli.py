@@ -36,6 +36,7 @@ def test_calibrate_example_and_report(tmp_path, capsys):
     assert "joint_offsets" in (out / "offsets.yaml").read_text()
     text = capsys.readouterr().out
     assert "LM iterations: " in text and " from zero + " in text and "warning" not in text
+    assert "simulation truth in run.yaml: 21 parameters, worst |error|/std " in text
     # the rebuilt report has what the first one had: tables, histograms, per-view RMS, overlays
     assert main(["humanoid", "report", str(out / "result.json"), "--out", str(tmp_path / "rep")]) == 0
     first, again = ((p / "report.html").read_text() for p in (out, tmp_path / "rep"))
@@ -66,6 +67,21 @@ def test_corner_sigma_must_be_finite_and_positive(tmp_path, capsys, value):
     assert main(["humanoid", "calibrate", str(EXAMPLE), "--corner-sigma", value, "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "corner_sigma must be a finite number > 0 px" in err[0] and value in err[0]
+
+
+def test_bad_options_are_refused_before_detection(tmp_path, capsys, monkeypatch):
+    import robocal.rigs.humanoid.detect as det
+
+    def boom(*a, **k):
+        raise AssertionError("detection ran before the options were checked")
+
+    monkeypatch.setattr(det, "detect_views", boom)
+    for opt, msg in ((["--params", "camera.z"], "camera.z' (the camera's z shift is not observable"),
+                     (["--consistency-ratio", "0.5"], "--consistency-ratio"),
+                     (["--corner-sigma", "0"], "corner_sigma")):
+        assert main(["humanoid", "calibrate", str(EXAMPLE), *opt, "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and msg in err[0]
 
 
 def test_negative_offset_scale_is_refused(tmp_path, capsys):

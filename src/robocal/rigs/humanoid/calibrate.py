@@ -8,14 +8,17 @@ differences. The result carries the residual RMS in x and y, per-view
 residuals, > 3 sigma outliers by view and corner, and the identifiability
 analysis of the shared estimation layer: rank, condition number, standard
 deviations, strongest correlations, and no value for a parameter the data do
-not determine. Optionally (``reject_outliers``) the named corners are removed
-and the problem re-solved once.
+not determine. Corners missing from a view (NaN: removed at detection) are
+left out of it; optionally (``reject_outliers``) the named outliers are removed
+too and the problem re-solved once. Each view is one residual term holding
+only its kept corners, so every count (degrees of freedom, residual variance,
+RMS) is over the corners actually used.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +30,8 @@ from robocal.io import CalibrationResult
 from robocal.rigs.humanoid.model import CAMERA_PARAMS, FEET, HumanoidModel
 from robocal.rigs.humanoid.simulate import JOINT_RESOLUTION, HumanoidDataset
 
-__all__ = ["PARAMETER_SETS", "resolve_parameters", "HumanoidCalibration", "calibrate", "build_problem",
+__all__ = ["PARAMETER_SETS", "resolve_parameters", "HumanoidCalibration", "calibrate", "check_options",
+           "build_problem",
            "choose_gauge", "check_views_consistent", "plausibility_warnings"]
 
 #: Named parameter sets (``--params``): see :func:`resolve_parameters`.
@@ -66,8 +70,10 @@ def resolve_parameters(model: HumanoidModel, spec: str | Sequence[str] = "seed")
         add = groups.get(it, [it])
         for lab in add:
             if lab not in labels:
-                raise InputError(f"unknown calibration parameter {lab!r}; known: sets {list(groups)} or labels "
-                                 f"{labels}")
+                hint = (" (the camera's z shift is not observable in this set-up, seed 001)"
+                         if lab == "camera.z" else "")
+                raise InputError(f"unknown calibration parameter {lab!r}{hint}; known: sets {list(groups)} or "
+                                 f"labels {labels}")
             if lab not in out:
                 out.append(lab)
     if not out:
@@ -76,9 +82,15 @@ def resolve_parameters(model: HumanoidModel, spec: str | Sequence[str] = "seed")
 
 
 def _valid_views(data: HumanoidDataset) -> np.ndarray:
+    """Views (V,) bool with at least one corner (a corner is present when both coordinates are finite)."""
+    return _present(data).any(axis=1)
+
+
+def _present(data: HumanoidDataset) -> np.ndarray:
+    """Corners (V, N) bool that are present (finite): NaN marks a corner removed at detection."""
     if data.corners is None:
         raise InputError("the data set has no corners (detect them first)")
-    return np.all(np.isfinite(data.corners), axis=(1, 2))
+    return np.all(np.isfinite(data.corners), axis=2)
 
 
 def noise_weights(model: HumanoidModel, data: HumanoidDataset, x, *, corner_sigma: float,
@@ -111,14 +123,15 @@ def corner_noise(model: HumanoidModel, data: HumanoidDataset, x, keep=None) -> f
 
     Per view, the residual is projected onto the orthogonal complement of the
     columns of ``d uv / d theta``; ``sigma^2 = sum ||P r||^2 / sum (2N - rank)``.
-    ``keep`` (V, N) bool, optional: only these corners count (rejected outliers left out).
+    ``keep`` (V, N) bool, optional: only these corners count (rejected outliers left out); missing
+    (NaN) corners never do.
     """
     V, N = data.corners.shape[:2]
     n = len(model.joint_names)
     uv, J = model.project(data.theta, data.feet, x, jacobian=True, check=False)
     r = (uv - data.corners).reshape(V, 2 * N)
     Jt = J[..., :n].reshape(V, 2 * N, n)
-    rows = np.ones((V, 2 * N), bool) if keep is None else np.repeat(np.asarray(keep, bool), 2, axis=1)
+    rows = np.repeat(_present(data) if keep is None else np.asarray(keep, bool) & _present(data), 2, axis=1)
     ss, dof = 0.0, 0
     for v in range(V):
         if not rows[v].any():
@@ -160,45 +173,58 @@ def build_problem(model: HumanoidModel, data: HumanoidDataset, free: Sequence[st
                   joint_sigma: float = 0.0, keep=None) -> tuple[Problem, np.ndarray]:
     """The least-squares problem over one block ``p`` (all parameters, unselected ones fixed at ``x0``).
 
-    Residuals: ``uv_pred - uv_meas`` [px] of each view, whitened by
-    :func:`noise_weights` (so they are in units of the assumed noise; with
-    ``joint_sigma = 0`` simply divided by ``corner_sigma``), shape
-    ``(V, 2N)``: one observation per view. ``tie`` ties the RHipYawPitch offset to
-    LHipYawPitch (one motor) when the tree does not already do so. ``keep`` (V, N)
-    bool, optional: corners to use; a view's kept corners are whitened by the
-    inverse Cholesky factor of their own sub-block of ``Sigma_v`` (the marginal of
-    the noise model), the rows of the left-out corners are zero (so ``m`` counts
-    them: see :func:`_exclude_zero_rows`). Returns the problem and the per-view noise
-    covariances (V, 2N, 2N) [px^2] of all corners.
+    One residual term per view (named by the view), holding ``uv_pred - uv_meas`` [px] of its
+    kept corners only, whitened by the inverse Cholesky factor of their block of the view's
+    noise covariance :func:`noise_weights` (the marginal of the noise model; in units of the
+    assumed noise, with ``joint_sigma = 0`` simply divided by ``corner_sigma``): one observation
+    of dimension ``2 K_v`` per view, as the whitening mixes the corners of a view (corner
+    outliers are tested separately on the raw residuals, see :func:`calibrate`). ``keep`` (V, N)
+    bool, optional: corners to use (default: the present ones, see :func:`_present`); a view
+    without any is left out. So the residual count ``m``, the degrees of freedom and the
+    residual variance count only the corners used. ``tie`` ties the RHipYawPitch offset to
+    LHipYawPitch (one motor) when the tree does not already do so. Returns the problem and the
+    per-view noise covariances (V, 2N, 2N) [px^2] of all corners.
     """
     labels = model.parameter_labels()
     x0 = np.zeros(len(labels)) if x0 is None else np.asarray(x0, dtype=float)
     fixed = np.array([lab not in free for lab in labels])
-    theta, feet, meas = data.theta, np.asarray(data.feet), data.corners
-    V, N = meas.shape[:2]
-    W, S = noise_weights(model, data, x0, corner_sigma=corner_sigma, joint_sigma=joint_sigma)
-    if keep is not None:
-        rows = np.repeat(np.asarray(keep, bool), 2, axis=1)
-        W = np.zeros_like(W)
-        for v in range(V):
-            K = np.flatnonzero(rows[v])
-            if K.size:
-                W[v][np.ix_(np.arange(K.size), K)] = np.linalg.inv(np.linalg.cholesky(S[v][np.ix_(K, K)]))
+    theta, feet = data.theta, np.asarray(data.feet)
+    V, N = data.corners.shape[:2]
+    keep = _present(data) if keep is None else np.asarray(keep, bool) & _present(data)
+    W_all, S = noise_weights(model, data, x0, corner_sigma=corner_sigma, joint_sigma=joint_sigma)
+    meas = data.corners.reshape(V, 2 * N)
+    P = len(labels)
+    # model.project evaluates every view at once: the per-view terms share one evaluation per parameter
+    # vector (the solver calls all terms with the same one)
+    cache: dict = {}
 
-    def fun(p):
-        r = (model.project(theta, feet, p["p"], check=False) - meas).reshape(V, 2 * N)
-        return np.einsum("vij,vj->vi", W, r)
-
-    def jac(p):
-        _, J = model.project(theta, feet, p["p"], jacobian=True, check=False)
-        return {"p": (W @ J.reshape(V, 2 * N, len(labels))).reshape(V * N * 2, len(labels))}
+    def projected(p, jacobian=False):
+        key = p.tobytes()
+        if cache.get("key") != key or (jacobian and cache["J"] is None):
+            out = model.project(theta, feet, p, jacobian=jacobian, check=False)
+            uv, J = out if jacobian else (out, None)
+            cache.update(key=key, uv=uv, J=J)
+        return cache["uv"], cache["J"]
 
     units = model.parameter_units()
     scale = np.where(np.array(units) == "m", 1e-3, np.radians(0.5))
     prob = Problem().add_block("p", x0, fixed=fixed, labels=labels, unit=units, scale=scale)
-    # one observation per view: the whitening mixes the corners of a view (corner outliers are
-    # tested separately on the raw residuals, see calibrate)
-    prob.add_residuals(fun, name="views", jacobian=jac if analytic else None, residual_dim=2 * N)
+    names = data.names if len(set(data.names)) == V else [f"view{v:03d}" for v in range(V)]
+    for v in range(V):
+        rows = np.flatnonzero(np.repeat(keep[v], 2))
+        if not rows.size:
+            continue
+        W = W_all[v] if rows.size == 2 * N else np.linalg.inv(np.linalg.cholesky(S[v][np.ix_(rows, rows)]))
+
+        def fun(p, v=v, rows=rows, W=W):
+            uv, _ = projected(p["p"])
+            return W @ (uv[v].reshape(2 * N)[rows] - meas[v, rows])
+
+        def jac(p, v=v, rows=rows, W=W):
+            _, J = projected(p["p"], jacobian=True)
+            return {"p": W @ J[v].reshape(2 * N, P)[rows]}
+
+        prob.add_residuals(fun, name=str(names[v]), jacobian=jac if analytic else None, residual_dim=rows.size)
     if tie and not model.tied and "RHipYawPitch" in labels and "LHipYawPitch" in labels:
         if ("RHipYawPitch" in free) != ("LHipYawPitch" in free):
             raise InputError("tie needs both LHipYawPitch and RHipYawPitch among the free parameters")
@@ -238,13 +264,19 @@ class HumanoidCalibration:
         of free parameters (tied ones counted once), before the gauge is held.
     two_pass : bool
         True when the corner noise was measured and a second LM pass run (``lsq`` is that pass).
-    keep : ndarray of bool, shape (V, N), or None
-        Corners used in the final solve (None: all; see ``calibrate(reject_outliers=True)``).
-        ``residuals`` covers every corner; RMS values are over the kept ones.
+    keep : ndarray of bool, shape (V, N)
+        Corners used in the final solve: the present ones (not removed at detection) less those
+        removed by ``calibrate(reject_outliers=True)``. ``residuals`` covers every corner (NaN for
+        missing ones); RMS values, degrees of freedom and the residual variance are over the kept ones.
     rejected_corners : list of (str, int)
         ``(view name, corner index)`` removed as outliers before the re-solve.
     rejected_views : list of str
         Views removed whole (too many of their corners flagged).
+    missing_corners : list of (str, int)
+        ``(view name, corner index)`` absent from the data (NaN: removed at detection, see
+        :func:`robocal.rigs.humanoid.detect.detect_views`), left out of their view.
+    reject_outliers : bool
+        Whether outlier rejection was asked for (it removes nothing when no corner is flagged).
     """
 
     model: HumanoidModel
@@ -270,6 +302,8 @@ class HumanoidCalibration:
     keep: np.ndarray | None = None
     rejected_corners: list = field(default_factory=list)
     rejected_views: list = field(default_factory=list)
+    missing_corners: list = field(default_factory=list)
+    reject_outliers: bool = False
 
     # -- queries -----------------------------------------------------------------------------
     @property
@@ -474,7 +508,12 @@ class HumanoidCalibration:
             # (the board's object-point order, row by row), and views removed whole
             "rejected_corners": [[v, c] for v, c in self.rejected_corners],
             "rejected_views": list(self.rejected_views),
+            "reject_outliers": self.reject_outliers,
+            # corners absent from the data (removed at detection: refinement wandered off, or off the
+            # board's homography), by view name and corner index; left out of their view
+            "missing_corners": [[v, c] for v, c in self.missing_corners],
             "n_corners_used": int(self.used_residuals.shape[0]),
+            "n_corners_rejected": self.n_rejected,
             "n_views": self.data.n_views,
             "n_corners": int(self.residuals.shape[0] * self.residuals.shape[1]),
             "joint_offsets_deg": {r["joint"]: r["offset [deg]"] for r in self.offsets_table() if r["estimated"]},
@@ -505,13 +544,18 @@ class HumanoidCalibration:
     def summary(self) -> str:
         """Plain-text summary: RMS, identifiability, the parameter table."""
         lsq = self.lsq
-        lines = [f"views used: {self.data.n_views}, corners: {self.residuals.shape[0] * self.residuals.shape[1]}",
+        lines = [f"views used: {self.data.n_views}, corners used: {self.used_residuals.shape[0]} of "
+                 f"{self.residuals.shape[0] * self.residuals.shape[1]}",
                  f"LM iterations: {self.first_iterations} from zero"
                  + (f" + {lsq.iterations} with the measured corner noise" if self.two_pass else "")
                  + f"; residual RMS x {self.rms_xy[0]:.3f} px, y {self.rms_xy[1]:.3f} px",
                  self.rank_text()]
-        if self.keep is not None:
+        if self.rejected_corners or self.rejected_views:
             lines.insert(1, "outliers rejected and re-solved once: " + self.rejection_text())
+        elif self.reject_outliers:
+            lines.insert(1, f"outlier rejection: no corner beyond {self.lsq.outlier_sigma:g} sigma, nothing removed")
+        if self.missing_corners:
+            lines.insert(1, "corners removed at detection (left out): " + _by_view_text(self.missing_corners))
         for r in self.parameter_rows():
             val = "not identifiable" if r["value"] is None else f"{r['value']:+.4f} +- {r['std']:.4f} {r['unit']}"
             lines.append(f"  {r['parameter']:<18s} {val}")
@@ -522,15 +566,19 @@ class HumanoidCalibration:
 
     def rejection_text(self) -> str:
         """What ``reject_outliers`` removed: corners by view, whole views ('' when nothing)."""
-        if self.keep is None:
+        if not (self.rejected_corners or self.rejected_views):
             return ""
-        by_view: dict[str, list[int]] = {}
-        for nm, c in self.rejected_corners:
-            by_view.setdefault(nm, []).append(c)
-        parts = [f"{nm} corners {cs}" for nm, cs in by_view.items()]
+        parts = [_by_view_text(self.rejected_corners, sep=" ")] if self.rejected_corners else []
         if self.rejected_views:
             parts.append(f"whole views {self.rejected_views}")
-        return f"{int((~self.keep).sum())} corner(s) removed: " + "; ".join(parts)
+        return f"{self.n_rejected} corner(s) removed: " + "; ".join(parts)
+
+    @property
+    def n_rejected(self) -> int:
+        """Corners removed by ``reject_outliers`` (the present corners of whole views included)."""
+        if self.keep is None:
+            return 0
+        return int((np.all(np.isfinite(self.data.corners), axis=2) & ~self.keep).sum())
 
     def rank_text(self) -> str:
         """'Jacobian rank r of n free parameters ...', with the undetermined ones and the gauge."""
@@ -571,8 +619,13 @@ def check_views_consistent(model: HumanoidModel, data: HumanoidDataset, x0=None,
     _check_consistency_thresholds(min_px, ratio)
     x0 = np.zeros(len(model.parameter_labels())) if x0 is None else np.asarray(x0, dtype=float)
     pred = model.project(data.theta, data.feet, x0, check=False)
-    dist = np.median(np.linalg.norm(pred - data.corners, axis=-1), axis=1)
-    dist = np.where(np.isfinite(dist), dist, np.inf)  # board behind the camera: as far as can be
+    d = np.linalg.norm(pred - data.corners, axis=-1)
+    # corners missing from the data (NaN) do not count; a view without any, or a board behind the
+    # camera (NaN prediction), is as far as can be
+    present = np.isfinite(data.corners).all(axis=-1)
+    d = np.where(present, np.where(np.isfinite(d), d, np.inf), np.nan)
+    dist = np.full(len(d), np.inf)
+    dist[present.any(axis=1)] = np.nanmedian(d[present.any(axis=1)], axis=1)
     typical = float(np.median(dist))
     tol = max(float(min_px), float(ratio) * typical)
     bad = np.flatnonzero(dist > tol)
@@ -622,6 +675,22 @@ def plausibility_warnings(model: HumanoidModel, free, params, view_rms, names,
     return out
 
 
+def check_options(model: HumanoidModel, *, parameters: str | Sequence[str] = "seed",
+                  corner_sigma: float | None = None, joint_resolution: float = JOINT_RESOLUTION,
+                  consistency_px: float = NOMINAL_MIN_PX, consistency_ratio: float = NOMINAL_RATIO,
+                  max_rejected_fraction: float = 0.25) -> list[str]:
+    """Check :func:`calibrate`'s options (raise :class:`InputError` naming the bad one) and return the
+    free parameter labels; the CLI calls it before the slow corner detection."""
+    if corner_sigma is not None and not (np.isfinite(corner_sigma) and corner_sigma > 0):
+        raise InputError(f"corner_sigma must be a finite number > 0 px, got {corner_sigma}")
+    if not (np.isfinite(joint_resolution) and joint_resolution >= 0):
+        raise InputError(f"joint_resolution must be a finite number >= 0 rad, got {joint_resolution}")
+    _check_consistency_thresholds(consistency_px, consistency_ratio)
+    if not (0.0 <= max_rejected_fraction <= 1.0):
+        raise InputError(f"max_rejected_fraction must be within [0, 1], got {max_rejected_fraction}")
+    return resolve_parameters(model, parameters)
+
+
 def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | Sequence[str] = "seed",
               tie: bool = False, jac: str = "analytic", method: str = "lm", x0=None,
               corner_sigma: float | None = None, joint_resolution: float = JOINT_RESOLUTION,
@@ -629,14 +698,15 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
               check_consistency: bool = True, consistency_px: float = NOMINAL_MIN_PX,
               consistency_ratio: float = NOMINAL_RATIO, reject_outliers: bool = False,
               max_rejected_fraction: float = 0.25) -> HumanoidCalibration:
-    """Estimate the selected offsets from the corners of every complete view.
+    """Estimate the selected offsets from the corners of every view.
 
     Parameters
     ----------
     model : HumanoidModel
     data : HumanoidDataset
-        Views with corners; views whose corners are NaN (board not fully
-        found) are dropped with a message.
+        Views with corners. NaN corners (removed at detection) are left out of
+        their view; a view without any corner (board not fully found) is
+        dropped with a message.
     parameters : str or sequence of str
         See :func:`resolve_parameters`; default the seed's 21.
     tie : bool
@@ -681,18 +751,16 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
     -------
     HumanoidCalibration
     """
-    if corner_sigma is not None and not (np.isfinite(corner_sigma) and corner_sigma > 0):
-        raise InputError(f"corner_sigma must be a finite number > 0 px, got {corner_sigma}")
-    if not (np.isfinite(joint_resolution) and joint_resolution >= 0):
-        raise InputError(f"joint_resolution must be a finite number >= 0 rad, got {joint_resolution}")
-    _check_consistency_thresholds(consistency_px, consistency_ratio)
-    if not (0.0 <= max_rejected_fraction <= 1.0):
-        raise InputError(f"max_rejected_fraction must be within [0, 1], got {max_rejected_fraction}")
-    free = resolve_parameters(model, parameters)
+    free = check_options(model, parameters=parameters, corner_sigma=corner_sigma,
+                         joint_resolution=joint_resolution, consistency_px=consistency_px,
+                         consistency_ratio=consistency_ratio, max_rejected_fraction=max_rejected_fraction)
     messages = list(data.messages)
     ok = _valid_views(data)
     for v in np.flatnonzero(~ok):
-        messages.append(f"view {data.names[v]!r}: board not fully detected, view dropped")
+        if not any(m.startswith(f"view {data.names[v]!r}:") and "dropped" in m for m in messages):
+            # (detection has said so already, with the reason)
+            messages.append(f"view {data.names[v]!r}: no corners (board not fully or not correctly detected), "
+                            f"view dropped")
     used = data.subset(ok)
     if used.n_views == 0:
         raise NotEnoughDataError("no view with a fully detected board")
@@ -700,7 +768,9 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
     if missing:
         raise NotEnoughDataError(f"no usable view of the {missing[0]} board, but its mounting offsets are "
                                  f"selected; drop them from the parameters or add views")
-    n_res = used.corners.shape[0] * used.corners.shape[1] * 2
+    present = _present(used)  # corners removed at detection are NaN: left out of their view
+    missing_corners = [(used.names[v], int(c)) for v, c in zip(*np.nonzero(~present))]
+    n_res = 2 * int(present.sum())
     if n_res < len(free):
         raise NotEnoughDataError(f"{n_res} residuals for {len(free)} parameters")
     if check_consistency:
@@ -727,8 +797,10 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
         held_all = set(gauge) | {lab for lab, master in tied_to.items() if master in gauge}
         solvable = [lab for lab in free if lab not in held_all]
         if not solvable or all(lab in undetermined for lab in solvable):
-            raise NotEnoughDataError(f"the views determine none of the selected parameters "
-                                     f"({', '.join(undetermined)})")
+            raise NotEnoughDataError(f"the {used.n_views} view(s) determine none of the selected parameters "
+                                     f"({', '.join(undetermined)}): add views (`robocal humanoid plan` shows "
+                                     f"how many poses determine the offsets) or select fewer parameters "
+                                     f"(--params)")
         k = len(pre.labels) - pre.rank
         warn_held = Diagnostic(
             "rank_deficient",
@@ -747,7 +819,7 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
     two_pass = False
     if corner_sigma is None and joint_sigma > 0:
         # Second pass with the corner noise measured where joint errors cannot reach.
-        sig = corner_noise(model, used, res.params["p"].reshape(-1))
+        sig = corner_noise(model, used, res.params["p"].reshape(-1), present)
         prob, S = build_problem(model, used, free, tie=tie, x0=res.params["p"].reshape(-1),
                                 analytic=(jac == "analytic"), corner_sigma=sig, joint_sigma=joint_sigma)
         res = solve(prob, method=method, jac=None if jac == "analytic" else jac, progress=progress,
@@ -755,16 +827,17 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
         two_pass = True
     params = res.params["p"].reshape(-1)
     V, N = used.corners.shape[:2]
-    resid, view_rms, score, flat = _corner_stats(model, used, params, S, res.residual_variance, outlier_sigma)
-    keep, rejected, rejected_views = None, [], []
+    resid, view_rms, score, flat = _corner_stats(model, used, params, S, res.residual_variance, outlier_sigma,
+                                                 present)
+    keep, rejected, rejected_views = present, [], []
     outlier_warning = None
     if reject_outliers and flat.size:
         # Drop the flagged corners (a view that loses more than max_rejected_fraction of its corners as
         # a whole: so many bad corners say its detection or joint record is wrong) and re-solve once, from
         # the solution, with the noise model of the kept corners.
-        keep = np.ones((V, N), bool)
+        keep = present.copy()
         keep.reshape(-1)[flat] = False
-        lost = (~keep).sum(axis=1)
+        lost = (present & ~keep).sum(axis=1)  # flagged now (corners missing from the data not counted)
         whole = np.flatnonzero(lost > max_rejected_fraction * N)
         rejected = [(used.names[int(i) // N], int(i) % N) for i in flat if int(i) // N not in whole]
         rejected_views = [used.names[v] for v in whole]
@@ -776,7 +849,7 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
                                      + (f"no view of the {gone[0]} board" if gone else "too few corners")
                                      + "; check the data or calibrate without rejection")
         first_outliers = [(used.names[int(i) // N], int(i) % N) for i in flat]
-        outlier_warning = _outlier_diagnostic(first_outliers, flat, outlier_sigma, V * N,
+        outlier_warning = _outlier_diagnostic(first_outliers, flat, outlier_sigma, int(present.sum()),
                                               " (before rejection)")
         if corner_sigma is None and joint_sigma > 0:
             sig = corner_noise(model, used, params, keep)
@@ -784,7 +857,6 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
                                 corner_sigma=sig, joint_sigma=joint_sigma, keep=keep)
         res = solve(prob, method=method, jac=None if jac == "analytic" else jac, progress=progress,
                     outlier_sigma=outlier_sigma)
-        res = _exclude_zero_rows(res, 2 * int((~keep).sum()))
         params = res.params["p"].reshape(-1)
         resid, view_rms, score, flat = _corner_stats(model, used, params, S, res.residual_variance,
                                                      outlier_sigma, keep)
@@ -794,33 +866,36 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
         warnings.insert(0, warn_held)
     if outlier_warning is not None:
         warnings.append(outlier_warning)
-        by_view: dict[str, list[int]] = {}
-        for nm, c in rejected:
-            by_view.setdefault(nm, []).append(c)
-        text = "; ".join(f"{nm}: corners {cs}" for nm, cs in by_view.items())
+        text = _by_view_text(rejected)
         if rejected_views:
             text += ("; " if text else "") + f"whole view(s) {rejected_views} (more than " \
                     f"{100 * max_rejected_fraction:.0f} % of their corners beyond {outlier_sigma:g} sigma)"
-        warnings.append(Diagnostic("low_quality", f"--reject-outliers: removed {int((~keep).sum())} corner(s) "
+        removed = present & ~keep
+        warnings.append(Diagnostic("low_quality", f"--reject-outliers: removed {int(removed.sum())} corner(s) "
                                                   f"and re-solved once: {text}",
-                                   indices=tuple(int(i) for i in np.flatnonzero(~keep.reshape(-1)))))
+                                   indices=tuple(int(i) for i in np.flatnonzero(removed.reshape(-1)))))
     if outliers:
-        warnings.append(_outlier_diagnostic(outliers, flat, outlier_sigma, V * N,
-                                            " (after rejection, kept)" if keep is not None else ""))
+        warnings.append(_outlier_diagnostic(outliers, flat, outlier_sigma, int(present.sum()),
+                                            " (after rejection, kept)" if outlier_warning is not None else ""))
+    if missing_corners:
+        warnings.append(Diagnostic("low_quality", f"{len(missing_corners)} corner(s) removed at detection, left "
+                                                  f"out of their views: {_by_view_text(missing_corners)}",
+                                   indices=tuple(int(i) for i in np.flatnonzero(~present.reshape(-1)))))
     dropped = [i for i, good in enumerate(ok) if not good]
     if dropped:
         warnings.append(Diagnostic("dropped", f"{len(dropped)} view(s) without a fully and correctly detected "
                                               f"board were dropped: {[data.names[i] for i in dropped]}",
                                    indices=tuple(dropped)))
     if check_consistency:
-        vr = view_rms if keep is None else np.where(keep.any(axis=1), view_rms, np.nan)
+        vr = np.where(keep.any(axis=1), view_rms, np.nan)
         warnings += plausibility_warnings(model, free, params, vr, used.names, res.residual_variance)
     selected = [lab for lab in model.parameter_labels() if lab in free or lab in gauge]
     return HumanoidCalibration(model, used, res, params, selected, resid, view_rms, outliers, messages,
                                warnings, score, sig, joint_resolution, first_iterations, list(gauge),
                                first_history, undetermined=undetermined, rank=pre.rank,
                                n_params=len(pre.labels), two_pass=two_pass, keep=keep,
-                               rejected_corners=rejected, rejected_views=rejected_views)
+                               rejected_corners=rejected, rejected_views=rejected_views,
+                               missing_corners=missing_corners, reject_outliers=bool(reject_outliers))
 
 
 def _corner_stats(model, data, params, S, residual_variance, outlier_sigma, keep=None):
@@ -829,11 +904,11 @@ def _corner_stats(model, data, params, S, residual_variance, outlier_sigma, keep
     own 2x2 noise block (chi-square(2)), scaled by the residual variance."""
     V, N = data.corners.shape[:2]
     resid = model.project(data.theta, data.feet, params, check=False) - data.corners
-    k = np.ones((V, N), bool) if keep is None else keep
-    with np.errstate(invalid="ignore"):
-        sq = np.sum(resid ** 2, axis=2)
-        view_rms = np.sqrt(np.where(k.any(1), np.sum(sq * k, 1) / np.maximum(k.sum(1), 1) / 2,
-                                    np.mean(sq, 1) / 2))
+    k = np.all(np.isfinite(resid), axis=2) if keep is None else keep
+    sq = np.sum(resid ** 2, axis=2)
+    # a view without kept corners (removed whole) reports the RMS of its present ones
+    k_rms = np.where(k.any(1)[:, None], k, np.isfinite(sq))
+    view_rms = np.sqrt(np.sum(np.where(k_rms, sq, 0.0), 1) / np.maximum(k_rms.sum(1), 1) / 2)
     idx = np.arange(N)
     blocks = np.stack([np.stack([S[:, 2 * idx, 2 * idx], S[:, 2 * idx, 2 * idx + 1]], -1),
                        np.stack([S[:, 2 * idx + 1, 2 * idx], S[:, 2 * idx + 1, 2 * idx + 1]], -1)], -2)
@@ -844,24 +919,15 @@ def _corner_stats(model, data, params, S, residual_variance, outlier_sigma, keep
 
 
 def _outlier_diagnostic(outliers, flat, outlier_sigma, n_corners, note="") -> Diagnostic:
-    by_view: dict[str, list[int]] = {}
-    for nm, c in outliers:
-        by_view.setdefault(nm, []).append(c)
-    text = "; ".join(f"{nm}: corners {cs}" for nm, cs in by_view.items())
+    text = _by_view_text(outliers)
     return Diagnostic("outliers", f"{len(outliers)} corner residuals beyond {outlier_sigma:g} sigma"
                                   f"{note} ({100 * len(outliers) / n_corners:.1f} %): {text}",
                       indices=tuple(int(i) for i in flat))
 
 
-def _exclude_zero_rows(res: LSQResult, n_zero: int) -> LSQResult:
-    """Correct the residual variance (and so the covariance) for ``n_zero`` residual rows that are
-    identically zero (left-out corners, :func:`build_problem` ``keep``): the solver's
-    ``s^2 = sum r^2 / (m - rank)`` counts them in ``m``."""
-    if n_zero <= 0 or not np.isfinite(res.residual_variance):
-        return res
-    dof = res.dof - n_zero
-    if dof <= 0:
-        raise NotEnoughDataError(f"{res.dof + res.rank - n_zero} residuals left for {res.rank} parameters")
-    k = res.dof / dof
-    std = {lab: (None if v is None else v * np.sqrt(k)) for lab, v in res.std.items()}
-    return replace(res, residual_variance=res.residual_variance * k, cov=res.cov * k, std=std, dof=dof)
+def _by_view_text(pairs, sep: str = ": ") -> str:
+    """``'view000: corners [3, 18]; view004: corners [7]'`` from ``(view, corner)`` pairs."""
+    by_view: dict[str, list[int]] = {}
+    for nm, c in pairs:
+        by_view.setdefault(nm, []).append(c)
+    return "; ".join(f"{nm}{sep}corners {cs}" for nm, cs in by_view.items())

@@ -42,8 +42,10 @@ FORMAT = "robocal.humanoid-data/1"
 def load_dataset(path, *, detect: bool = True, progress: bool = False) -> tuple[HumanoidModel, HumanoidDataset, dict]:
     """Read a data-set file; returns ``(model, data, info)``.
 
-    With ``detect`` the corners are found on every image (a board not fully
-    found leaves that view's corners NaN and a message in ``data.messages``).
+    With ``detect`` the corners are found on every image
+    (:func:`robocal.rigs.humanoid.detect.detect_views`: a board not fully found
+    leaves that view's corners NaN, a badly detected corner its own; each with a
+    message in ``data.messages``).
     ``info`` holds the joint resolution [rad] and the input files (for the
     result's hashes).
     """

@@ -60,6 +60,8 @@ def draw_overlay(img, det, pred, size, *, magnify: float = 20.0) -> np.ndarray:
         img = load_image(img)
     rgb = cv2.cvtColor(np.asarray(img, np.uint8), cv2.COLOR_GRAY2RGB) if np.ndim(img) == 2 else np.array(img)
     for d, p in zip(np.asarray(det, float), np.asarray(pred, float)):
+        if not (np.all(np.isfinite(d)) and np.all(np.isfinite(p))):
+            continue  # a corner removed at detection
         end = d + magnify * (p - d)
         cv2.line(rgb, _pt(d), _pt(end), (240, 200, 0), 1, cv2.LINE_AA)
         cv2.circle(rgb, _pt(d), 4, (0, 200, 0), 1, cv2.LINE_AA)
@@ -84,8 +86,9 @@ def plot_residual_histograms(residuals, ax=None):
     """Histograms of the x and y corner residuals [px] on one axes; returns the axes."""
     if ax is None:
         _, ax = new_figure()
-    r = np.asarray(residuals).reshape(-1, 2)
-    lim = max(float(np.max(np.abs(r))), 1e-6)
+    r = np.asarray(residuals, float).reshape(-1, 2)
+    r = r[np.all(np.isfinite(r), axis=1)]  # corners removed at detection have none
+    lim = max(float(np.max(np.abs(r), initial=0.0)), 1e-6)
     bins = np.linspace(-lim, lim, 41)
     ax.hist(r[:, 0], bins=bins, alpha=0.6, label=f"x (RMS {np.sqrt(np.mean(r[:, 0] ** 2)):.3f} px)")
     ax.hist(r[:, 1], bins=bins, alpha=0.6, label=f"y (RMS {np.sqrt(np.mean(r[:, 1] ** 2)):.3f} px)")
@@ -172,10 +175,11 @@ def build_report(cal: HumanoidCalibration, *, title: str = "NAO leg and camera c
         {"quantity": "Jacobian rank", "value": "{} of {}".format(*cal.jacobian_rank)},
         {"quantity": "condition number (scaled)", "value": float(lsq.condition_number)},
         {"quantity": "outlier corners (> 3 sigma)", "value": len(cal.outlier_corners)},
+        {"quantity": "corners removed at detection", "value": len(cal.missing_corners)},
         {"quantity": "corners removed (--reject-outliers)",
-         "value": "—" if cal.keep is None else int((~cal.keep).sum())},
+         "value": cal.n_rejected if cal.rejected_corners or cal.rejected_views else "—"},
     ])
-    if cal.keep is not None:
+    if cal.rejected_corners or cal.rejected_views:
         s.text("Outliers rejected and the calibration re-solved once without them: " + cal.rejection_text()
                + " (view name, corner index in the board's object-point order, row by row). RMS values and "
                "histograms are over the corners used.", cls="warn")
@@ -243,6 +247,7 @@ def report_from_result(result: CalibrationResult, *, title: str = "NAO leg and c
         {"quantity": "Jacobian rank", "value": f"{rank[0]} of {rank[1]}"},
         {"quantity": "condition number (scaled)", "value": d.get("condition_number")},
         {"quantity": "outlier corners (> 3 sigma)", "value": len(d.get("outlier_corners") or [])},
+        {"quantity": "corners removed at detection", "value": len(d.get("missing_corners") or [])},
         {"quantity": "corners removed (--reject-outliers)",
          "value": len(d["rejected_corners"]) if d.get("rejected_corners") or d.get("rejected_views") else "—"},
     ])

@@ -67,8 +67,9 @@ class HumanoidDataset:
     theta : ndarray, shape (V, n_joints)
         Joint sensor readings [rad], in the model's ``joint_names`` order.
     corners : ndarray, shape (V, N, 2) [px], or None
-        Detected (or simulated) corners, ``object_points`` order; NaN rows for
-        a view whose board was not found.
+        Detected (or simulated) corners, ``object_points`` order; NaN for a
+        view whose board was not found, or for single corners removed at
+        detection (calibration leaves them out of their view).
     images : list of (Path or ndarray or None)
         Image of each view (a path on disk, or an array in memory).
     names : list of str
