@@ -128,3 +128,16 @@ def test_boolean_search_walks_shared_lists_once():
         shared = [shared, shared]
     assert _first_leaf(shared, lambda v: isinstance(v, bool)) is None
     assert _first_leaf([[1.0], [2.0, [False]]], lambda v: isinstance(v, bool)) == (1, 1, 0)
+
+
+@pytest.mark.parametrize(
+    "x, where",
+    [
+        ([[1.0, 2.0], [3.0]], "row 0 has 2 entries, row 1 has 1 entry"),
+        ([[1.0, 2.0], 3.0], "row 0 has 2 entries, row 1 has a single number"),
+        ([[[1, 2], [3, 4]], [[1, 2], [3]]], r"index \(1, 0\) has 2 entries, index \(1, 1\) has 1 entry"),
+    ],
+)
+def test_ragged_lists_name_the_first_short_row(x, where):
+    with pytest.raises(InputError, match=f"v has rows of different lengths: {where}"):
+        check_array(x, "v")

@@ -77,6 +77,35 @@ def format_shape(shape: Sequence[int | str | None]) -> str:
     return "(" + ", ".join(parts) + ("," if len(parts) == 1 else "") + ")"
 
 
+def _ragged(x, index: tuple = (), seen: frozenset = frozenset()) -> str | None:
+    """Where nested lists stop being rectangular, for the error message; None if they don't.
+
+    A list that contains itself (a YAML alias like ``&a [1, *a]``) is not
+    called ragged: None, and the caller's generic message stands.
+    """
+    if not isinstance(x, (list, tuple)):
+        return None
+    if id(x) in seen or any(isinstance(v, (list, tuple)) and id(v) in seen | {id(x)} for v in x):
+        return None
+    seen = seen | {id(x)}
+
+    def size(v):
+        if not isinstance(v, (list, tuple)):
+            return "a single number"
+        return f"{len(v)} entr{'y' if len(v) == 1 else 'ies'}"
+
+    sizes = [size(v) for v in x]
+    if len(set(sizes)) > 1:
+        j = next(i for i, s in enumerate(sizes) if s != sizes[0])
+        at = lambda i: f"index {(*index, i)}" if index else f"row {i}"  # noqa: E731
+        return f"{at(0)} has {sizes[0]}, {at(j)} has {sizes[j]}"
+    for i, v in enumerate(x):
+        found = _ragged(v, (*index, i), seen)
+        if found is not None:
+            return found
+    return None
+
+
 def check_array(
     x,
     name: str,
@@ -127,6 +156,9 @@ def check_array(
     try:
         arr = np.asarray(x, dtype=dtype)
     except (TypeError, ValueError, OverflowError) as exc:
+        ragged = _ragged(x)
+        if ragged is not None:
+            raise InputError(f"{name} has rows of different lengths: {ragged}") from None
         raise InputError(f"{name} must be numeric, got {type(x).__name__} ({exc})") from None
     if shape is not None:
         # ``(..., 3)`` and ``(3,)`` both mean "trailing axis of size 3"

@@ -98,6 +98,13 @@ def test_malformed_joint_records(example):
     _edit(example, lambda d: [row.pop() for row in d["joints"]["records"]])
     with pytest.raises(InputError, match="missing joint angles for \\['RAnkleRoll'\\]"):
         load_dataset(example)
+    # a quoted angle, or a row one angle short, through the shared loader's messages
+    _edit(example, lambda d: d["joints"]["records"][0].__setitem__(1, "25.8"))
+    with pytest.raises(FileFormatError, match=r"joints.records'?: contains a quoted string \('25.8'\) at index \(0, 1\)"):
+        load_dataset(example)
+    _edit(example, lambda d: d["joints"]["records"][0].__setitem__(1, 25.8) or d["joints"]["records"][2].pop())
+    with pytest.raises(InputError, match=r"rows of different lengths: row 0 has \d+ entries, row 2 has"):
+        load_dataset(example)
 
 
 def test_bad_fields(example):

@@ -96,10 +96,8 @@ def load_dataset(path, *, detect: bool = True, progress: bool = False) -> tuple[
         raise InconsistentDataError(
             f"{path}: {len(images)} images, {len(feet)} feet and {len(rec_raw)} joint records: "
             f"need one foot and one joint record per image")
-    try:
-        rec = np.array(rec_raw, dtype=float)
-    except (TypeError, ValueError):
-        raise j.error("records", "must be rows of numbers") from None
+    # through the loader, so a quoted "25.8", true or null is refused like anywhere else
+    rec = j.array("records", finite=False)
     if rec.ndim != 2 or rec.shape[1] != len(names):
         raise j.error("records", f"each row must hold {len(names)} angles (one per name), got shape {rec.shape}")
     if not np.all(np.isfinite(rec)):
