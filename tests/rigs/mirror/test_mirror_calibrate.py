@@ -338,13 +338,15 @@ def test_implausible_answers_are_flagged(setup):
     # (b) body model with x not flipped (given in ri): chi2 ~ 200 on 34 dof at the declared 0.5 px
     r = calibrate(cam, scene.rectangle, scene.body_points_r * [-1.0, 1.0, 1.0], [o], sigma_px=0.5)
     msgs = [w.message for w in r.warnings if w.code == "inconsistent_data"]
-    assert any("chi2" in m and "x not flipped" in m for m in msgs), msgs
+    assert any("chi2" in m and "handedness of body_points" in m and "mirrored ri" in m for m in msgs), msgs
     # (c) body model in m where mm were meant: the whole scene scales, the camera stays "near" the body
     r = calibrate_single(cam, scene.rectangle, scene.body_points_r * 1e3, o)
     assert any("span" in w.message and "unit of body_points" in w.message for w in r.warnings)
-    # without a declared sigma the chi-square test has nothing to test against
+    # without a declared sigma the chi-square test has nothing to test against; the handedness test
+    # (model vs its mirror image) needs no sigma
     r = calibrate_single(cam, scene.rectangle, scene.body_points_r * [-1.0, 1.0, 1.0], o)
-    assert not any("chi2" in w.message for w in r.warnings)
+    assert not any("fit worse than sigma_px" in w.message for w in r.warnings)
+    assert any("mirror image of body_points" in w.message for w in r.warnings)
 
 
 def test_no_refine_reports_the_covariance_of_the_average():

@@ -6,7 +6,8 @@ camera pose in the robot frame. See ``docs/rigs/mirror.md``.
 
 Modules: :mod:`.model` (frames, the patent's chain, the Householder form),
 :mod:`.scene` (the published example), :mod:`.calibrate` (single-image method,
-planar-ambiguity choice, joint refinement), :mod:`.crossratio`,
+planar-ambiguity choice, joint refinement), :mod:`.checks` (camera, rectangle,
+handedness and marker-fit checks of a user's inputs), :mod:`.crossratio`,
 :mod:`.simulate`, :mod:`.render` (images, ArUco path), :mod:`.montecarlo`,
 :mod:`.files`, :mod:`.report`, :mod:`.workflow`, :mod:`.cli`.
 """

@@ -38,6 +38,7 @@ from robocal.errors import (
     InconsistentDataError,
     InputError,
     NotEnoughDataError,
+    RobocalError,
     ShapeError,
 )
 from robocal.estimation import LSQResult, Problem, solve
@@ -49,6 +50,13 @@ from robocal.geometry import (
     rotvec_from_matrix,
     skew,
     transform_from,
+)
+from robocal.rigs.mirror.checks import (
+    camera_warnings,
+    check_camera,
+    handedness_warnings,
+    marker_fit_warnings,
+    rectangle_warnings,
 )
 from robocal.rigs.mirror.model import (
     PatentSteps,
@@ -65,12 +73,17 @@ __all__ = [
     "SingleImageResult",
     "MirrorCalibration",
     "check_observation",
+    "check_camera",
     "check_in_image",
+    "camera_warnings",
     "choose_planar_solution",
     "calibrate_single",
     "calibrate",
     "geometry_warnings",
     "plausibility_warnings",
+    "handedness_warnings",
+    "marker_fit_warnings",
+    "rectangle_warnings",
     "residual_model",
     "predicted_covariance",
 ]
@@ -103,12 +116,16 @@ class MirrorObservation:
         Index of each observed point in the body point model.
     name : str
         Label used in messages and reports (file name, "image 3", ...).
+    warnings : list of Diagnostic
+        From the detection (tags not found, repeated or unknown ids); passed
+        on to the calibration's warnings.
     """
 
     marker_uv: np.ndarray
     body_uv: np.ndarray
     body_ids: np.ndarray | None = None
     name: str = "image"
+    warnings: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         return {
@@ -179,27 +196,32 @@ def check_observation(obs: MirrorObservation, body_points_r: np.ndarray, rectang
 
 
 #: Image points farther than this fraction of the image size outside it are rejected as wrong input.
-OUTSIDE_IMAGE_FRACTION = 0.5
-
-
+OUTSIDE_IMAGE_FRACTION = 0.02
+#: ... but never less than this many pixels (sub-pixel detections and noise at the border).
+OUTSIDE_IMAGE_MIN_PX = 3.0
 def check_in_image(camera: CameraModel, uv, what: str) -> None:
-    """Reject image points far outside the camera's ``width x height`` [px].
+    """Reject image points outside the camera's ``width x height`` image [px].
 
     A detector cannot report such points, so they are a unit or column mix-up
-    (or a different camera); without this check PnP fails later with a
-    misleading "behind the camera". The margin (``OUTSIDE_IMAGE_FRACTION`` of
-    the image size) leaves room for hand-picked points near the border.
+    or points of another image size (e.g. picked in a full-resolution photo
+    with a camera calibrated on reduced images); without this check PnP fails
+    later with a misleading "behind the camera", or succeeds with a wrong
+    answer. The margin (``OUTSIDE_IMAGE_FRACTION`` of the image size, at
+    least ``OUTSIDE_IMAGE_MIN_PX``) leaves room for noisy detections at the
+    border.
     """
     uv = np.asarray(uv, dtype=float)
     size = np.array([camera.width, camera.height], dtype=float)
-    lo, hi = -OUTSIDE_IMAGE_FRACTION * size, (1.0 + OUTSIDE_IMAGE_FRACTION) * size
+    margin = np.maximum(OUTSIDE_IMAGE_FRACTION * size, OUTSIDE_IMAGE_MIN_PX)
+    lo, hi = -0.5 - margin, size - 0.5 + margin
     bad = np.flatnonzero(np.any((uv < lo) | (uv > hi), axis=1))
     if bad.size:
         i = int(bad[0])
         raise InconsistentDataError(
             f"{what}: row {i} = ({uv[i, 0]:.4g}, {uv[i, 1]:.4g}) px lies outside the {camera.width} x "
             f"{camera.height} px image{f' ({bad.size} such rows)' if bad.size > 1 else ''}; check the camera "
-            "width/height and that the points are pixels of this camera")
+            "width/height (the size of the images the points come from) and that the points are pixels, "
+            "in (u, v) = (column, row) order")
 
 
 @dataclass
@@ -407,16 +429,22 @@ def plausibility_warnings(body_points_r, T_r_c, body_residuals, sigma_px: float 
         if p < CHI2_P_MIN:
             out.append(Diagnostic("inconsistent_data", f"{name}: body points fit worse than sigma_px = "
                                   f"{sigma_px:.3g} px allows: chi2 = {chi2:.4g} on {dof} dof (p = {p:.2g}); check "
-                                  "that body_points are in the robot frame r (not the mirrored ri: x not flipped), "
+                                  "the handedness of body_points (frame r, x forward, y left, z up; not the "
+                                  "mirrored ri, no axis sign flipped, no two axes swapped, u and v not swapped), "
                                   "the point order, and for single bad points", params=("T_r_c",)))
     return out
 
 
 def _single_warnings(P_seen, body_points_r, steps: PatentSteps, body_residuals, sigma_known, choice: PlanarChoice,
-                     name: str) -> list[Diagnostic]:
+                     name: str, *, camera: CameraModel | None = None, body_uv=None,
+                     rectangle: MarkerRectangle | None = None) -> list[Diagnostic]:
     """All warnings of one image for the chosen marker pose (rerun when the choice changes)."""
     warnings = geometry_warnings(P_seen, steps.T_c_m, name=name)
     warnings += plausibility_warnings(body_points_r, steps.T_r_c, body_residuals, sigma_known, name=name)
+    if rectangle is not None and choice.marker_residuals is not None:
+        warnings += marker_fit_warnings(choice.marker_residuals[choice.chosen], sigma_known, rectangle, name=name)
+    if camera is not None and body_uv is not None:
+        warnings += handedness_warnings(camera, P_seen, body_uv, body_residuals, sigma_known, name=name)
     if not choice.decisive:
         warnings.append(Diagnostic("degenerate_geometry", f"{name}: planar ambiguity of the mirror markers not "
                                    f"resolved: {choice.reason}", params=("T_c_m",)))
@@ -509,16 +537,30 @@ def calibrate_single(camera: CameraModel, rectangle: MarkerRectangle, body_point
     body_rms = T_c_ri_sol.rms_px / np.sqrt(2.0)  # per coordinate
     limit = 5.0 * sigma_px if sigma_given else max_body_rms_px
     if body_rms > limit:
+        why = (f"5 x sigma_px = {limit:.3g} px; if sigma_px = {sigma_px:.3g} px is below your detector's noise, "
+               "raise it or leave it out" if sigma_given else f"{limit:.3g} px, max_body_rms_px")
         raise InconsistentDataError(
             f"{src}: body_uv does not match body_points_r: the best pose leaves {body_rms:.3g} px rms per "
-            f"coordinate (limit {limit:.3g} px); check the point order / body_ids and that the model is in frame r"
+            f"coordinate (limit {why}); check the point order / body_ids, the unit of body_points and that "
+            "the model is in frame r"
         )
     best = cands[0]
     size_px = np.linalg.norm(m_uv[2] - m_uv[0])
-    if best.rms_px > max(5.0 * sigma_px, 0.02 * size_px, 1.0):
+    marker_limit = max(5.0 * sigma_px, 0.02 * size_px, 1.0)
+    if best.rms_px > marker_limit:
+        hint = ""
+        try:
+            turned = solve_pnp_planar(camera, MarkerRectangle(rectangle.height, rectangle.width).object_points(), m_uv)
+            if turned[0].rms_px <= marker_limit:
+                hint = (f"; they fit a {rectangle.height * 1e3:.4g} x {rectangle.width * 1e3:.4g} mm one "
+                        f"({turned[0].rms_px:.2g} px): width is the A-B edge (A top left, B top right in the image), so width and height "
+                        "are swapped or the marker order starts at the wrong corner")
+        except RobocalError:
+            pass
         raise InconsistentDataError(
-            f"{src}: marker_uv is not a plausible image of a {rectangle.width * 1e3:.0f} x {rectangle.height * 1e3:.0f}"
-            f" mm rectangle: best pose leaves {best.rms_px:.3g} px rms (check the marker order and the rectangle size)"
+            f"{src}: marker_uv is not a plausible image of a {rectangle.width * 1e3:.4g} x "
+            f"{rectangle.height * 1e3:.4g} mm rectangle: best pose leaves {best.rms_px:.3g} px rms (check the marker "
+            f"order and the rectangle size){hint}"
         )
     choice = choose_planar_solution(cands, T_c_ri_sol.T_cam_obj, P, sigma_px=sigma_px)
     T_c_m = choice.T_c_m[choice.chosen]
@@ -527,7 +569,7 @@ def calibrate_single(camera: CameraModel, rectangle: MarkerRectangle, body_point
         raise InconsistentDataError(f"{src}: the markers put the camera behind the mirror; check the marker order")
     steps = patent_compose(T_c_m, T_c_ri_sol.T_cam_obj)  # eqs. [3]-[7]
     warnings = _single_warnings(P, body_points_r, steps, T_c_ri_sol.residuals, sigma_px if sigma_given else None,
-                                choice, src)
+                                choice, src, camera=camera, body_uv=b_uv, rectangle=rectangle)
     return SingleImageResult(
         steps=steps,
         T_c_r_householder=householder_compose(T_c_m, T_c_ri_sol.T_cam_obj),
@@ -783,8 +825,9 @@ def _consensus_choice(singles, camera, rectangle, body_points_r, obs_list, sigma
                     f"({dist[k] * 1e3:.3g} vs {dist[1 - k] * 1e3:.3g} mm)")
         T_c_m = c.T_c_m[k]
         steps = patent_compose(T_c_m, s.steps.T_c_ri)
-        P_seen = check_observation(o, body_points_r, rectangle)[3]
-        warnings = _single_warnings(P_seen, body_points_r, steps, s.body_residuals, sigma_px, c, o.name)
+        _, b_uv, _, P_seen = check_observation(o, body_points_r, rectangle)
+        warnings = _single_warnings(P_seen, body_points_r, steps, s.body_residuals, sigma_px, c, o.name,
+                                    camera=camera, body_uv=b_uv, rectangle=rectangle)
         m_res = s.marker_residuals if c.marker_residuals is None else c.marker_residuals[k]
         out.append(SingleImageResult(steps, householder_compose(T_c_m, s.steps.T_c_ri), c, m_res,
                                      s.body_residuals, s.sigma_px, warnings))
@@ -875,14 +918,17 @@ def calibrate(camera: CameraModel, rectangle: MarkerRectangle, body_points_r, ob
         raise NotEnoughDataError("observations: need at least one image")
     names = [o.name for o in obs_list]
     if len(set(names)) != len(names):
-        obs_list = [MirrorObservation(o.marker_uv, o.body_uv, o.body_ids, f"{o.name} #{i}")
+        obs_list = [MirrorObservation(o.marker_uv, o.body_uv, o.body_ids, f"{o.name} #{i}", list(o.warnings))
                     for i, o in enumerate(obs_list)]
     P_all = check_array(body_points_r, "body_points_r")
     if P_all.ndim != 2 or P_all.shape[1] != 3:
         raise ShapeError(f"body_points_r must have shape (N, 3), got {P_all.shape}")
+    check_camera(camera)
     singles = [calibrate_single(camera, rectangle, P_all, o, sigma_px=sigma_px) for o in obs_list]
     singles = _consensus_choice(singles, camera, rectangle, P_all, obs_list, sigma_px)
-    warnings = [w for s in singles for w in s.warnings]
+    warnings = camera_warnings(camera) + rectangle_warnings(rectangle)
+    warnings += [w for o in obs_list for w in o.warnings]
+    warnings += [w for s in singles for w in s.warnings]
     T_c_m0 = np.stack([s.T_c_m for s in singles])
     # start from the first image's estimate, rotation-averaged over the images
     T_r_c0 = singles[0].T_r_c.copy()

@@ -48,7 +48,8 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
                                "robocal mirror calibrate sim/mirror_input.yaml --out cal"))
     p.add_argument("--placements", type=_number(int, 1, False), default=1, help="number of mirror placements (images)")
     p.add_argument("--sigma", type=_number(float, 0.0, False), default=0.5,
-                   help="pixel noise sigma [px] (point files); 0 = noise-free, sigma_px then left out of the file")
+                   help="pixel noise sigma [px] of point files; 0 = noise-free, sigma_px then left out of the file "
+                        "(not used with --images: images get 0.6 px blur and grey-level noise 2)")
     p.add_argument("--images", action="store_true",
                    help="render images with ArUco tags on the body instead of writing image points")
     add_seed_argument(p)
@@ -60,10 +61,13 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
         formatter_class=RawHelp,
         description="Input: intrinsics, mirror marker rectangle, body point model and, per image, the marker "
                     "and reflected body image points (or an image with ArUco tags). Format: docs/rigs/mirror.md "
-                    "or robocal.rigs.mirror.files.",
+                    "or robocal.rigs.mirror.files. Your own camera: 'camera: {file: my_camera.yaml}' (an OpenCV "
+                    "calibration: camera_matrix, dist_coeffs, image size; cv2.FileStorage YAML/XML, ROS or JSON); "
+                    "the example files use the patent scene's assumed 768 x 576, f = 800 px camera.",
         epilog=examples_epilog(f"robocal mirror calibrate {EXAMPLES}/published_single.yaml --out cal",
                                f"robocal mirror calibrate {EXAMPLES}/four_placements.yaml --out cal",
                                f"robocal mirror calibrate {EXAMPLES}/aruco_images.yaml --out cal",
+                               f"robocal mirror calibrate {EXAMPLES}/own_camera.yaml --out cal   # OpenCV camera file",
                                f"robocal mirror calibrate {EXAMPLES}/published_single.yaml --no-refine --out cal"))
     p.add_argument("input", type=Path, help="calibration input (YAML/JSON)")
     p.add_argument("--no-refine", action="store_true",

@@ -4,7 +4,7 @@ Layout (lengths in the unit given by ``units.length`` or inline
 ``{value, unit}``; pixels in px)::
 
     units: {length: mm}
-    camera:                      # robocal.camera layout (or OpenCV/ROS camera_info)
+    camera:                      # robocal.camera layout (or OpenCV/ROS camera_info), or {file: ...}
       fx: 800.0
       fy: 800.0
       cx: 383.5
@@ -39,10 +39,31 @@ is the outward normal of its face in ``r``; ``x_axis`` is the printed tag's
 right (needed on horizontal faces, where "upright" is undefined). Image paths
 are relative to the input file. Body tag ids must differ from the mirror tag
 ids when both use one dictionary.
+
+Your own camera (``camera: {file: my_camera.yaml}``, or ``camera:
+my_camera.yaml``, relative to the input file; other keys in ``camera``
+override or complete the file's): a file with
+``camera_matrix`` (or ``K``), ``dist_coeffs`` / ``distortion_coefficients``
+(or ``D``) and the image size (``image_width`` + ``image_height``,
+``width`` + ``height``, or ``image_size: [width, height]`` in cv2's order)
+as written by ``cv2.FileStorage`` (YAML with ``%YAML:1.0`` and
+``!!opencv-matrix``, or XML), by ROS ``camera_calibration`` (or a
+``CameraInfo`` echo: ``width``, ``height``, ``K`` as 9 numbers, ``D``,
+``distortion_model``) or by a JSON dump of ``cv2.calibrateCamera``'s
+``mtx.tolist()`` and ``dist.tolist()``.
+Checked: the distortion vector has 4, 5, 8, 12 or 14 values and only
+``k1, k2, p1, p2, k3`` may be non-zero (the rational, thin-prism and tilted
+models are refused by name); a ``distortion_model`` other than ``plumb_bob``
+/ ``rational_polynomial`` (e.g. ``equidistant``, a fisheye) is refused; the
+principal point must lie inside the ``width x height`` image. The image size
+must be that of the images the points come from: it is compared with each
+image file (ArUco path) and bounds the image points.
 """
 
 from __future__ import annotations
 
+import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -50,10 +71,10 @@ import numpy as np
 import yaml
 
 from robocal.camera import CameraModel, MarkerRectangle, camera_from_document
-from robocal.errors import RobocalError
+from robocal.errors import FileFormatError, InputError, RobocalError
 from robocal.geometry import transform_from
-from robocal.io import atomic_write_text, load_document
-from robocal.rigs.mirror.calibrate import MirrorObservation
+from robocal.io import Document, atomic_write_text, load_document
+from robocal.rigs.mirror.calibrate import MirrorObservation, check_camera
 from robocal.rigs.mirror.render import (
     _R_R_TAG_FRONT,
     ARUCO_DICT,
@@ -63,7 +84,7 @@ from robocal.rigs.mirror.render import (
     tag_rotation,
 )
 
-__all__ = ["MirrorInput", "load_input", "write_input"]
+__all__ = ["MirrorInput", "load_input", "write_input", "load_camera", "read_camera_file"]
 
 
 @dataclass
@@ -79,6 +100,7 @@ class MirrorInput:
     image_paths: dict = field(default_factory=dict)  # observation name -> image path
     source: str = "<input>"
     mirror_tags: MirrorTags | None = None
+    camera_file: str | None = None  # the file of ``camera: {file: ...}``, if any
 
 
 def _uv(doc, key, n=None):
@@ -90,16 +112,167 @@ def _uv(doc, key, n=None):
     return a
 
 
+#: Keys of the distortion vector, in the order camera_from_document looks for them.
+_DIST_KEYS = ("dist", "dist_coeffs", "distortion_coefficients", "D")
+#: OpenCV distortion vector lengths and what their extra terms are.
+_OPENCV_DIST = {4: "", 5: "", 8: "k4, k5, k6 (the rational model, CALIB_RATIONAL_MODEL)",
+                12: "k4..k6, s1..s4 (CALIB_RATIONAL_MODEL / CALIB_THIN_PRISM_MODEL)",
+                14: "k4..k6, s1..s4, tau_x, tau_y (CALIB_TILTED_MODEL)"}
+#: ROS ``distortion_model`` values that are OpenCV's Brown-Conrady model.
+_BROWN_CONRADY = ("plumb_bob", "rational_polynomial", "radtan", "pinhole-brown-conrady")
+
+
+def _mapping_from_filestorage(path: Path) -> dict:
+    """Top-level scalars and matrices of an OpenCV FileStorage file (XML or YAML) as plain Python."""
+    import cv2
+
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    try:
+        if not fs.isOpened():
+            raise FileFormatError("cv2.FileStorage cannot read this file", source=str(path))
+        out = {}
+        for key in fs.root().keys():
+            node = fs.getNode(key)
+            if node.isInt():
+                out[key] = int(node.real())
+            elif node.isReal():
+                out[key] = float(node.real())
+            elif node.isString():
+                out[key] = node.string()
+            else:
+                m = node.mat()
+                if m is not None:
+                    out[key] = np.asarray(m, dtype=float).tolist()
+                elif node.isSeq():
+                    out[key] = [node.at(i).real() for i in range(node.size())]
+        return out
+    finally:
+        fs.release()
+
+
+def read_camera_file(path) -> dict:
+    """The raw mapping of a camera calibration file (YAML, OpenCV FileStorage YAML/XML, or JSON).
+
+    OpenCV's ``%YAML:1.0`` header and ``!!opencv-matrix`` tags, which a plain
+    YAML reader rejects, are accepted: the matrices come back as
+    ``{rows, cols, dt, data}`` mappings (read by :func:`load_camera`).
+    """
+    path = Path(path)
+    if not path.exists():
+        raise FileFormatError("camera file not found", source=str(path))
+    if path.suffix.lower() == ".xml":
+        return _mapping_from_filestorage(path)
+    if path.suffix.lower() not in (".yaml", ".yml", ".json"):
+        raise FileFormatError(f"camera file: expected .yaml, .yml, .json or .xml (cv2.FileStorage), got "
+                              f"{path.suffix or 'no suffix'!r}", source=str(path))
+    text = path.read_text(encoding="utf-8-sig")
+    if path.suffix.lower() != ".json":
+        # cv2.FileStorage writes a "%YAML:1.0" directive and "!!opencv-matrix" tags
+        text = re.sub(r"^%YAML[: ]1\.[0-9]+[ \t]*$", "", text, count=1, flags=re.M)
+        text = re.sub(r"!!opencv-(?:nd-)?matrix", "", text)
+    from robocal.io import parse_document
+
+    return parse_document(text, suffix=path.suffix.lower(), source=str(path)).data
+
+
+def _flat_values(raw) -> list | None:
+    """Numbers of a distortion field (list, nested list or ``{data: [...]}``), or None if unreadable."""
+    if isinstance(raw, dict):
+        raw = raw.get("data")
+    try:
+        a = np.asarray(raw, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        return None
+    return a.tolist()
+
+
+def load_camera(doc: Document, *, base_dir=None) -> CameraModel:
+    """The ``camera`` section of an input file, inline or ``{file: ...}`` (see the module docstring).
+
+    Raises :class:`~robocal.errors.InputError` naming the file and field for a
+    distortion model robocal does not implement, a wrong number of distortion
+    coefficients, or a principal point outside the image (image size of
+    another resolution, or width and height swapped).
+    """
+    data = dict(doc.data)
+    source, prefix = doc.source, doc.prefix
+    if "file" in data:
+        raw = data.pop("file")
+        if not isinstance(raw, str):
+            raise doc.error("file", f"must be the path of a camera calibration file, got {type(raw).__name__}")
+        p = Path(raw)
+        if not p.is_absolute():
+            p = (Path(base_dir) if base_dir is not None else Path(source).parent) / p
+        if not p.exists():
+            raise doc.error("file", f"camera file {p} does not exist")
+        data = {**read_camera_file(p), **data}  # keys in the input file complete or override the file's
+        source, prefix = f"{os.path.normpath(p)} (camera.file of {doc.source})", ""
+    for alias in ("image_size", "resolution"):
+        if alias in data and not ({"width", "image_width"} & set(data)):
+            size = data.pop(alias)
+            if (not isinstance(size, (list, tuple)) or len(size) != 2
+                    or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in size)):
+                raise FileFormatError(f"field '{prefix + '.' if prefix else ''}{alias}': must be [width, height] "
+                                      f"in px (cv2's imageSize order), got {size!r}", source=source)
+            data["width"], data["height"] = size
+    for key in ("camera_matrix", "K"):  # a ROS CameraInfo echo has K as 9 numbers, row-major
+        v = data.get(key)
+        if isinstance(v, list) and len(v) == 9 and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                       for x in v):
+            data[key] = [v[0:3], v[3:6], v[6:9]]
+    cdoc = Document(data, source, prefix, {**doc.units, "pixel": "px"}, doc.units_error)
+    model = data.get("distortion_model")
+    if model is not None and str(model).lower() not in _BROWN_CONRADY:
+        raise cdoc.error("distortion_model", f"{model!r} is not supported: robocal's camera is OpenCV's pinhole "
+                         f"model with (k1, k2, p1, p2[, k3]) ({', '.join(_BROWN_CONRADY[:2])}); a fisheye "
+                         "(equidistant) calibration needs its images undistorted first", InputError)
+    key = next((k for k in _DIST_KEYS if k in data), None)
+    if key is not None:
+        vals = _flat_values(data[key])
+        if vals is not None:
+            n = len(vals)
+            if n not in _OPENCV_DIST:
+                raise cdoc.error(key, f"an OpenCV distortion vector has 4, 5, 8, 12 or 14 values "
+                                 f"(k1, k2, p1, p2[, k3[, ...]]), got {n}", InputError)
+            if n > 5 and any(v != 0.0 for v in vals[5:]):
+                raise cdoc.error(key, f"{n} coefficients with non-zero {_OPENCV_DIST[n]}: robocal's camera model "
+                                 "has k1, k2, p1, p2, k3 only; calibrate without that flag (extra terms that are "
+                                 "exactly zero are accepted)", InputError)
+    cam = camera_from_document(cdoc)
+    try:
+        check_camera(cam)
+    except RobocalError as exc:
+        raise InputError(f"field '{prefix or 'camera'}': {exc.message}", source=source) from None
+    return cam
+
+
 def load_input(path) -> MirrorInput:
     """Read and validate an input file (see the module docstring)."""
     path = Path(path)
-    doc = load_document(path)
     src = str(path)
+    try:
+        head = path.read_text(encoding="utf-8-sig")[:200] if path.suffix.lower() in (".yaml", ".yml") else ""
+    except (OSError, UnicodeDecodeError):
+        head = ""  # load_document says what is wrong
+    hint = ("this looks like a camera calibration file (OpenCV), not a mirror input: reference it from the input "
+            "file as 'camera: {file: <this file>}' (docs/rigs/mirror.md, 'Your own camera')")
+    if head.startswith("%YAML:1."):
+        raise FileFormatError(hint, source=src)
+    doc = load_document(path)
+    if "camera" not in doc and ("camera_matrix" in doc or "K" in doc):
+        raise FileFormatError(hint, source=src)
     if "units" in doc and "pixel" not in doc.units:
         doc.units["pixel"] = "px"
     elif "units" not in doc:
         doc.units["pixel"] = "px"
-    cam = camera_from_document(doc.sub("camera"))
+    cam_raw = doc.raw("camera")
+    if isinstance(cam_raw, str):  # shorthand: camera: my_camera.yaml
+        cam_raw = doc.data["camera"] = {"file": cam_raw}
+    cam = load_camera(doc.sub("camera"), base_dir=path.parent)
+    camera_file = None
+    if isinstance(cam_raw, dict) and isinstance(cam_raw.get("file"), str):
+        cf = Path(cam_raw["file"])
+        camera_file = str(cf if cf.is_absolute() else path.parent / cf)
     r = doc.sub("mirror_rectangle")
     try:
         rect = MarkerRectangle(r.float("width", kind="length", positive=True),
@@ -169,7 +342,7 @@ def load_input(path) -> MirrorInput:
             if img is None:
                 raise e.error("image", f"{p} is not a readable image")
             try:
-                obs.append(detect_mirror_image(img, cam, tags, name=name, mirror_tags=mirror_tags))
+                obs.append(detect_mirror_image(img, cam, tags, name=name, mirror_tags=mirror_tags, rectangle=rect))
             except RobocalError as exc:
                 raise exc.with_source(f"{src}: {e.prefix}") from None
             images[name] = str(p)
@@ -181,7 +354,7 @@ def load_input(path) -> MirrorInput:
                 raise e.error("body_ids", "must be a list of integers")
             ids = np.array(raw, dtype=int)
         obs.append(MirrorObservation(_uv(e, "marker_uv", 4), _uv(e, "body_uv"), ids, name))
-    return MirrorInput(cam, rect, body, obs, sigma, tags, images, src, mirror_tags)
+    return MirrorInput(cam, rect, body, obs, sigma, tags, images, src, mirror_tags, camera_file)
 
 
 def write_input(path, camera: CameraModel, rectangle: MarkerRectangle, body_points_r, observations, *,

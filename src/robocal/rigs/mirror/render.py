@@ -18,12 +18,14 @@ left-right mirrored tag bitmap.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 from robocal.camera import CameraModel, add_blur_and_noise, blank_image, render_plane_texture
+from robocal.diagnostics import Diagnostic
 from robocal.errors import DetectionError, InputError
 from robocal.geometry import apply_transform, transform_from
 from robocal.rigs.mirror.calibrate import MirrorObservation
@@ -35,6 +37,7 @@ __all__ = [
     "BodyTags",
     "MirrorTags",
     "aruco_dictionary",
+    "mirror_symmetric_ids",
     "tag_rotation",
     "default_body_tags",
     "render_mirror_image",
@@ -62,6 +65,23 @@ def aruco_dictionary(name: str = ARUCO_DICT):
 
 def _dictionary(name: str = ARUCO_DICT):
     return aruco_dictionary(name)
+
+
+@functools.lru_cache(maxsize=None)
+def mirror_symmetric_ids(name: str = ARUCO_DICT) -> frozenset:
+    """Ids of a dictionary whose mirror image decodes as the same id (``DICT_4X4_50``: 8, 9, 17, 47).
+
+    On the body such a tag is ambiguous: seen directly it reads like its own
+    reflection in the flipped image.
+    """
+    d = aruco_dictionary(name)
+    out = set()
+    for i in range(d.bytesList.shape[0]):
+        bits = cv2.aruco.Dictionary.getBitsFromByteList(d.bytesList[i:i + 1], d.markerSize)
+        ok, idx, _ = d.identify(np.ascontiguousarray(bits[:, ::-1]).astype(np.uint8), 0.0)
+        if ok and int(idx) == i:
+            out.add(i)
+    return frozenset(out)
 
 
 def tag_rotation(normal, x_axis=None) -> np.ndarray:
@@ -166,8 +186,14 @@ class MirrorTags:
 
 
 def default_body_tags() -> BodyTags:
-    """Six 0.1 m tags on the published body: four on the front face, two on the box (two depths)."""
-    centres = [(0.45, -0.19, 0.10), (0.45, -0.19, 0.21), (0.45, 0.19, 0.10), (0.45, 0.19, 0.21),
+    """Six 0.1 m tags on the published body: four on the front face, two on the box (two depths).
+
+    Neighbouring tags on one face are 0.12 m apart, so no tag's white quiet
+    zone (1/6 of the side) covers another's black border, as with real prints
+    side by side (the earlier layout, 0.11 m apart, lost one or two tags per
+    image to that).
+    """
+    centres = [(0.45, -0.19, 0.09), (0.45, -0.19, 0.21), (0.45, 0.19, 0.09), (0.45, 0.19, 0.21),
                (0.52, -0.06, 0.14), (0.52, 0.06, 0.14)]
     T = np.stack([transform_from(_R_R_TAG_FRONT, c) for c in centres])
     return BodyTags(ids=tuple(range(len(centres))), T_r_tag=T, size=0.1)
@@ -200,15 +226,19 @@ def render_mirror_image(camera: CameraModel, scene: MirrorScene, tags: BodyTags,
     return add_blur_and_noise(img, blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng)
 
 
-def _detect(gray: np.ndarray, dictionary: str = ARUCO_DICT):
+def _detect(gray: np.ndarray, dictionary: str = ARUCO_DICT) -> dict:
+    """``{id: [corners (4, 2), ...]}``: every detection of each id (a list, so repeated ids are seen)."""
     params = cv2.aruco.DetectorParameters()
     params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
     params.cornerRefinementWinSize = 3
     det = cv2.aruco.ArucoDetector(_dictionary(dictionary), params)
     corners, ids, _ = det.detectMarkers(gray)
+    out: dict = {}
     if ids is None:
-        return {}
-    return {int(i): c.reshape(4, 2).astype(float) for i, c in zip(ids.ravel(), corners)}
+        return out
+    for i, c in zip(ids.ravel(), corners):
+        out.setdefault(int(i), []).append(c.reshape(4, 2).astype(float))
+    return out
 
 
 def _centre(camera: CameraModel, corners_uv: np.ndarray) -> np.ndarray:
@@ -219,18 +249,71 @@ def _centre(camera: CameraModel, corners_uv: np.ndarray) -> np.ndarray:
     return camera.pixel_from_normalized(x[:2] / x[2])
 
 
+def _size_hint(img_w: int, img_h: int, camera: CameraModel) -> str:
+    """Why an image's size differs from the camera's, when it can be told."""
+    if (img_w, img_h) == (camera.height, camera.width):
+        return "; the camera's width and height look swapped"
+    s = img_w / camera.width
+    if abs(img_h / camera.height - s) < 1e-3 * max(s, 1.0):
+        return (f"; the image is {s:.4g} x the calibration resolution: use images at {camera.width} x "
+                f"{camera.height} px, or scale fx, fy, cx, cy by {s:.4g} (cx' = {s:.4g} (cx + 0.5) - 0.5) "
+                "and set width/height to the image's")
+    return "; the camera was calibrated at another resolution or crop: calibrate at the image's size"
+
+
+#: A mirror tag whose corners, mapped onto the mirror plane, deviate from a square by more than this
+#: (relative side or diagonal difference) is warned about: clean renders reach 0.05 (0.09 at 1.2 px blur
+#: and grey noise 5); a corner bitten off by an 8 px occluder gives 0.13 and moves the centre 1.8 px.
+MIRROR_TAG_SQUARENESS = 0.10
+
+
+def _mirror_tag_shape_warnings(camera: CameraModel, corners: list, marker_uv: np.ndarray, rectangle, mt: "MirrorTags",
+                               name: str) -> list:
+    """Warn about mirror tags whose corners are not a square on the mirror (partly occluded, glare)."""
+    src = camera.undistort_points(marker_uv)
+    H, _ = cv2.findHomography(src, rectangle.object_points()[:, :2])
+    if H is None:
+        return []
+    out = []
+    for letter, tag_id, c in zip("ABCD", mt.ids, corners):
+        q = cv2.perspectiveTransform(camera.undistort_points(c).reshape(-1, 1, 2), H).reshape(-1, 2)
+        sides = np.linalg.norm(np.roll(q, -1, axis=0) - q, axis=1)
+        diag = np.array([np.linalg.norm(q[2] - q[0]), np.linalg.norm(q[3] - q[1])])
+        dev = max(float(np.abs(sides / sides.mean() - 1.0).max()), float(abs(diag[0] - diag[1]) / diag.mean()))
+        if dev > MIRROR_TAG_SQUARENESS:
+            out.append(Diagnostic(
+                "inconsistent_data", f"{name}: mirror tag {letter} (id {tag_id}): its corners are not a square on "
+                f"the mirror (sides or diagonals differ by {dev:.0%}): partly occluded, glare or bent? Its centre "
+                f"(marker {letter}) may be off by a pixel or more, which moves t_r_c by tens of mm",
+                params=("T_c_m",), indices=(int("ABCD".index(letter)),)))
+    return out
+
+
 def detect_mirror_image(image, camera: CameraModel, tags: BodyTags, *, name: str = "image",
-                        mirror_tags: MirrorTags | None = None) -> MirrorObservation:
+                        mirror_tags: MirrorTags | None = None, rectangle=None) -> MirrorObservation:
     """Find the mirror tags (direct) and the body tags (in the flipped image).
 
     Returns a :class:`MirrorObservation` whose ``body_ids`` index
     ``tags.body_points_r()`` (tags not found are left out). ``mirror_tags``:
     ids and dictionary of the mirror's tags (default ids 40-43, DICT_4X4_50).
 
+    Named warnings (``observation.warnings``, code ``dropped``, ``indices`` =
+    ``body_points`` rows, i.e. ``4 k .. 4 k + 3`` for tag ``k``): body tags
+    not found; body tag ids found more than once in the flipped image (all
+    their detections are left out: which one is the reflection cannot be
+    told); ids found in the flipped image that are not in ``tags`` (a tag
+    missing from the body model?). With ``rectangle`` (the marker
+    rectangle), also ``inconsistent_data`` for a mirror tag whose corners,
+    mapped onto the mirror, are not a square (``MIRROR_TAG_SQUARENESS``):
+    a partly occluded tag can still decode with one corner off.
+
     Raises
     ------
+    InputError
+        The image is not 8-bit, or its size is not the camera's.
     DetectionError
-        A mirror tag is missing, or fewer than one body tag (4 corners) is found.
+        A mirror tag is missing or found more than once, or no body tag
+        (4 corners) is left.
     """
     img = np.asarray(image)
     if img.ndim == 3:
@@ -238,27 +321,69 @@ def detect_mirror_image(image, camera: CameraModel, tags: BodyTags, *, name: str
     if img.ndim != 2 or img.dtype != np.uint8:
         raise InputError(f"{name}: image must be an 8-bit grey or BGR image, got shape {img.shape} {img.dtype}")
     if img.shape != (camera.height, camera.width):
-        raise InputError(f"{name}: image is {img.shape[1]} x {img.shape[0]} px, camera is "
-                         f"{camera.width} x {camera.height}")
+        raise InputError(f"{name}: image is {img.shape[1]} x {img.shape[0]} px but the camera (width x height) is "
+                         f"{camera.width} x {camera.height} px{_size_hint(img.shape[1], img.shape[0], camera)}")
     mt = mirror_tags or MirrorTags()
     mt.check_body(tags)
     direct = _detect(img, mt.dictionary)
     missing = [i for i in mt.ids if i not in direct]
     if missing:
-        raise DetectionError(f"{name}: mirror tag(s) {missing} not found (ids {list(mt.ids)} at A, B, C, D, "
-                             f"{mt.dictionary})")
-    marker_uv = np.stack([_centre(camera, direct[i]) for i in mt.ids])
+        letters = ", ".join(f"{'ABCD'[mt.ids.index(i)]} (id {i})" for i in missing)
+        seen = sorted(direct)
+        raise DetectionError(
+            f"{name}: mirror tag(s) {letters} not found ({mt.dictionary}; ids {list(mt.ids)} at A, B, C, D); "
+            f"ids found in the image: {seen if seen else 'none'}. All four must be fully visible: check for "
+            "occlusion, glare or a tag outside the image, and mirror_tags.ids / dictionary")
+    repeated = {i: len(direct[i]) for i in mt.ids if len(direct[i]) > 1}
+    if repeated:
+        raise DetectionError(
+            f"{name}: mirror tag id(s) {sorted(repeated)} found {sorted(repeated.values())} times; each of A-D must "
+            "appear once (another print of the tag in view, or a body tag with a mirror tag's id?)")
+    marker_uv = np.stack([_centre(camera, direct[i][0]) for i in mt.ids])
+    warnings = [] if rectangle is None else _mirror_tag_shape_warnings(
+        camera, [direct[i][0] for i in mt.ids], marker_uv, rectangle, mt, name)
     flipped = _detect(np.ascontiguousarray(img[:, ::-1]), tags.dictionary)
     W = img.shape[1]
     uv, ids = [], []
+    not_found, twice = [], []
     for k, tag_id in enumerate(tags.ids):
-        c = flipped.get(int(tag_id))
-        if c is None:
+        found = flipped.get(int(tag_id), [])
+        if len(found) != 1:
+            (twice if found else not_found).append(k)
             continue
-        c = c.copy()
+        c = found[0].copy()
         c[:, 0] = (W - 1) - c[:, 0]
         uv.append(c)
         ids.extend(range(4 * k, 4 * k + 4))
+
+    def rows(ks):
+        return tuple(4 * k + j for k in ks for j in range(4))
+
+    if twice:
+        warnings.append(Diagnostic(
+            "dropped", f"{name}: body tag id(s) {[tags.ids[k] for k in twice]} found more than once in the flipped "
+            "image; left out (a second print of the tag, or a tag that reads the same in a mirror seen directly)",
+            params=("body_uv",), indices=rows(twice)))
+    if not_found:
+        warnings.append(Diagnostic(
+            "dropped", f"{name}: body tag id(s) {[tags.ids[k] for k in not_found]} not found in the flipped image "
+            f"({len(ids) // 4} of {len(tags.ids)} found): occluded, outside the image or too small; their corners "
+            "are left out", params=("body_uv",), indices=rows(not_found)))
+    symmetric = sorted(int(tags.ids[k]) for k in range(len(tags.ids))
+                       if int(tags.ids[k]) in mirror_symmetric_ids(tags.dictionary) and int(tags.ids[k]) in flipped)
+    if symmetric:
+        warnings.append(Diagnostic(
+            "inconsistent_data", f"{name}: body tag id(s) {symmetric} read the same in a mirror ({tags.dictionary}): "
+            "a direct view of such a tag is indistinguishable from its reflection; prefer other ids",
+            params=("body_uv",)))
+    unknown = sorted(set(flipped) - {int(i) for i in tags.ids} - (set(mt.ids) if mt.dictionary == tags.dictionary
+                                                                    else set()))
+    if unknown:
+        warnings.append(Diagnostic(
+            "dropped", f"{name}: tag id(s) {unknown} seen in the mirror ({tags.dictionary}) but not in body_tags; "
+            "ignored (add them to body_tags.tags to use them)", params=("body_uv",)))
     if not uv:
-        raise DetectionError(f"{name}: no body tag found in the flipped image (ids {list(tags.ids)})")
-    return MirrorObservation(marker_uv, np.concatenate(uv), np.array(ids), name)
+        rep = f"; repeated ids {[tags.ids[k] for k in twice]}" if twice else ""
+        raise DetectionError(f"{name}: no body tag found in the flipped image (ids {list(tags.ids)}, "
+                             f"{tags.dictionary}{rep})")
+    return MirrorObservation(marker_uv, np.concatenate(uv), np.array(ids), name, warnings)

@@ -26,6 +26,15 @@ from robocal.rigs.mirror.model import mirror_plane, virtual_transform
 __all__ = ["result_from_calibration", "build_report", "draw_image_overlay", "relative_image_paths"]
 
 
+#: What no check can see; in every result (``diagnostics.unobservable``) and report.
+UNOBSERVABLE = ("What no check can see: t_r_c is measured from the origin of the body model (body_points or "
+                "body_tags), so an offset of the model by any vector (x, y or z alike) moves t_r_c by that vector "
+                "with identical residuals and warnings; a unit error shared by mirror_rectangle and body_points "
+                "scales the answer by the same factor; and for (nearly) coplanar body points a model of the wrong "
+                "handedness (x sign) fits too (points on one face x = c: the answer moves by 2c along x). "
+                "See docs/rigs/mirror.md, 'What the images cannot tell'.")
+
+
 def result_from_calibration(cal: MirrorCalibration, *, inputs=None, image_paths=None, truth=None) -> CalibrationResult:
     """The shared result record (SI units; ``T_r_c`` is ``robot -> camera``)."""
     est = {
@@ -66,6 +75,7 @@ def result_from_calibration(cal: MirrorCalibration, *, inputs=None, image_paths=
         "single_image": singles,
         "cov_rot_t": cal.cov.tolist(),
         "n_images": len(cal.observations),
+        "unobservable": UNOBSERVABLE,
     }
     if cal.lsq is not None:
         diag["solver"] = {"iterations": cal.lsq.iterations, "cost_history": cal.lsq.cost_history.tolist(),
@@ -237,6 +247,10 @@ def build_report(result: CalibrationResult, *, title: str = "robocal mirror — 
     s.table(rows, digits=4, caption="std: first-order (sampling) uncertainty; rotation std is per axis of the "
                                     "robot-side rotation vector, shown next to roll/pitch/yaw for scale")
     s.text(f"Residual RMS {result.residual_rms:.3g} px over markers and reflected body points.")
+    s.text(f"Inputs used: camera {cam.width} x {cam.height} px, fx {cam.fx:.6g}, fy {cam.fy:.6g}, cx {cam.cx:.6g}, "
+           f"cy {cam.cy:.6g} px, dist (k1, k2, p1, p2, k3) = ({', '.join(f'{v:.5g}' for v in cam.dist)}); "
+           f"mirror rectangle {rect.width * 1e3:.5g} x {rect.height * 1e3:.5g} mm; {len(body)} body points.")
+    s.text(UNOBSERVABLE)
     s.diagnostics(result.warnings)
     s2 = rep.section("Per image: the patent's single-image estimate and the planar (IPPE) choice")
     rows = []

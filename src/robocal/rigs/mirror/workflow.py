@@ -56,7 +56,7 @@ def simulate_files(out_dir, *, placements: int = 1, sigma_px: float = 0.5, seed:
             cv2.imwrite(str(out_dir / name), img)
             written.append(out_dir / name)
             files[k] = name
-            obs.append(detect_mirror_image(img, cam, tags, name=f"placement {k}"))
+            obs.append(detect_mirror_image(img, cam, tags, name=f"placement {k}", rectangle=scene.rectangle))
         path = write_input(out_dir / INPUT_NAME, cam, scene.rectangle, None, obs, tags=tags, image_files=files,
                            comment="robocal mirror simulate --images: rendered images, ArUco tags on the body")
     else:
@@ -110,7 +110,7 @@ def calibrate_file(path, *, refine: bool = True, progress: bool = False, out_dir
     except RobocalError as exc:  # the library names the image and field; the user also needs the file
         raise (exc if exc.source else exc.with_source(str(path))) from None
     truth = _read_truth(path)
-    inputs = hash_inputs([path, *inp.image_paths.values()])
+    inputs = hash_inputs([path, *([inp.camera_file] if inp.camera_file else []), *inp.image_paths.values()])
     base = Path(out_dir) if out_dir is not None else Path.cwd()
     result = result_from_calibration(cal, inputs=inputs, image_paths=relative_image_paths(inp.image_paths, base),
                                      truth=truth)
@@ -139,7 +139,7 @@ def demo(out_dir, rng: np.random.Generator, *, progress: bool = False):
     tags = default_body_tags()
     scene_tags = MirrorScene(scene.T_c_r, scene.T_c_m[:1], tags.body_points_r(), scene.rectangle)
     img = render_mirror_image(cam, scene_tags, tags, rng=rng)
-    obs_img = detect_mirror_image(img, cam, tags, name="rendered image")
+    obs_img = detect_mirror_image(img, cam, tags, name="rendered image", rectangle=scene.rectangle)
     cal_img = calibrate(cam, scene.rectangle, scene_tags.body_points_r, [obs_img])
     e_img = pose_error(cal_img.T_r_c, scene.T_r_c)
     z_img = np.abs(e_img) / np.sqrt(np.diag(cal_img.cov))
