@@ -335,12 +335,7 @@ def rigid_fit(points_from, points_to, weights=None, *, with_scale: bool = False,
     if x.shape[-2] < 3 or np.any(n_used < 3):
         got = x.shape[-2] if x.shape[-2] < 3 else int(np.min(n_used))
         raise NotEnoughDataError(f"rigid_fit needs at least 3 non-collinear points with non-zero weight, got {got}")
-    wsum = w.sum(axis=-1)
-    wcol = w[..., :, None]
-    xbar = (wcol * x).sum(axis=-2) / wsum[..., None]
-    ybar = (wcol * y).sum(axis=-2) / wsum[..., None]
-    xc = x - xbar[..., None, :]
-    yc = y - ybar[..., None, :]
+    wsum, wcol, xbar, ybar, xc, yc = _weighted_centring(x, y, w)
     sw = np.sqrt(wcol)
     # Singular values of the weighted centred point sets (one batched call)
     # name the failing side; the scatter matrices would square the ratio and
@@ -406,18 +401,22 @@ def _require_spread_2d(xc, x, w, name: str, rtol: float) -> np.ndarray:
     return spread2
 
 
+def _weighted_centring(x, y, w):
+    """Weight sums, weights as a column, weighted centroids and centred points of both sets."""
+    wsum = w.sum(axis=-1)
+    wcol = w[..., :, None]
+    xbar = (wcol * x).sum(axis=-2) / wsum[..., None]
+    ybar = (wcol * y).sum(axis=-2) / wsum[..., None]
+    return wsum, wcol, xbar, ybar, x - xbar[..., None, :], y - ybar[..., None, :]
+
+
 def _rigid_fit_2d(x, y, w, with_scale: bool, rtol: float) -> RigidFit:
     """Planar (SE(2) / similarity) branch of :func:`rigid_fit`; inputs already broadcast."""
     n_used = np.count_nonzero(w > 0, axis=-1)
     if x.shape[-2] < 2 or np.any(n_used < 2):
         got = x.shape[-2] if x.shape[-2] < 2 else int(np.min(n_used))
         raise NotEnoughDataError(f"rigid_fit in 2D needs at least 2 distinct points with non-zero weight, got {got}")
-    wsum = w.sum(axis=-1)
-    wcol = w[..., :, None]
-    xbar = (wcol * x).sum(axis=-2) / wsum[..., None]
-    ybar = (wcol * y).sum(axis=-2) / wsum[..., None]
-    xc = x - xbar[..., None, :]
-    yc = y - ybar[..., None, :]
+    wsum, wcol, xbar, ybar, xc, yc = _weighted_centring(x, y, w)
     var_x = _require_spread_2d(xc, x, w, "points_from", rtol)
     _require_spread_2d(yc, y, w, "points_to", rtol)
     R, mag = _planar_rotation(xc, yc, w, "point pairs (centred)", rtol)
