@@ -416,7 +416,7 @@ def _rigid_fit_2d(x, y, w, with_scale: bool, rtol: float) -> RigidFit:
     if x.shape[-2] < 2 or np.any(n_used < 2):
         got = x.shape[-2] if x.shape[-2] < 2 else int(np.min(n_used))
         raise NotEnoughDataError(f"rigid_fit in 2D needs at least 2 distinct points with non-zero weight, got {got}")
-    wsum, wcol, xbar, ybar, xc, yc = _weighted_centring(x, y, w)
+    wsum, _, xbar, ybar, xc, yc = _weighted_centring(x, y, w)
     var_x = _require_spread_2d(xc, x, w, "points_from", rtol)
     _require_spread_2d(yc, y, w, "points_to", rtol)
     R, mag = _planar_rotation(xc, yc, w, "point pairs (centred)", rtol)
