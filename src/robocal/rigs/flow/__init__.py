@@ -6,16 +6,30 @@ metric flow; numba), :mod:`.model` (the array, SE(2) helpers),
 :mod:`.simulate` (real-photo ground, sensor cameras, gyro, height, wheels),
 :mod:`.calibrate` (array calibration), :mod:`.evaluate` (ATE, RPE, plots),
 :mod:`.log` (file formats), :mod:`.workflow` and :mod:`.cli`.
+
+The names in ``__all__`` are imported from their submodule on first access
+(PEP 562): importing the package, e.g. for ``robocal flow --help`` through
+:mod:`.cli`, does not import numba, OpenCV, matplotlib or scipy.
 """
 
-from robocal.rigs.flow.kernel import FlowConfig, FrameFlow, compute_flow, match_blocks, match_sequence
-from robocal.rigs.flow.model import SensorArray, seed_array
-from robocal.rigs.flow.odometry import Odometry, SensorSteps, dead_reckon, fuse_steps
-from robocal.rigs.flow.calibrate import ArrayCalibration, calibrate_array
-from robocal.rigs.flow.evaluate import evaluate_trajectory, rpe_lengths, rpe_per_distance, ate
+from __future__ import annotations
+
+from robocal._lazy import lazy_exports
+
+#: exported name -> submodule defining it (no exported name is also a submodule's name; a test checks both)
+_EXPORTS = {
+    **dict.fromkeys(("FlowConfig", "FrameFlow", "compute_flow", "match_blocks", "match_sequence"), "kernel"),
+    **dict.fromkeys(("SensorArray", "seed_array"), "model"),
+    **dict.fromkeys(("Odometry", "SensorSteps", "dead_reckon", "fuse_steps"), "odometry"),
+    **dict.fromkeys(("ArrayCalibration", "calibrate_array"), "calibrate"),
+    **dict.fromkeys(("evaluate_trajectory", "rpe_lengths", "rpe_per_distance", "ate"), "evaluate"),
+}
 
 __all__ = [
     "FlowConfig", "FrameFlow", "compute_flow", "match_blocks", "match_sequence",
     "SensorArray", "seed_array", "Odometry", "SensorSteps", "dead_reckon", "fuse_steps",
     "ArrayCalibration", "calibrate_array", "evaluate_trajectory", "rpe_lengths", "rpe_per_distance", "ate",
 ]
+
+
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())

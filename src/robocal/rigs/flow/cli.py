@@ -5,36 +5,27 @@ from __future__ import annotations
 import argparse
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from robocal.cli import DemoContext, DemoOutcome, Rig
 from robocal.cli._common import RawHelp, add_out_argument, add_seed_argument, examples_epilog, prepare_out_dir, progress, write_run
 from robocal.errors import InputError
-from robocal.geometry import wrap_angle
 from robocal.io import CalibrationResult, atomic_write_text
 from robocal.report import Report
-from robocal.rigs.flow.evaluate import evaluate_trajectory
-from robocal.rigs.flow.kernel import FlowConfig
-from robocal.rigs.flow.log import load_run
-from robocal.rigs.flow.odometry import dead_reckon
-from robocal.rigs.flow.simulate import TEXTURES, max_speed, simulate_run
-from robocal.rigs.flow.workflow import (
-    _traj_section,
-    array_yaml,
-    calibration_result,
-    calibration_run,
-    compare_text,
-    default_sim,
-    evaluation_run,
-    odometry_result,
-    odometry_run,
-    quality_figure,
-    velocity_figure,
-    write_simulation,
-)
+
+# The rig's library modules (kernel, simulate, workflow, ...: numba, OpenCV, matplotlib, scipy) are imported
+# inside the commands: building the parser (``robocal flow --help``, a usage error) imports none of them.
+if TYPE_CHECKING:
+    from robocal.rigs.flow.kernel import FlowConfig
 
 __all__ = ["RIG", "demo"]
+
+#: :data:`robocal.rigs.flow.simulate.TEXTURES` (the ``--texture`` choices), repeated here so that ``--help``
+#: does not import the simulator (numba, ~0.3 s); a test (tests/rigs/flow/test_flow_import_light.py) asserts that
+#: they are equal.
+TEXTURES = ("gravel", "grass", "brick", "moon")
 
 DESCRIPTION = """Dead reckoning from several downward optical-flow sensors (seed 003, PX4FLOW-class):
 SAD block matching + sub-pixel refinement + gyro compensation per sensor, the rigid-body
@@ -65,6 +56,8 @@ def _physical_memory() -> float:
 
 
 def _flow_config(args, spec=None) -> FlowConfig:
+    from robocal.rigs.flow.kernel import FlowConfig
+
     d = FlowConfig()
     kw = {k: getattr(args, k) if getattr(args, k, None) is not None else getattr(d, k) for k in _KERNEL_ARGS}
     if spec is not None:
@@ -123,6 +116,9 @@ def cmd_simulate(args) -> int:
             raise InputError("--gap takes X,Y,RADIUS in metres, e.g. --gap 0.5,0.2,0.05") from None
         if any(len(g) != 3 for g in gaps):
             raise InputError("--gap takes X,Y,RADIUS in metres, e.g. --gap 0.5,0.2,0.05")
+    from robocal.rigs.flow.simulate import max_speed, simulate_run
+    from robocal.rigs.flow.workflow import default_sim, write_simulation
+
     sim = default_sim(args.trajectory, args.duration, texture=args.texture, supersample=args.supersample, gaps=gaps,
                       speed=args.speed)
     sim.camera = type(sim.camera)(rate=args.rate)
@@ -141,6 +137,10 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_odometry(args) -> int:
+    from robocal.rigs.flow.log import load_run
+    from robocal.rigs.flow.workflow import (_traj_section, evaluation_run, odometry_result, odometry_run,
+                                            quality_figure, velocity_figure)
+
     spec = load_run(args.input)
     out = prepare_out_dir(args.out, "flow-odometry")
     pg = lambda it, desc: progress(it, desc=desc, enabled=not args.no_progress)  # noqa: E731
@@ -189,6 +189,9 @@ def _frames_table(od):
 
 
 def cmd_calibrate(args) -> int:
+    from robocal.rigs.flow.log import load_run
+    from robocal.rigs.flow.workflow import array_yaml, calibration_result, calibration_run
+
     spec = load_run(args.input)
     if not np.isfinite(args.window) or args.window <= 0:
         raise InputError(f"--window must be > 0 s, got {args.window}")
@@ -267,6 +270,10 @@ def _display(unit):
 
 
 def cmd_evaluate(args) -> int:
+    from robocal.rigs.flow.log import load_run
+    from robocal.rigs.flow.odometry import dead_reckon
+    from robocal.rigs.flow.workflow import _traj_section, compare_text, evaluation_run, odometry_run
+
     spec = load_run(args.input)
     out = prepare_out_dir(args.out, "flow-evaluate")
     pg = lambda it, desc: progress(it, desc=desc, enabled=not args.no_progress)  # noqa: E731
@@ -362,6 +369,13 @@ def add_commands(parser: argparse.ArgumentParser) -> None:
 
 def demo(ctx: DemoContext) -> DemoOutcome:
     """Calibration drive -> array calibration -> fresh drive: nominal vs calibrated vs wheels."""
+    from robocal.geometry import wrap_angle
+    from robocal.rigs.flow.evaluate import evaluate_trajectory
+    from robocal.rigs.flow.kernel import FlowConfig
+    from robocal.rigs.flow.odometry import dead_reckon
+    from robocal.rigs.flow.simulate import simulate_run
+    from robocal.rigs.flow.workflow import _traj_section, calibration_result, default_sim, quality_figure
+
     t0 = time.perf_counter()
     fc = FlowConfig()
     # supersample 1 keeps the demo inside its time budget; the tests use 2

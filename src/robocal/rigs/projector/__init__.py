@@ -5,9 +5,29 @@ extrinsic calibration by the seed's method, the optimal closed form and
 nonlinear least squares (:mod:`.calibrate`); the seed's Table 2 evaluation
 (:mod:`.evaluate`); spot paths over one or several projectors (:mod:`.path`);
 simulation (:mod:`.simulate`) and the command line (:mod:`.cli`).
+
+The names in ``__all__`` (those of :mod:`.model`) are imported on first access
+(PEP 562): importing the package, e.g. for ``robocal projector --help`` through
+:mod:`.cli`, does not import the model and its dependencies (scipy.spatial via
+:mod:`robocal.geometry`).
 """
 
-from robocal.rigs.projector.model import *  # noqa: F401,F403
-from robocal.rigs.projector import model as _model
+from __future__ import annotations
 
-__all__ = [*_model.__all__]
+from robocal._lazy import lazy_exports
+
+#: exported name -> submodule defining it (``model.__all__``; a test checks that they agree)
+_EXPORTS = {
+    "ProjectorModel": "model",
+    "NearSingularityWarning": "model",
+    "UnreachablePointError": "model",
+    "wrap_angle": "model",
+    "NADIR_TOL": "model",
+    "HORIZON_TOL": "model",
+    "NEAR_NADIR_WARN": "model",
+}
+
+__all__ = [*_EXPORTS]
+
+
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())

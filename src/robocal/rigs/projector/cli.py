@@ -12,18 +12,24 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from robocal.cli import DemoContext, DemoOutcome, Rig
 from robocal.cli._common import RawHelp, add_out_argument, add_seed_argument, examples_epilog, prepare_out_dir, write_run
 from robocal.errors import FileFormatError, InputError, RobocalError
 from robocal.io import atomic_write_text, load_result
 from robocal.report import Section
-from robocal.rigs.projector.path import MAX_NADIR_SNAP, NADIR_SNAP
+
+# The rig's library modules (model, path, calibrate, ...: scipy, matplotlib) are imported inside the commands:
+# building the parser (``robocal projector --help``, a usage error) imports none of them.
 
 __all__ = ["RIG"]
 
 EXAMPLES = Path("examples/projector")
+#: :data:`robocal.rigs.projector.path.NADIR_SNAP` and ``MAX_NADIR_SNAP`` [m], repeated for the ``path`` parser so
+#: that ``--help`` does not import the path planner (its model pulls in scipy.spatial, ~0.4 s); a test
+#: (tests/rigs/projector/test_projector_import_light.py) asserts that they equal path's.
+NADIR_SNAP = 1e-3
+MAX_NADIR_SNAP = 0.1
 #: ``simulate --points`` cap: the pairwise-distance check is O(N^2) in memory (1e8 points were killed, OOM).
 MAX_SIM_POINTS = 10_000
 
@@ -106,15 +112,17 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
 
 # ------------------------------------------------------------------ commands
 def _cmd_simulate(args) -> int:
-    from robocal.rigs.projector.simulate import simulate_calibration
-    from robocal.rigs.projector.workflow import scenario_document
-
     if not 3 <= args.points <= MAX_SIM_POINTS:
         raise InputError(f"--points must be in [3, {MAX_SIM_POINTS}], got {args.points}")
     if not (math.isfinite(args.noise) and args.noise > 0):
         raise InputError(f"--noise must be a finite sigma > 0 [mm], got {args.noise:g}")
     if not (math.isfinite(args.theta_noise) and args.theta_noise >= 0):
         raise InputError(f"--theta-noise must be a finite sigma >= 0 [deg], got {args.theta_noise:g}")
+    import yaml
+
+    from robocal.rigs.projector.simulate import simulate_calibration
+    from robocal.rigs.projector.workflow import scenario_document
+
     rng = np.random.default_rng(args.seed)
     sc = simulate_calibration(rng, n_points=args.points, sigma=args.noise * 1e-3,
                               theta_sigma=math.radians(args.theta_noise))
@@ -162,13 +170,13 @@ def _model_from_result(path: Path, nominal):
 
 
 def _cmd_evaluate(args) -> int:
-    from robocal.rigs.projector.files import load_calibration_input
-    from robocal.rigs.projector.workflow import calibration_report, calibration_result, run_calibration, run_evaluation
-
     if not (math.isfinite(args.spacing) and args.spacing > 0):
         raise InputError(f"--spacing must be a finite distance > 0 [m], got {args.spacing:g}")
     if not all(math.isfinite(c) for c in args.center):
         raise InputError(f"--center must be two finite coordinates [m], got {args.center[0]:g} {args.center[1]:g}")
+    from robocal.rigs.projector.files import load_calibration_input
+    from robocal.rigs.projector.workflow import calibration_report, calibration_result, run_calibration, run_evaluation
+
     inp = load_calibration_input(args.input)
     if inp.truth is None:
         raise FileFormatError("evaluate needs a 'truth' section (a simulated rig, see `robocal projector simulate`)",
@@ -270,11 +278,11 @@ def _check_path_options(args) -> None:
 
 
 def _cmd_path(args) -> int:
+    _check_path_options(args)
     from robocal.rigs.projector.files import load_path_input
     from robocal.rigs.projector.path import plan_multi, require_reachable_path, retime
     from robocal.rigs.projector.workflow import path_report
 
-    _check_path_options(args)
     inp = load_path_input(args.input)
     _require_distinct_file_names([q.name for q in inp.projectors], source=str(args.input))
     try:  # exit 2: a point no projector reaches is wrong input; exit 1 is kept for a plan that fails its checks
