@@ -209,3 +209,74 @@ def test_document_errors_name_the_field(text, match):
     with pytest.raises(RobocalError, match=match) as info:
         CameraModel.from_document(parse_document(text, source="cam.yaml"))
     assert "cam.yaml" in str(info.value)
+
+
+# ---------------------------------------------------------------- loader checks every rig gets
+_K = "camera_matrix: [[600.0, 0, 321.3], [0, 605.0, 238.7], [0, 0, 1]]\nwidth: 640\nheight: 480\n"
+_D = [-0.28, 0.11, 0.0008, -0.0006, -0.02]
+
+
+@pytest.mark.parametrize(
+    "dist, match",
+    [
+        (_D[:4], None),
+        (_D, None),
+        (_D + [0.0] * 3, None),  # 8, 12, 14 values with the extra terms exactly zero
+        (_D + [0.0] * 7, None),
+        (_D + [0.0] * 9, None),
+        (_D[:3], r"'dist_coeffs': an OpenCV distortion vector has 4, 5, 8, 12 or 14 values .* got 3 values"),
+        (_D + [0.0], r"4, 5, 8, 12 or 14 values .* got 6 values"),
+        (_D + [0.01, 0.0, 0.0], r"8 coefficients with non-zero k4, k5, k6 \(the rational model, CALIB_RATIONAL_MODEL\)"),
+        (_D + [0.0] * 6 + [0.001], r"12 coefficients .*CALIB_THIN_PRISM_MODEL.*calibrate without that flag"),
+        (_D + [0.0] * 8 + [0.01], r"14 coefficients .*CALIB_TILTED_MODEL"),
+    ],
+)
+def test_distortion_vector_has_an_opencv_length(dist, match):
+    doc = parse_document(_K + f"dist_coeffs: {dist}\n", source="cam.yaml")
+    if match is None:
+        cam = camera_from_document(doc)
+        assert np.allclose(cam.dist[:4], _D[:4]) and cam.dist.shape == (5,)
+        assert CameraModel.from_matrix(cam.K, dist, 640, 480) == cam
+        return
+    with pytest.raises(InputError, match=match) as info:
+        camera_from_document(doc)
+    assert "cam.yaml" in str(info.value)
+    with pytest.raises(InputError, match=match.split("': ")[-1]):
+        CameraModel.from_matrix(np.eye(3), dist)  # the same check in code
+
+
+def test_camera_matrix_layouts_and_distortion_model():
+    ref = camera_from_document(parse_document(_K))
+    flat = "K: [600.0, 0, 321.3, 0, 605.0, 238.7, 0, 0, 1]\nwidth: 640\nheight: 480\n"  # a ROS CameraInfo echo
+    assert camera_from_document(parse_document(flat + "D: [0, 0, 0, 0, 0]\ndistortion_model: plumb_bob\n")) == ref
+    data = "camera_matrix: {rows: 3, cols: 3, data: [600.0, 0, 321.3, 0, 605.0, 238.7, 0, 0, 1]}\n"
+    assert camera_from_document(parse_document(data + "image_size: [640, 480]\n")) == ref  # cv2's (width, height)
+    assert CameraModel.from_matrix(np.ravel(ref.K), width=640, height=480) == ref
+    with pytest.raises(InputError, match=r"'distortion_model': 'equidistant' is not supported.*fisheye"):
+        camera_from_document(parse_document(_K + "distortion_model: equidistant\nD: [0.1, 0.01, 0, 0]\n"))
+    with pytest.raises(FileFormatError, match=r"'image_size': must be \[width, height\]"):
+        camera_from_document(parse_document(data + "image_size: 640\n"))
+    with pytest.raises(FileFormatError, match=r"'camera_matrix': .*\[0, 0, 1\]\] \(no skew\)"):
+        camera_from_document(parse_document(_K.replace("[0, 0, 1]", "[0, 0, 2]")))
+
+
+def test_principal_point_outside_the_image_is_refused_and_off_centre_warned():
+    from robocal.camera import check_principal_point, principal_point_warnings
+    from robocal.io import Document
+
+    big = "camera_matrix: [[1600.0, 0, 959.5], [0, 1600.0, 719.5], [0, 0, 1]]\n"  # a 1920 x 1440 calibration
+    doc = Document(parse_document(big + "image_size: [768, 576]\n").data, "in.yaml", "camera")
+    with pytest.raises(InputError, match=r"field 'camera': principal point \(cx, cy\) = \(959.5, 719.5\) px lies "
+                                         r"outside the 768 x 576 px image: width/height must be the size"):
+        camera_from_document(doc)
+    tall = CameraModel(800.0, 800.0, 500.0, 300.0, width=400, height=700)  # inside 700 x 400, not 400 x 700
+    with pytest.raises(InputError, match=r"outside the 400 x 700 px image \(width and height swapped\?\)"):
+        check_principal_point(tall)
+    centred = CameraModel(800.0, 800.0, 383.5, 287.5, width=768, height=576)
+    check_principal_point(centred)
+    assert principal_point_warnings(centred) == []
+    swapped = dataclasses.replace(centred, width=576, height=768)  # (height, width) given as (width, height)
+    (w,) = principal_point_warnings(swapped)
+    assert w.code == "inconsistent_data" and "width and height swapped it would be near the centre" in w.message
+    (w,) = principal_point_warnings(dataclasses.replace(centred, cx=700.0))
+    assert "41% of the width" in w.message and "swapped" not in w.message

@@ -25,7 +25,31 @@ import numpy as np
 from robocal.errors import DegenerateGeometryError, FileFormatError, InputError, ShapeError
 from robocal.validation import check_array, check_transform
 
-__all__ = ["CameraModel", "camera_from_document"]
+__all__ = [
+    "CameraModel",
+    "camera_from_document",
+    "dist_from_opencv",
+    "check_principal_point",
+    "principal_point_warnings",
+    "OPENCV_DIST_TERMS",
+    "BROWN_CONRADY_MODELS",
+    "PRINCIPAL_POINT_OFF_CENTRE",
+]
+
+#: OpenCV distortion vector lengths and what their terms beyond (k1, k2, p1, p2, k3) are (the cv2 flag).
+OPENCV_DIST_TERMS = {
+    4: "",
+    5: "",
+    8: "k4, k5, k6 (the rational model, CALIB_RATIONAL_MODEL)",
+    12: "k4..k6, s1..s4 (CALIB_RATIONAL_MODEL / CALIB_THIN_PRISM_MODEL)",
+    14: "k4..k6, s1..s4, tau_x, tau_y (CALIB_TILTED_MODEL)",
+}
+#: ROS ``distortion_model`` values that are OpenCV's Brown-Conrady model (the only one implemented).
+BROWN_CONRADY_MODELS = ("plumb_bob", "rational_polynomial", "radtan", "pinhole-brown-conrady")
+#: A principal point farther than this fraction of the image size from the centre is warned about.
+PRINCIPAL_POINT_OFF_CENTRE = 0.2
+#: Keys of the distortion vector, in the order :func:`camera_from_document` looks for them.
+_DIST_KEYS = ("dist", "dist_coeffs", "distortion_coefficients", "D")
 
 #: Newton iterations / tolerance of :meth:`CameraModel.undistort_points` (normalised units).
 _UNDISTORT_MAX_ITER = 50
@@ -37,6 +61,77 @@ def _where(mask: np.ndarray, limit: int = 8) -> str:
     items = [tuple(int(i) for i in row) if len(row) > 1 else int(row[0]) for row in idx[:limit]]
     more = f" and {len(idx) - limit} more" if len(idx) > limit else ""
     return f"{items}{more}"
+
+
+def dist_from_opencv(values) -> np.ndarray:
+    """``(k1, k2, p1, p2, k3)`` (5,) from an OpenCV distortion vector of any of OpenCV's lengths.
+
+    OpenCV writes 4, 5, 8, 12 or 14 coefficients (:data:`OPENCV_DIST_TERMS`);
+    robocal's model has the first five. Longer vectors are accepted when the
+    extra terms are exactly zero. Raises :class:`~robocal.errors.InputError`
+    for any other length, and for non-zero extra terms, naming the
+    ``cv2.calibrateCamera`` flag that produced them.
+    """
+    d = check_array(values, "dist").reshape(-1)
+    n = d.shape[0]
+    if n not in OPENCV_DIST_TERMS:
+        raise InputError(f"an OpenCV distortion vector has 4, 5, 8, 12 or 14 values (k1, k2, p1, p2[, k3[, ...]]), "
+                         f"got {n} values")
+    if n > 5 and np.any(d[5:] != 0.0):
+        raise InputError(f"{n} coefficients with non-zero {OPENCV_DIST_TERMS[n]}: robocal's camera model has k1, k2, "
+                         "p1, p2, k3 only; calibrate without that flag (extra terms that are exactly zero are "
+                         f"accepted; got {d[5:].tolist()})")
+    return np.append(d, 0.0) if n == 4 else d[:5].copy()
+
+
+def _pp_offset(camera: "CameraModel", width, height) -> np.ndarray:
+    """Principal point offset from the centre of a ``width x height`` image, as fractions of the size."""
+    size = np.array([width, height], dtype=float)
+    return np.abs(np.array([camera.cx, camera.cy]) - (size - 1.0) / 2.0) / size
+
+
+def check_principal_point(camera: "CameraModel") -> None:
+    """Reject a camera whose principal point lies outside its ``width x height`` image.
+
+    That is the sign of an image size that does not belong to the camera
+    matrix: a calibration at another resolution, or width and height swapped
+    (``img.shape[:2]`` is ``(height, width)``, cv2's ``imageSize`` is
+    ``(width, height)``). Raises :class:`~robocal.errors.InputError`.
+    :func:`camera_from_document` calls it on every camera it reads.
+    """
+    W, H = camera.width, camera.height
+    if -0.5 <= camera.cx <= W - 0.5 and -0.5 <= camera.cy <= H - 0.5:
+        return
+    hint = ""
+    if -0.5 <= camera.cx <= H - 0.5 and -0.5 <= camera.cy <= W - 0.5:
+        hint = " (width and height swapped?)"
+    raise InputError(f"principal point (cx, cy) = ({camera.cx:.6g}, {camera.cy:.6g}) px lies outside the "
+                     f"{W} x {H} px image{hint}: width/height must be the size of the images this camera matrix "
+                     "was calibrated at")
+
+
+def principal_point_warnings(camera: "CameraModel", *, params=("camera",)) -> list:
+    """Warn when the principal point is far from the image centre (an image size of another camera?).
+
+    Returns a list of :class:`~robocal.diagnostics.Diagnostic` (code
+    ``inconsistent_data``): none when the principal point is within
+    :data:`PRINCIPAL_POINT_OFF_CENTRE` of the size from the centre, unless
+    width and height look swapped (a swap moves a centred principal point by
+    only 12-17 % on a 4:3 image, so it is told apart by being near the centre
+    of the swapped size).
+    """
+    from robocal.diagnostics import Diagnostic
+
+    off = _pp_offset(camera, camera.width, camera.height)
+    swapped = _pp_offset(camera, camera.height, camera.width)
+    is_swap = off.max() > 0.08 and swapped.max() < off.max() / 3
+    if off.max() <= PRINCIPAL_POINT_OFF_CENTRE and not is_swap:
+        return []
+    hint = "; with width and height swapped it would be near the centre" if is_swap else ""
+    return [Diagnostic("inconsistent_data", f"camera: the principal point ({camera.cx:.6g}, {camera.cy:.6g}) px is "
+                       f"{off[0]:.0%} of the width and {off[1]:.0%} of the height off the centre of the "
+                       f"{camera.width} x {camera.height} px image{hint}: check that width/height belong to this "
+                       "camera matrix", params=tuple(params))]
 
 
 @dataclass(frozen=True, eq=False)
@@ -135,21 +230,20 @@ class CameraModel:
 
     @classmethod
     def from_matrix(cls, K, dist=(0.0, 0.0, 0.0, 0.0, 0.0), width: int = 640, height: int = 480) -> "CameraModel":
-        """From a 3x3 intrinsic matrix (zero skew) and OpenCV distortion coefficients."""
-        K = check_array(K, "K", shape=(3, 3))
-        if K.ndim != 2:
-            raise InputError(f"K must have shape (3, 3), got {K.shape}")
+        """From a 3x3 intrinsic matrix (zero skew) and OpenCV distortion coefficients.
+
+        ``K`` may also be the 9 numbers of a ROS ``CameraInfo`` (row-major).
+        ``dist``: any OpenCV length (4, 5, 8, 12, 14), extra terms zero (see
+        :func:`dist_from_opencv`).
+        """
+        K = check_array(K, "K")
+        if K.shape == (9,):
+            K = K.reshape(3, 3)
+        if K.shape != (3, 3):
+            raise InputError(f"K must have shape (3, 3) (or 9 numbers, row-major), got {K.shape}")
         if abs(K[0, 1]) > 1e-12 * abs(K[0, 0]) or np.any(K[2] != [0.0, 0.0, 1.0]) or K[1, 0] != 0.0:
             raise InputError(f"K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (no skew), got {K.tolist()}")
-        dist = check_array(dist, "dist").reshape(-1)
-        if dist.shape[0] > 5:
-            if np.any(dist[5:] != 0.0):
-                raise InputError(
-                    f"dist has {dist.shape[0]} coefficients; only (k1, k2, p1, p2, k3) are supported "
-                    f"(got non-zero higher-order terms {dist[5:].tolist()})"
-                )
-            dist = dist[:5]
-        return cls(K[0, 0], K[1, 1], K[0, 2], K[1, 2], dist, width, height)
+        return cls(K[0, 0], K[1, 1], K[0, 2], K[1, 2], dist_from_opencv(dist), width, height)
 
     # -- distortion in normalised coordinates ------------------------------
     def distort_normalized(self, xy) -> np.ndarray:
@@ -368,7 +462,7 @@ def _matrix_field(doc, key: str, shape):
 
 
 def camera_from_document(doc) -> CameraModel:
-    """Read a :class:`CameraModel` from a :class:`robocal.io.Document` section.
+    """Read a :class:`CameraModel` from a :class:`robocal.io.Document` section, with the checks every rig needs.
 
     Two layouts are accepted (pixel quantities may carry ``unit: px`` or a
     ``units: {pixel: px}`` default; no other unit is valid for them):
@@ -385,10 +479,24 @@ def camera_from_document(doc) -> CameraModel:
 
     * OpenCV / ROS ``camera_info`` style::
 
-        image_width: 640   # or width
+        image_width: 640   # or width; or image_size / resolution: [width, height] (cv2's imageSize order)
         image_height: 480  # or height
-        camera_matrix: [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]   # or {rows: 3, cols: 3, data: [...]}
-        dist_coeffs: [k1, k2, p1, p2, k3]   # or distortion_coefficients: {data: [...]}
+        camera_matrix: [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]   # or {rows: 3, cols: 3, data: [...]},
+                                                               # or K: 9 numbers, row-major (CameraInfo)
+        dist_coeffs: [k1, k2, p1, p2, k3]   # or distortion_coefficients: {data: [...]}, or D: [...]
+        distortion_model: plumb_bob         # optional (ROS)
+
+    Checks (:class:`~robocal.errors.InputError` naming the file and field):
+
+    * ``distortion_model``, when given, must be Brown-Conrady
+      (:data:`BROWN_CONRADY_MODELS`): a fisheye calibration is refused;
+    * the distortion vector has one of OpenCV's lengths, with any terms beyond
+      k3 exactly zero (:func:`dist_from_opencv`; the message names the cv2 flag);
+    * the camera matrix is ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]``;
+    * the principal point lies inside the image (:func:`check_principal_point`):
+      otherwise the image size belongs to another resolution or is swapped.
+      A principal point far off the centre is only warned about, by
+      :func:`principal_point_warnings` (the caller decides where warnings go).
     """
     from robocal.errors import RobocalError
 
@@ -396,32 +504,57 @@ def camera_from_document(doc) -> CameraModel:
         for n in names:
             if n in doc:
                 return doc.int(n, minimum=1)
+        for alias in ("image_size", "resolution"):
+            if alias in doc:
+                size = doc.raw(alias)
+                if (not isinstance(size, (list, tuple)) or len(size) != 2
+                        or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in size)):
+                    raise doc.error(alias, f"must be [width, height] in px (cv2's imageSize order), got {size!r}")
+                v = size[0] if names[0] == "width" else size[1]
+                if not (float(v).is_integer() and v >= 1):
+                    raise doc.error(alias, f"must be [width, height], integers >= 1 [px], got {size!r}")
+                return int(v)
         raise doc.error(names[0], "is missing (image size in px)")
 
     try:
+        model = doc.raw("distortion_model", default=None)
+        if model is not None and str(model).lower() not in BROWN_CONRADY_MODELS:
+            raise doc.error("distortion_model", f"{model!r} is not supported: robocal's camera is OpenCV's pinhole "
+                            f"model with (k1, k2, p1, p2[, k3]) ({', '.join(BROWN_CONRADY_MODELS[:2])}); a fisheye "
+                            "(equidistant) calibration needs its images undistorted first", InputError)
         width = _size("width", "image_width")
         height = _size("height", "image_height")
-        dist_key = next((k for k in ("dist", "dist_coeffs", "distortion_coefficients", "D") if k in doc), None)
+        dist_key = next((k for k in _DIST_KEYS if k in doc), None)
         dist = np.zeros(5)
         if dist_key is not None:
-            dist = _matrix_field(doc, dist_key, None).reshape(-1)
-            if dist.shape[0] not in (4, 5) and not (dist.shape[0] > 5 and np.all(dist[5:] == 0)):
-                raise doc.error(dist_key, f"must hold (k1, k2, p1, p2[, k3]), got {dist.shape[0]} values")
-            dist = dist[:5]
+            try:
+                dist = dist_from_opencv(_matrix_field(doc, dist_key, None))
+            except InputError as exc:
+                if exc.source is not None:
+                    raise
+                raise doc.error(dist_key, exc.message, InputError) from None
         if "camera_matrix" in doc or "K" in doc:
             key = "camera_matrix" if "camera_matrix" in doc else "K"
             K = _matrix_field(doc, key, (3, 3))
+            if K.shape == (9,):
+                K = K.reshape(3, 3)  # a ROS CameraInfo echo: 9 numbers, row-major
             if K.shape != (3, 3):
-                raise doc.error(key, f"must have shape (3, 3), got {K.shape}")
+                raise doc.error(key, f"must have shape (3, 3) (or 9 numbers, row-major), got {K.shape}")
             try:
-                return CameraModel.from_matrix(K, dist, width, height)
+                cam = CameraModel.from_matrix(K, dist, width, height)
             except InputError as exc:
                 raise doc.error(key, exc.message) from None
-        vals = {}
-        for name in ("fx", "fy", "cx", "cy"):
-            vals[name] = doc.float(name, kind="pixel", positive=name in ("fx", "fy"))
-        return CameraModel(dist=dist, width=width, height=height, **vals)
+        else:
+            vals = {}
+            for name in ("fx", "fy", "cx", "cy"):
+                vals[name] = doc.float(name, kind="pixel", positive=name in ("fx", "fy"))
+            cam = CameraModel(dist=dist, width=width, height=height, **vals)
     except RobocalError as exc:
         if exc.source is None:
             raise FileFormatError(f"camera: {exc.message}", source=doc.source) from None
         raise
+    try:
+        check_principal_point(cam)
+    except InputError as exc:
+        raise InputError(f"field '{doc.prefix or 'camera'}': {exc.message}", source=doc.source) from None
+    return cam

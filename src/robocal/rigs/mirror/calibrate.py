@@ -119,6 +119,14 @@ class MirrorObservation:
     warnings : list of Diagnostic
         From the detection (tags not found, repeated or unknown ids); passed
         on to the calibration's warnings.
+    marker_sigma_scale : float
+        Noise std of a marker coordinate relative to a body point's (1: the
+        same). The ArUco path sets it to
+        :data:`~robocal.rigs.mirror.render.TAG_CENTRE_SIGMA_SCALE` (~0.27): a
+        marker there is a tag's centre, fixed by four fitted edges, and is
+        several times more precise than a tag corner. The joint refinement
+        weights the markers by it; with equal weights the reported std was
+        ~3x too large on that path.
     """
 
     marker_uv: np.ndarray
@@ -126,14 +134,23 @@ class MirrorObservation:
     body_ids: np.ndarray | None = None
     name: str = "image"
     warnings: list = field(default_factory=list)
+    marker_sigma_scale: float = 1.0
+
+    def __post_init__(self):
+        s = self.marker_sigma_scale
+        if isinstance(s, bool) or not isinstance(s, (int, float, np.floating, np.integer)) or not 0 < s < np.inf:
+            raise InputError(f"{self.name}: marker_sigma_scale must be a number > 0, got {s!r}")
 
     def to_dict(self) -> dict:
-        return {
+        d = {
             "name": self.name,
             "marker_uv": np.asarray(self.marker_uv).tolist(),
             "body_uv": np.asarray(self.body_uv).tolist(),
             "body_ids": None if self.body_ids is None else [int(i) for i in self.body_ids],
         }
+        if self.marker_sigma_scale != 1.0:
+            d["marker_sigma_scale"] = float(self.marker_sigma_scale)
+        return d
 
 
 def _signed_area(q: np.ndarray) -> float:
@@ -589,6 +606,7 @@ class _Layout:
     P: list
     marker_uv: np.ndarray
     body_uv: list
+    marker_scale: np.ndarray  # (K,) marker noise relative to the body points'
 
 
 def _left_jacobian(v: np.ndarray) -> np.ndarray:
@@ -703,7 +721,11 @@ def _problem(camera, rectangle, layout, T_r_c0, T_c_m0, sigma_px):
     prob.add_block("rot_cm", np.zeros((layout.K, 3)), labels=lab["rot_cm"], unit="rad", scale=1e-3)
     prob.add_block("t_cm", T_c_m0[:, :3, 3], labels=lab["t_cm"], unit="m", scale=1e-3)
     sig = None if sigma_px is None else float(sigma_px)
-    prob.add_residuals(markers, name="markers", jacobian=mjac, residual_dim=2, sigma=sig)
+    msig = sig
+    if np.any(layout.marker_scale != 1.0):  # relative weights (absolute only with sigma_px)
+        sig = 1.0 if sig is None else sig
+        msig = sig * np.repeat(layout.marker_scale, 4)[:, None]
+    prob.add_residuals(markers, name="markers", jacobian=mjac, residual_dim=2, sigma=msig)
     prob.add_residuals(body, name="body", jacobian=bjac, residual_dim=2, sigma=sig)
     return prob, poses
 
@@ -716,6 +738,7 @@ def _layout(obs_list, body_points_r, rectangle):
         P=[c[3] for c in checked],
         marker_uv=np.stack([c[0] for c in checked]),
         body_uv=[c[1] for c in checked],
+        marker_scale=np.array([float(getattr(o, "marker_sigma_scale", 1.0)) for o in obs_list]),
     )
 
 

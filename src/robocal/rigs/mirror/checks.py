@@ -10,56 +10,36 @@ from __future__ import annotations
 
 import numpy as np
 
-from robocal.camera import CameraModel, MarkerRectangle, solve_pnp
+from robocal.camera import (
+    PRINCIPAL_POINT_OFF_CENTRE,  # noqa: F401  (re-exported)
+    CameraModel,
+    MarkerRectangle,
+    check_principal_point,
+    principal_point_warnings,
+    solve_pnp,
+)
 from robocal.diagnostics import Diagnostic
-from robocal.errors import InputError, RobocalError
+from robocal.errors import RobocalError
 
 __all__ = ["check_camera", "camera_warnings", "rectangle_warnings", "handedness_warnings", "marker_fit_warnings"]
 
 #: Chi-square tail probability of the marker fit below which a known sigma_px is contradicted.
 MARKER_CHI2_P_MIN = 1e-3
-#: Principal point farther than this fraction of the image size from the centre: warned.
-PRINCIPAL_POINT_OFF_CENTRE = 0.2
-
-
-def _pp_offset(camera: CameraModel, width, height) -> np.ndarray:
-    """Principal point offset from the centre of a ``width x height`` image, as fractions of the size."""
-    size = np.array([width, height], dtype=float)
-    return np.abs(np.array([camera.cx, camera.cy]) - (size - 1.0) / 2.0) / size
 
 
 def check_camera(camera: CameraModel) -> None:
     """Reject a camera whose principal point lies outside its ``width x height`` image.
 
-    That is the sign of an image size that does not belong to the camera
-    matrix: a calibration at another resolution, or width and height swapped
-    (``img.shape[:2]`` is ``(height, width)``, cv2's ``imageSize`` is
-    ``(width, height)``).
+    The core check, :func:`robocal.camera.check_principal_point` (which
+    :func:`robocal.camera.camera_from_document` applies to every camera it
+    reads); kept here for cameras built in code.
     """
-    W, H = camera.width, camera.height
-    if -0.5 <= camera.cx <= W - 0.5 and -0.5 <= camera.cy <= H - 0.5:
-        return
-    hint = ""
-    if -0.5 <= camera.cx <= H - 0.5 and -0.5 <= camera.cy <= W - 0.5:
-        hint = " (width and height swapped?)"
-    raise InputError(f"principal point (cx, cy) = ({camera.cx:.6g}, {camera.cy:.6g}) px lies outside the "
-                     f"{W} x {H} px image{hint}: width/height must be the size of the images this camera matrix "
-                     "was calibrated at")
+    check_principal_point(camera)
 
 
 def camera_warnings(camera: CameraModel) -> list[Diagnostic]:
-    """Warn when the principal point is far from the image centre (image size of another camera?)."""
-    off = _pp_offset(camera, camera.width, camera.height)
-    swapped = _pp_offset(camera, camera.height, camera.width)
-    # a swap (img.shape[:2] is (height, width)) moves a centred principal point by only 12-17 % on a 4:3 image
-    is_swap = off.max() > 0.08 and swapped.max() < off.max() / 3
-    if off.max() <= PRINCIPAL_POINT_OFF_CENTRE and not is_swap:
-        return []
-    hint = "; with width and height swapped it would be near the centre" if is_swap else ""
-    return [Diagnostic("inconsistent_data", f"camera: the principal point ({camera.cx:.6g}, {camera.cy:.6g}) px is "
-                       f"{off[0]:.0%} of the width and {off[1]:.0%} of the height off the centre of the "
-                       f"{camera.width} x {camera.height} px image{hint}: check that width/height belong to this "
-                       "camera matrix", params=("camera",))]
+    """Warn when the principal point is far from the image centre (:func:`robocal.camera.principal_point_warnings`)."""
+    return principal_point_warnings(camera)
 
 
 #: Plausible side lengths [m] of the mirror marker rectangle (the patent's is 0.366 x 0.256 m).

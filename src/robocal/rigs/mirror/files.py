@@ -22,6 +22,7 @@ Layout (lengths in the unit given by ``units.length`` or inline
         marker_uv: [[u, v], ...]   # A (top left), B, C, D, clockwise [px]
         body_uv: [[u, v], ...]     # reflections of body points [px]
         body_ids: [0, 1, ...]      # optional: row of body_points for each body_uv
+        marker_sigma_scale: 1.0    # optional: marker noise / body-point noise (ArUco tag centres: 0.265)
       - name: shot 2
         image: shot2.png           # or a photo: ArUco tags are detected (needs body_tags)
     body_tags:                   # only with image entries; replaces body_points
@@ -71,10 +72,10 @@ import numpy as np
 import yaml
 
 from robocal.camera import CameraModel, MarkerRectangle, camera_from_document
-from robocal.errors import FileFormatError, InputError, RobocalError
+from robocal.errors import FileFormatError, RobocalError
 from robocal.geometry import transform_from
 from robocal.io import Document, atomic_write_text, load_document
-from robocal.rigs.mirror.calibrate import MirrorObservation, check_camera
+from robocal.rigs.mirror.calibrate import MirrorObservation
 from robocal.rigs.mirror.render import (
     _R_R_TAG_FRONT,
     ARUCO_DICT,
@@ -110,16 +111,6 @@ def _uv(doc, key, n=None):
     if n is not None and a.shape[0] != n:
         raise doc.error(key, f"must have {n} rows, got {a.shape[0]}")
     return a
-
-
-#: Keys of the distortion vector, in the order camera_from_document looks for them.
-_DIST_KEYS = ("dist", "dist_coeffs", "distortion_coefficients", "D")
-#: OpenCV distortion vector lengths and what their extra terms are.
-_OPENCV_DIST = {4: "", 5: "", 8: "k4, k5, k6 (the rational model, CALIB_RATIONAL_MODEL)",
-                12: "k4..k6, s1..s4 (CALIB_RATIONAL_MODEL / CALIB_THIN_PRISM_MODEL)",
-                14: "k4..k6, s1..s4, tau_x, tau_y (CALIB_TILTED_MODEL)"}
-#: ROS ``distortion_model`` values that are OpenCV's Brown-Conrady model.
-_BROWN_CONRADY = ("plumb_bob", "rational_polynomial", "radtan", "pinhole-brown-conrady")
 
 
 def _mapping_from_filestorage(path: Path) -> dict:
@@ -175,24 +166,17 @@ def read_camera_file(path) -> dict:
     return parse_document(text, suffix=path.suffix.lower(), source=str(path)).data
 
 
-def _flat_values(raw) -> list | None:
-    """Numbers of a distortion field (list, nested list or ``{data: [...]}``), or None if unreadable."""
-    if isinstance(raw, dict):
-        raw = raw.get("data")
-    try:
-        a = np.asarray(raw, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
-        return None
-    return a.tolist()
-
-
 def load_camera(doc: Document, *, base_dir=None) -> CameraModel:
     """The ``camera`` section of an input file, inline or ``{file: ...}`` (see the module docstring).
 
-    Raises :class:`~robocal.errors.InputError` naming the file and field for a
+    The layouts and checks are the core loader's,
+    :func:`robocal.camera.camera_from_document`: it raises
+    :class:`~robocal.errors.InputError` naming the file and field for a
     distortion model robocal does not implement, a wrong number of distortion
-    coefficients, or a principal point outside the image (image size of
-    another resolution, or width and height swapped).
+    coefficients (non-zero extras name the cv2 flag), a camera matrix with
+    skew, or a principal point outside the image (image size of another
+    resolution, or width and height swapped). This adds ``file:`` (a
+    calibration file; keys next to it override the file's).
     """
     data = dict(doc.data)
     source, prefix = doc.source, doc.prefix
@@ -207,43 +191,9 @@ def load_camera(doc: Document, *, base_dir=None) -> CameraModel:
             raise doc.error("file", f"camera file {p} does not exist")
         data = {**read_camera_file(p), **data}  # keys in the input file complete or override the file's
         source, prefix = f"{os.path.normpath(p)} (camera.file of {doc.source})", ""
-    for alias in ("image_size", "resolution"):
-        if alias in data and not ({"width", "image_width"} & set(data)):
-            size = data.pop(alias)
-            if (not isinstance(size, (list, tuple)) or len(size) != 2
-                    or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in size)):
-                raise FileFormatError(f"field '{prefix + '.' if prefix else ''}{alias}': must be [width, height] "
-                                      f"in px (cv2's imageSize order), got {size!r}", source=source)
-            data["width"], data["height"] = size
-    for key in ("camera_matrix", "K"):  # a ROS CameraInfo echo has K as 9 numbers, row-major
-        v = data.get(key)
-        if isinstance(v, list) and len(v) == 9 and all(isinstance(x, (int, float)) and not isinstance(x, bool)
-                                                       for x in v):
-            data[key] = [v[0:3], v[3:6], v[6:9]]
     cdoc = Document(data, source, prefix, {**doc.units, "pixel": "px"}, doc.units_error)
-    model = data.get("distortion_model")
-    if model is not None and str(model).lower() not in _BROWN_CONRADY:
-        raise cdoc.error("distortion_model", f"{model!r} is not supported: robocal's camera is OpenCV's pinhole "
-                         f"model with (k1, k2, p1, p2[, k3]) ({', '.join(_BROWN_CONRADY[:2])}); a fisheye "
-                         "(equidistant) calibration needs its images undistorted first", InputError)
-    key = next((k for k in _DIST_KEYS if k in data), None)
-    if key is not None:
-        vals = _flat_values(data[key])
-        if vals is not None:
-            n = len(vals)
-            if n not in _OPENCV_DIST:
-                raise cdoc.error(key, f"an OpenCV distortion vector has 4, 5, 8, 12 or 14 values "
-                                 f"(k1, k2, p1, p2[, k3[, ...]]), got {n}", InputError)
-            if n > 5 and any(v != 0.0 for v in vals[5:]):
-                raise cdoc.error(key, f"{n} coefficients with non-zero {_OPENCV_DIST[n]}: robocal's camera model "
-                                 "has k1, k2, p1, p2, k3 only; calibrate without that flag (extra terms that are "
-                                 "exactly zero are accepted)", InputError)
-    cam = camera_from_document(cdoc)
-    try:
-        check_camera(cam)
-    except RobocalError as exc:
-        raise InputError(f"field '{prefix or 'camera'}': {exc.message}", source=source) from None
-    return cam
+    # the core loader checks the distortion model and length, the camera matrix and the principal point
+    return camera_from_document(cdoc)
 
 
 def load_input(path) -> MirrorInput:
@@ -353,7 +303,9 @@ def load_input(path) -> MirrorInput:
             if not isinstance(raw, list) or not all(isinstance(v, int) and not isinstance(v, bool) for v in raw):
                 raise e.error("body_ids", "must be a list of integers")
             ids = np.array(raw, dtype=int)
-        obs.append(MirrorObservation(_uv(e, "marker_uv", 4), _uv(e, "body_uv"), ids, name))
+        scale = e.float("marker_sigma_scale", default=1.0, positive=True) if "marker_sigma_scale" in e else 1.0
+        obs.append(MirrorObservation(_uv(e, "marker_uv", 4), _uv(e, "body_uv"), ids, name,
+                                     marker_sigma_scale=scale))
     return MirrorInput(cam, rect, body, obs, sigma, tags, images, src, mirror_tags, camera_file)
 
 
@@ -400,6 +352,8 @@ def write_input(path, camera: CameraModel, rectangle: MarkerRectangle, body_poin
                  "body_uv": np.round(o.body_uv, 4).tolist()}
         if o.body_ids is not None:
             entry["body_ids"] = [int(i) for i in o.body_ids]
+        if getattr(o, "marker_sigma_scale", 1.0) != 1.0:
+            entry["marker_sigma_scale"] = float(o.marker_sigma_scale)
         imgs.append(entry)
     doc["images"] = imgs
     text = (f"# {comment}\n" if comment else "") + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)

@@ -227,7 +227,8 @@ def build_report(result: CalibrationResult, *, title: str = "robocal mirror — 
     rect = MarkerRectangle(d["rectangle"]["width"], d["rectangle"]["height"])
     body = np.asarray(d["body_points_r"], dtype=float)
     obs = [MirrorObservation(np.asarray(o["marker_uv"]), np.asarray(o["body_uv"]),
-                             None if o["body_ids"] is None else np.asarray(o["body_ids"], dtype=int), o["name"])
+                             None if o["body_ids"] is None else np.asarray(o["body_ids"], dtype=int), o["name"],
+                             marker_sigma_scale=float(o.get("marker_sigma_scale", 1.0)))
            for o in d["observations"]]
     T_r_c = np.asarray(result.estimate["T_r_c"])
     T_c_m = np.asarray(result.estimate["T_c_m"]).reshape(-1, 4, 4)
