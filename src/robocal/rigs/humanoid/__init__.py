@@ -11,13 +11,35 @@
 * :mod:`.plan` -- greedy D-optimal pose planning;
 * :mod:`.report` -- offsets table, corrected URDF, HTML report;
 * :mod:`.cli` -- ``robocal humanoid simulate | calibrate | plan | report``.
+
+The names in ``__all__`` are imported from their submodule on first access
+(PEP 562): importing the package, e.g. for ``robocal humanoid --help`` through
+:mod:`.cli`, does not import SciPy's optimisers, OpenCV or matplotlib.
+
+``calibrate`` is both an exported function and a submodule. As when this
+package imported everything eagerly, the package attribute ``calibrate`` is
+always the function, whichever is imported first (so ``from
+robocal.rigs.humanoid import calibrate`` and even ``import
+robocal.rigs.humanoid.calibrate as m`` give the function); the module is
+``sys.modules["robocal.rigs.humanoid.calibrate"]``, or ``from
+robocal.rigs.humanoid.calibrate import ...``.
 """
 
-from robocal.rigs.humanoid.calibrate import HumanoidCalibration, calibrate, resolve_parameters
-from robocal.rigs.humanoid.dataset import load_dataset, write_dataset
-from robocal.rigs.humanoid.model import HumanoidModel, default_model
-from robocal.rigs.humanoid.plan import PosePlan, plan_poses
-from robocal.rigs.humanoid.simulate import HumanoidDataset, Truth, draw_truth, sample_poses, simulate_dataset
+from __future__ import annotations
+
+from robocal._lazy import lazy_exports
+
+#: exported name -> submodule defining it (a test checks both)
+_EXPORTS = {
+    **dict.fromkeys(("HumanoidModel", "default_model"), "model"),
+    **dict.fromkeys(("HumanoidDataset", "Truth", "draw_truth", "sample_poses", "simulate_dataset"), "simulate"),
+    **dict.fromkeys(("load_dataset", "write_dataset"), "dataset"),
+    **dict.fromkeys(("HumanoidCalibration", "calibrate", "resolve_parameters"), "calibrate"),
+    **dict.fromkeys(("PosePlan", "plan_poses"), "plan"),
+}
+
+#: exported names that are also submodule names (a test checks that this is all of them)
+_COLLISIONS = ("calibrate",)
 
 __all__ = [
     "HumanoidModel",
@@ -35,3 +57,6 @@ __all__ = [
     "PosePlan",
     "plan_poses",
 ]
+
+
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals(), collisions=_COLLISIONS)
