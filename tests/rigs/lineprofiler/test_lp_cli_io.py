@@ -8,8 +8,9 @@ import pytest
 
 from robocal.cli import DemoContext
 from robocal.cli.main import main
-from robocal.errors import FileFormatError, InputError
+from robocal.errors import FileFormatError, InputError, ShapeError
 from robocal.geometry import matrix_from_rotvec, transform_from
+from robocal.rigs.lineprofiler.calibrate import calibrate_file
 from robocal.rigs.lineprofiler.cli import HANDEYE, RIG
 from robocal.rigs.lineprofiler.io import (
     interpolate_poses,
@@ -31,6 +32,25 @@ def test_calibrate_example_names_undetermined_component(tmp_path, capsys):
     assert abs(res["estimate"]["T_E_L.translation"][0] - 0.035) < 2e-4
     assert (tmp_path / "report.html").stat().st_size > 10000
     assert main(["lineprofiler", "report", str(tmp_path / "result.json"), "--out", str(tmp_path / "r")]) == 0
+
+
+def test_calibrate_with_joint_sigma(tmp_path):
+    for f in ("fpdp_input.yaml", "fpdp_profiles.csv"):
+        (tmp_path / f).write_bytes((EX / f).read_bytes())
+    y = tmp_path / "fpdp_input.yaml"
+    y.write_text(y.read_text() + "joint_sigma: [0.02, 0.00035, 0.02]  # mm, rad (no angle unit given), mm\n")
+    assert main(["lineprofiler", "calibrate", str(y), "--out", str(tmp_path / "o")]) == 0
+    res = json.loads((tmp_path / "o" / "result.json").read_text())
+    d = res["diagnostics"]
+    assert d["joint_noise_modelled"] and len(d["joint_corrections"]) == d["n_profiles_used"]
+    assert res["estimate"]["T_E_L.translation"][1] is None and res["std"]["T_E_L.translation"][1] is None
+    assert abs(res["estimate"]["T_E_L.translation"][0] - 0.035) < 4 * res["std"]["T_E_L.translation"][0]
+    y.write_text(y.read_text().replace("joint_sigma: [0.02, 0.00035, 0.02]", "joint_sigma: [0.02, -0.1, 0.02]"))
+    with pytest.raises(FileFormatError, match="joint_sigma"):
+        calibrate_file(y)
+    y.write_text(y.read_text().replace("joint_sigma: [0.02, -0.1, 0.02]", "joint_sigma: [0.02, 0.1]"))
+    with pytest.raises(ShapeError, match="joint_sigma"):
+        calibrate_file(y)
 
 
 def test_handeye_example(tmp_path):
@@ -160,7 +180,7 @@ def test_mct_input_errors_are_one_line(tmp_path, capsys, file, edit, message):
     assert len(err.splitlines()) == 1 and message in err, err
 
 
-def test_handeye_robot_world_example(tmp_path):
+def test_handeye_robot_world_example(tmp_path, capsys):
     # the same two pose lists give AX = ZB: T_gripper_cam and T_base_target together
     assert main(["handeye", "robot-world", str(EX / "gripper_poses.csv"), str(EX / "target_poses.csv"),
                  "--out", str(tmp_path)]) == 0
@@ -171,6 +191,11 @@ def test_handeye_robot_world_example(tmp_path):
     assert all(v is not None and 0 < v < 3e-3 for v in res["std"]["T_cam_gripper.translation"])
     assert np.allclose(np.array(res["estimate"]["T_base_target"]) @ np.array(res["estimate"]["T_target_base"]),
                        np.eye(4), atol=1e-12)
+    # the inverses carry their std too (first order through the inverse), and the CLI prints it
+    st = np.array(res["std"]["T_gripper_cam.translation"])
+    assert np.all((st > 0) & (st < 3e-3)) and len(res["std"]["T_gripper_cam.rotvec"]) == 3
+    assert np.all(np.abs(T[:3, 3] - [0.035, 0.06, 0.12]) < 4 * st)
+    assert "+/-" in capsys.readouterr().out
 
 
 def test_mct_arm_sigma_enters_the_covariance(tmp_path):

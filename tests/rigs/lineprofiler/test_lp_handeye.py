@@ -153,3 +153,27 @@ def test_bad_input_errors():
     A, B = relative_motions(Tg, Tc)
     with pytest.raises(ShapeError):
         solve_ax_xb(A, B[:-1])
+
+
+def test_invert_with_covariance_matches_finite_differences_and_sampling():
+    from robocal.rigs.lineprofiler.handeye import invert_with_covariance
+
+    rng = np.random.default_rng(4)
+    T = transform_from(matrix_from_rotvec([0.4, -1.1, 0.7]), [0.05, -0.2, 0.3])
+    A = rng.normal(size=(6, 6)) * np.r_[[1e-3] * 3, [1e-3] * 3]
+    cov = A @ A.T
+    Ti, Ci = invert_with_covariance(T, cov)
+    assert np.allclose(Ti @ T, np.eye(4), atol=1e-12)
+
+    def delta(Ta, Tb):  # rotation vector of R_a R_b^T, t_a - t_b (the covariance convention)
+        return np.r_[rotvec_from_matrix(Ta[:3, :3] @ Tb[:3, :3].T), Ta[:3, 3] - Tb[:3, 3]]
+
+    h = 1e-7
+    G = np.column_stack([delta(np.linalg.inv(transform_from(matrix_from_rotvec(h * e[:3]) @ T[:3, :3],
+                                                             T[:3, 3] + h * e[3:])), Ti) / h for e in np.eye(6)])
+    assert np.allclose(G @ cov @ G.T, Ci, rtol=1e-5, atol=1e-14)
+    # and by sampling (first order holds at these 1 mrad / 1 mm levels)
+    d = rng.multivariate_normal(np.zeros(6), cov, size=4000)
+    s = np.array([delta(np.linalg.inv(transform_from(matrix_from_rotvec(x[:3]) @ T[:3, :3], T[:3, 3] + x[3:])), Ti)
+                  for x in d])
+    assert np.allclose(np.sqrt(np.diag(np.cov(s.T))), np.sqrt(np.diag(Ci)), rtol=0.08)

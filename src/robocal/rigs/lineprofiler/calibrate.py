@@ -8,6 +8,8 @@ Input (YAML, units stated)::
     profiles: fpdp_profiles.csv # see robocal.rigs.lineprofiler.io
     robot_poses: poses.csv      # optional: T_W_E with timestamps, when profiles carry 't' instead of q
     sign: auto                  # or +1 / -1: side of the laser plane the sphere centre is on
+    joint_sigma: [0.02, 0.02, 0.02]  # optional: read-out noise per joint (length unit for prismatic,
+                                     # angle unit for revolute joints); the refinement then models it
 
 ``method: mct`` selects the multi-coordinate-transformation method (seed 004
 §3, needs a laser tracker and a standard block; see
@@ -100,12 +102,22 @@ class SphereCalibration:
     profiles: list
 
 
-def calibrate_sphere(q, profiles, chain, sphere_radius: float, *, sign="auto") -> SphereCalibration:
-    """FPDP (linear, seed eqs. 3-4) then the geometric refinement on every point."""
+def calibrate_sphere(q, profiles, chain, sphere_radius: float, *, sign="auto", joint_sigma=None) -> SphereCalibration:
+    """FPDP (linear, seed eqs. 3-4) then the geometric refinement on every point.
+
+    ``joint_sigma`` (per joint, m or rad): noise of the joint readings; the
+    refinement then estimates one joint correction per pose (see
+    :func:`~.refine.refine_sphere`), otherwise it takes the readings as exact.
+    """
     f = fpdp_calibrate(q, profiles, chain, sphere_radius, sign=sign)
     used = f.used
-    g = refine_sphere(np.asarray(q)[used], [profiles[i] for i in used], chain, sphere_radius, f.X, f.Q,
-                      hold=[k for k in f.undetermined if k.startswith("X.")])
+    hold = [k for k in f.undetermined if k.startswith("X.")]
+    qu, pu = np.asarray(q)[used], [profiles[i] for i in used]
+    g = refine_sphere(qu, pu, chain, sphere_radius, f.X, f.Q, hold=hold)
+    if joint_sigma is not None:
+        weak = [w for w in g.warnings if w.code == "weakly_determined"]
+        g = refine_sphere(qu, pu, chain, sphere_radius, g.X, g.Q, hold=hold, joint_sigma=joint_sigma)
+        g.warnings = weak + g.warnings
     for k in f.undetermined:  # Q.z etc. only determined given the held X component
         g.std[k] = None
     g.undetermined = tuple(sorted(set(g.undetermined) | set(f.undetermined)))
@@ -196,7 +208,20 @@ def calibrate_file(path) -> tuple[SphereCalibration | MCTCalibration, dict]:
     elif q is None:
         raise FileFormatError("profiles carry timestamps but no 'robot_poses' file is given", source=str(path))
     sign = doc.raw("sign", "auto")
-    return calibrate_sphere(q, profiles, chain, R, sign=sign), hash_inputs(files)
+    joint_sigma = None
+    if "joint_sigma" in doc:
+        if isinstance(chain, PoseTable):
+            raise FileFormatError("'joint_sigma' needs joint readings and an arm model; with 'robot_poses' the "
+                                  "end-effector poses are given directly: leave it out", source=doc.source)
+        from robocal.io import to_si
+
+        js = doc.array("joint_sigma", shape=(chain.dof,))
+        au, lu = doc.units.get("angle", "rad"), doc.units.get("length", "m")
+        joint_sigma = np.array([float(to_si(v, au if t == "revolute" else lu)) for v, t in zip(js, chain.joint_types)])
+        if not (np.all(np.isfinite(joint_sigma)) and np.all(joint_sigma >= 0) and np.any(joint_sigma > 0)):
+            raise FileFormatError(f"field 'joint_sigma' must hold {chain.dof} values >= 0, not all 0, got "
+                                  f"{js.tolist()}", source=doc.source)
+    return calibrate_sphere(q, profiles, chain, R, sign=sign, joint_sigma=joint_sigma), hash_inputs(files)
 
 
 def result_from(cal: SphereCalibration | MCTCalibration, inputs=None) -> CalibrationResult:
@@ -219,7 +244,11 @@ def result_from(cal: SphereCalibration | MCTCalibration, inputs=None) -> Calibra
         diagnostics={"frames": "T_E_L: laser frame L -> end-effector frame E (hand-eye X)",
                      "undetermined": sorted(und), "fpdp_rank": f.rank, "fpdp_unknowns": f.n_unknowns,
                      "fpdp_rms_m": f.rms, "n_profiles_used": int(len(f.used)), "n_points": g.n_points,
-                     "noise_sigma_m": g.sigma, "signs": f.signs.tolist()})
+                     "noise_sigma_m": g.sigma, "signs": f.signs.tolist(),
+                     "joint_noise_modelled": g.dq is not None,
+                     **({"joint_corrections": g.dq.tolist(),
+                         "joint_corrections_unit": "per joint: m (prismatic) or rad (revolute), per used profile"}
+                        if g.dq is not None else {})})
 
 
 def _finite_or_none(v):

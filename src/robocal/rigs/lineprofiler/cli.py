@@ -151,8 +151,11 @@ def _comparison_sections(cmp) -> list[Section]:
                      "t err vs truth [mm]": 1e3 * cmp.err_true_t[k].mean()})
     s.table(rows, digits=3)
     s.text(f"FPDP cannot determine {', '.join(cmp.undetermined)} on the P1R2P3 arm; its e_p uses the other "
-           "components. The seed reports MCT e_v < 0.001, e_theta <= 0.07 deg, e_p <= 0.25 mm and FPDP "
-           "translation errors above 5 mm.")
+           "components. 'FPDP+refine' is the geometric refinement on every profile point with the joint "
+           "readings' noise modelled (one joint correction per pose); 'refine, q exact' takes the readings as "
+           "exact, so a pose's reading error, shared by all its points, is averaged like point noise: it is "
+           "barely more repeatable than FPDP and its std is several times too small. The seed reports MCT "
+           "e_v < 0.001, e_theta <= 0.07 deg, e_p <= 0.25 mm and FPDP translation errors above 5 mm.")
     return [s], rows
 
 
@@ -168,7 +171,7 @@ def _compare(args) -> int:
     rep.extend(sections)
     print(f"wrote {rep.write(out / 'report.html')}")
     for r in rows:
-        print(f"{r['method']:12s} e_v {r['max e_v']:.2e}  e_theta {r['max e_theta [deg]']:.3f} deg  "
+        print(f"{r['method']:16s} e_v {r['max e_v']:.2e}  e_theta {r['max e_theta [deg]']:.3f} deg  "
               f"e_p {r['max e_p [mm]']:.3f} mm")
     return 0
 
@@ -297,7 +300,7 @@ def _handeye_calibrate(args) -> int:
 
 def _robot_world(args) -> int:
     from robocal.geometry import invert_transform
-    from robocal.rigs.lineprofiler.handeye import calibrate_robot_world
+    from robocal.rigs.lineprofiler.handeye import calibrate_robot_world, invert_with_covariance
 
     Tg, Tc = _load_pose_pair(args)
     # A X = Z B with A = T_cam_target, B = T_gripper_base: X = T_target_base, Z = T_cam_gripper
@@ -310,16 +313,26 @@ def _robot_world(args) -> int:
                 [res.std.get(f"{prefix}.{k}") for k in ("tx", "ty", "tz")])
 
     (xr, xt), (zr, zt) = std_of("X"), std_of("Z")
+    # the inverses the user reads (T_gripper_cam, T_base_target): covariance through the inverse, first order
+    inv_std = {}
+    if res.cov is not None and res.std and all(res.std.get(f"{b}.{k}") is not None for b in "XZ"
+                                               for k in ("rx", "ry", "rz", "tx", "ty", "tz")):
+        for name, T, sl in (("T_base_target", res.X, slice(0, 6)), ("T_gripper_cam", res.Z, slice(6, 12))):
+            _, C = invert_with_covariance(T, np.asarray(res.cov)[sl, sl])
+            sd = np.sqrt(np.maximum(np.diag(C), 0.0))
+            inv_std[f"{name}.rotvec"], inv_std[f"{name}.translation"] = sd[:3].tolist(), sd[3:].tolist()
     result = CalibrationResult(
         rig="handeye", method=f"robot-world {res.method}",
         estimate={"T_target_base": res.X.tolist(), "T_cam_gripper": res.Z.tolist(),
                   "T_base_target": invert_transform(res.X).tolist(),
                   "T_gripper_cam": invert_transform(res.Z).tolist()},
         std={"T_target_base.rotvec": xr, "T_target_base.translation": xt, "T_cam_gripper.rotvec": zr,
-             "T_cam_gripper.translation": zt},
+             "T_cam_gripper.translation": zt, **inv_std},
         units={k: "m" for k in ("T_target_base", "T_cam_gripper", "T_base_target", "T_gripper_cam",
-                                "T_target_base.translation", "T_cam_gripper.translation")}
-        | {"T_target_base.rotvec": "rad", "T_cam_gripper.rotvec": "rad"},
+                                "T_target_base.translation", "T_cam_gripper.translation",
+                                "T_base_target.translation", "T_gripper_cam.translation")}
+        | {"T_target_base.rotvec": "rad", "T_cam_gripper.rotvec": "rad", "T_base_target.rotvec": "rad",
+           "T_gripper_cam.rotvec": "rad"},
         residual_rms=res.trans_rms, residual_unit="m", warnings=res.warnings,
         inputs=hash_inputs([args.gripper_poses, args.target_poses]),
         diagnostics={"rotation_rms_rad": res.rot_rms, "n_poses": len(Tc),
@@ -332,10 +345,23 @@ def _robot_world(args) -> int:
                   "rotation residual rms [rad]": res.rot_rms, "translation residual rms [m]": res.trans_rms}, {})
     if res.std:
         s.parameters({k: 0.0 for k in res.std}, dict(res.std))
+    if inv_std:
+        s.table([{"": k, "rx [mrad]": 1e3 * inv_std[f"{k}.rotvec"][0], "ry [mrad]": 1e3 * inv_std[f"{k}.rotvec"][1],
+                  "rz [mrad]": 1e3 * inv_std[f"{k}.rotvec"][2], "tx [mm]": 1e3 * inv_std[f"{k}.translation"][0],
+                  "ty [mm]": 1e3 * inv_std[f"{k}.translation"][1], "tz [mm]": 1e3 * inv_std[f"{k}.translation"][2]}
+                 for k in ("T_gripper_cam", "T_base_target")], digits=3,
+                caption="standard deviation of the inverses (first-order propagation through the inverse)")
     s.diagnostics(res.warnings)
     out = prepare_out_dir(args.out, "handeye-robot-world")
     write_run(out, result, rep)
-    print("T_gripper_cam translation [mm]: " + ", ".join(f"{1e3 * v:.3f}" for v in invert_transform(res.Z)[:3, 3]))
+    st = inv_std.get("T_gripper_cam.translation", [None] * 3)
+    print("T_gripper_cam translation [mm]: " + ", ".join(
+        f"{1e3 * v:.3f}" + ("" if sd is None else f" +/- {1e3 * sd:.3f}")
+        for v, sd in zip(invert_transform(res.Z)[:3, 3], st)))
+    sr = inv_std.get("T_gripper_cam.rotvec")
+    if sr is not None:
+        print("T_gripper_cam rotation std [mrad] (rotation vector of R_perturbed R^T): "
+              + ", ".join(f"{1e3 * v:.3f}" for v in sr))
     return 0
 
 

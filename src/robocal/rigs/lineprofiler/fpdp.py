@@ -54,8 +54,10 @@ class FPDPResult:
     Attributes
     ----------
     X : ndarray (4, 4)
-        ``T_E_L``; undetermined translation components hold the minimum-norm
-        value (0) only so the matrix can seed a refinement -- never report them.
+        ``T_E_L``; undetermined translation components hold their share of the
+        least-squares minimum-norm solution (e.g. ``X.ty`` and ``Q.z`` split
+        their sum; not 0 in general) only so that ``X`` and ``Q`` together can
+        seed a refinement -- never report them, and move them only together.
     Q : ndarray (3,)
         Sphere centre in the world (undetermined components likewise).
     undetermined : tuple of str

@@ -55,10 +55,11 @@ from robocal.geometry import (
     skew,
     transform_from,
 )
-from robocal.validation import check_transform
+from robocal.validation import check_array, check_transform
 
 __all__ = [
     "AXXB_METHODS",
+    "invert_with_covariance",
     "HandEyeResult",
     "RobotWorldResult",
     "MotionCheck",
@@ -534,6 +535,25 @@ def _rw_rotation(RA, RB):
     d = np.linalg.det(Rx)
     scale = np.sign(d) / abs(d) ** (1 / 3)
     return project_to_rotation(Rx * scale), project_to_rotation(Rz * scale)
+
+
+def invert_with_covariance(T, cov):
+    """``T^-1`` and its covariance (6, 6), first order, from ``cov`` (6, 6) of ``T``.
+
+    Both covariances are over ``(rx, ry, rz, tx, ty, tz)``: the rotation vector
+    of ``R_perturbed R^T`` (rad) and the translation (m), the convention of
+    :class:`RobotWorldResult` and :class:`HandEyeResult`. With ``T = (R, t)``
+    and ``T^-1 = (R^T, -R^T t)``: ``d omega_inv = -R^T d omega``,
+    ``d t_inv = -R^T [t]x d omega - R^T d t``.
+    """
+    T = check_transform(T, "T")
+    cov = check_array(cov, "cov", shape=(6, 6))
+    R, t = T[:3, :3], T[:3, 3]
+    G = np.zeros((6, 6))
+    G[:3, :3] = -R.T
+    G[3:, :3] = -R.T @ skew(t)
+    G[3:, 3:] = -R.T
+    return invert_transform(T), G @ cov @ G.T
 
 
 def calibrate_robot_world(T_cam_world, T_gripper_base, *, refine: bool = True,

@@ -228,6 +228,45 @@ def _segment(cloud: np.ndarray, n_planes: int = 3, tol: float = 0.3e-3, iters: i
     return labels
 
 
+def _so3_left_jacobian(w) -> np.ndarray:
+    """``J_l(w)``: ``exp(w + dw) = exp(J_l(w) dw) exp(w)`` to first order (3, 3)."""
+    w = np.asarray(w, float)
+    th = float(np.linalg.norm(w))
+    K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    if th < 1e-6:
+        return np.eye(3) + 0.5 * K + K @ K / 6.0
+    return np.eye(3) + (1 - np.cos(th)) / th**2 * K + (th - np.sin(th)) / th**3 * K @ K
+
+
+def _block_scan_residuals(mu, su, lu, u0, b1, b2, R0):
+    """Residuals of eq. 11 and their analytic Jacobian over ``x = (a, b, w, t)`` (8,).
+
+    Point ``j`` (``mu[j]`` in L, P3 offset ``su[j]``, face ``lu[j]``) lies at
+    ``p = mu + su u`` with ``u = v / |v|``, ``v = u0 + a b1 + b b2``; its
+    residual is its coordinate along the face normal, ``r = n . (p - t)``
+    with ``n = R[:, lu]``, ``R = exp(w) R0``. Derivatives: ``dr/dt = -n``,
+    ``dr/dw = (n x (p - t)) J_l(w)``, ``dr/d(a, b) = su n . (I - u u^T) b_k / |v|``.
+    """
+    rows = np.arange(len(lu))
+
+    def fun(x):
+        v = u0 + x[0] * b1 + x[1] * b2
+        R = matrix_from_rotvec(x[2:5]) @ R0
+        p_B = (mu + su[:, None] * (v / np.linalg.norm(v)) - x[5:8]) @ R  # R^T (p - t)
+        return p_B[rows, lu]
+
+    def jac(x):
+        v = u0 + x[0] * b1 + x[1] * b2
+        nv = np.linalg.norm(v)
+        u = v / nv
+        n = (matrix_from_rotvec(x[2:5]) @ R0).T[lu]  # (K, 3) face normals in L
+        d = mu + su[:, None] * u - x[5:8]
+        Jab = su[:, None] * (n @ ((np.eye(3) - np.outer(u, u)) / nv) @ np.column_stack([b1, b2]))
+        return np.column_stack([Jab, np.cross(n, d) @ _so3_left_jacobian(x[2:5]), -n])
+
+    return fun, jac
+
+
 def fit_block_scan(profiles, q3, q30: float, size, *, u0=(0.0, -1.0, 0.0), tol: float = 0.3e-3):
     """Eqs. 9-11: P3 direction ``u`` in L and block pose ``T_L_B`` from a scan of the block corner.
 
@@ -281,13 +320,9 @@ def fit_block_scan(profiles, q3, q30: float, size, *, u0=(0.0, -1.0, 0.0), tol: 
         u /= np.linalg.norm(u)
         return u, matrix_from_rotvec(x[2:5]) @ R0, x[5:8]
 
-    def fun(x):
-        u, R, t = unpack(x)
-        p_B = (mu + su[:, None] * u - t) @ R  # R^T (p - t)
-        return p_B[np.arange(len(p_B)), lu]
-
+    fun, jac = _block_scan_residuals(mu, su, lu, u0, b1, b2, R0)
     x0 = np.r_[0, 0, 0, 0, 0, t0]
-    ls = least_squares(fun, x0, method="lm", xtol=1e-12, ftol=1e-12)
+    ls = least_squares(fun, x0, jac=jac, method="lm", xtol=1e-12, ftol=1e-12)
     # relabel every point by its nearest face of the fitted corner (dropping far
     # ones) and refit until the labels settle: the first fit starts from the
     # sheared cloud, whose labels near the edges can be wrong
@@ -304,7 +339,8 @@ def fit_block_scan(profiles, q3, q30: float, size, *, u0=(0.0, -1.0, 0.0), tol: 
             break
         labels = new
         mu, su, lu, use = m[near], s[near], lab2[near], near
-        ls = least_squares(fun, ls.x, method="lm", xtol=1e-12, ftol=1e-12)
+        fun, jac = _block_scan_residuals(mu, su, lu, u0, b1, b2, R0)
+        ls = least_squares(fun, ls.x, jac=jac, method="lm", xtol=1e-12, ftol=1e-12)
     u, R, t = unpack(ls.x)
     r = ls.fun
     s2 = float(r @ r / max(len(r) - 8, 1))
