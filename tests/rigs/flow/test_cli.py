@@ -307,3 +307,10 @@ def test_bad_frames_files_name_the_file(tmp_path, capsys, edit, message):
 def test_simulate_refuses_bad_arguments(tmp_path, capsys, args, message):
     code, _, err = _run(["flow", "simulate", *args, "--out", str(tmp_path / "s"), "--no-progress"], capsys)
     assert code == 2 and message in err and err.count("\n") == 1
+
+
+def test_cli_textures_equal_the_simulator_ones():
+    """cli repeats them (the ``--texture`` choices) so that building the parser does not import the simulator."""
+    from robocal.rigs.flow import cli, simulate
+
+    assert cli.TEXTURES == simulate.TEXTURES

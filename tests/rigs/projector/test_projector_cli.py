@@ -231,3 +231,11 @@ def test_path_retime_slows_the_fast_stretch_down_instead_of_blank_rows(tmp_path,
     assert all(r[-1] == "ok" for r in rows)
     rates = np.array([[float(r[6]), float(r[7])] for r in rows])
     assert np.degrees(np.abs(rates).max()) <= 60.0 + 1e-6  # the example's 60 deg/s limit, peak 95 deg/s before
+
+
+def test_cli_nadir_snap_constants_equal_the_path_planner_ones():
+    """cli repeats them so that building the parser does not import path (and scipy)."""
+    from robocal.rigs.projector import cli, path
+
+    assert cli.NADIR_SNAP == path.NADIR_SNAP
+    assert cli.MAX_NADIR_SNAP == path.MAX_NADIR_SNAP

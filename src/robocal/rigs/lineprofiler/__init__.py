@@ -3,6 +3,10 @@
 Modules: :mod:`.handeye` (AX = XB / AX = ZB solvers), :mod:`.model` (arm,
 profiler, targets, tracker), :mod:`.simulate`, :mod:`.fpdp` (fixed point,
 different poses), :mod:`.mct` (multi-coordinate transformation), :mod:`.refine`
-(geometric refinement on raw profile points), :mod:`.errors_seed` (e_v, e_theta,
-e_p), :mod:`.io` (profile and pose files), :mod:`.cli`.
+(geometric refinement on raw profile points), :mod:`.compare` (e_v, e_theta,
+e_p of repeated calibrations; the seed's comparison), :mod:`.io` (profile and pose
+files), :mod:`.cli`.
 """
+
+#: the package exports nothing itself: import from the modules (importing it stays light for the CLI)
+__all__: list[str] = []

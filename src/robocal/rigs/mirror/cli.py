@@ -14,7 +14,6 @@ from robocal.cli import DemoContext, DemoOutcome, Rig
 from robocal.cli._common import RawHelp, add_out_argument, add_seed_argument, examples_epilog, prepare_out_dir, write_run
 from robocal.errors import InputError, RobocalError
 from robocal.io import load_result
-from robocal.rigs.mirror import workflow
 
 __all__ = ["RIG"]
 
@@ -85,6 +84,8 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
 
 
 def _cmd_simulate(args) -> int:
+    from robocal.rigs.mirror import workflow
+
     out = prepare_out_dir(args.out, "mirror-simulate")
     paths = workflow.simulate_files(out, placements=args.placements, sigma_px=args.sigma, seed=args.seed,
                                     images=args.images)
@@ -94,6 +95,8 @@ def _cmd_simulate(args) -> int:
 
 
 def _cmd_calibrate(args) -> int:
+    from robocal.rigs.mirror import workflow
+
     out = prepare_out_dir(args.out, "mirror-calibrate")
     cal, result, report = workflow.calibrate_file(args.input, refine=not args.no_refine, out_dir=out)
     write_run(out, result, report)
@@ -123,6 +126,8 @@ def _cmd_report(args) -> int:
 
 
 def _demo(ctx: DemoContext) -> DemoOutcome:
+    from robocal.rigs.mirror import workflow
+
     return workflow.demo(ctx.out_dir, ctx.rng, progress=ctx.progress)
 
 
