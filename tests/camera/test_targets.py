@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from robocal.camera import Checkerboard, MarkerRectangle
+from robocal.camera import Checkerboard, MarkerRectangle, PlaneTexture
 from robocal.errors import InputError
 
 
@@ -61,3 +61,46 @@ def test_marker_rectangle_order():
     assert np.allclose(m.object_points()[:, :2], [[0, 0], [0.4, 0], [0.4, 0.3], [0, 0.3]])
     with pytest.raises(InputError, match="width"):
         MarkerRectangle(0, 0.3)
+
+
+def _exact_box_mean(img, size, origin, x, y, dx, dy):
+    """Mean of the piecewise-constant texture over the part of the box on it (texel overlaps)."""
+    h, w = img.shape
+    sx, sy = size[0] / w, size[1] / h
+    ex = origin[0] + sx * np.arange(w + 1)
+    ey = origin[1] + sy * np.arange(h + 1)
+    ox = np.clip(np.minimum(x + dx / 2, ex[1:]) - np.maximum(x - dx / 2, ex[:-1]), 0, None)
+    oy = np.clip(np.minimum(y + dy / 2, ey[1:]) - np.maximum(y - dy / 2, ey[:-1]), 0, None)
+    return (oy @ (img / 255.0) @ ox) / (oy.sum() * ox.sum())
+
+
+@pytest.mark.parametrize("widths", [(0.001, 1.0), (1.0, 4.0), (0.001, 4.0)], ids=["small", "wide", "mixed"])
+def test_plane_texture_nearest_is_the_exact_box_average(widths):
+    """Each sample gets the exact area mean over its dx x dy box, for boxes narrower and wider than a texel."""
+    rng = np.random.default_rng(5)
+    img = rng.integers(0, 256, (5, 7)).astype(np.uint8)
+    size, origin = (0.7, 0.4), (-0.1, 0.2)  # texels 0.1 x 0.08 m
+    tex = PlaneTexture(img, size, origin=origin)
+    n = 400
+    x = rng.uniform(-0.12, 0.62, n)
+    y = rng.uniform(0.18, 0.62, n)
+    dx = rng.uniform(*widths, n) * 0.1
+    dy = rng.uniform(*widths, n) * 0.08
+    on = (x + dx / 2 > -0.1) & (x - dx / 2 < 0.6) & (y + dy / 2 > 0.2) & (y - dy / 2 < 0.6)
+    refl, alpha = tex.shade(x[on], y[on], dx[on], dy[on])
+    want = [_exact_box_mean(img, size, origin, *a) for a in zip(x[on], y[on], dx[on], dy[on])]
+    assert on.sum() > 300
+    assert np.allclose(refl, want, rtol=0, atol=1e-9)
+    assert np.all((alpha >= 0) & (alpha <= 1))
+    # samples off the plane (the renderer passes inf) read a finite value with zero coverage
+    r, a = tex.shade(np.array([np.inf, -np.inf]), np.array([np.inf, 0.3]), 0.01, 0.01)
+    assert np.all(np.isfinite(r)) and np.all(a == 0)
+
+
+def test_plane_texture_linear_reads_texel_centres():
+    img = np.array([[0, 255], [51, 102]], np.uint8)
+    tex = PlaneTexture(img, 2.0, interpolation="linear")  # 1 m texels
+    refl, _ = tex.shade(np.array([0.5, 1.5, 0.5, 1.0]), np.array([0.5, 0.5, 1.5, 0.5]), 0.01, 0.01)
+    assert np.allclose(refl, [0.0, 1.0, 0.2, 0.5], atol=1e-2)
+    with pytest.raises(InputError, match="interpolation"):
+        PlaneTexture(img, 2.0, interpolation="cubic")

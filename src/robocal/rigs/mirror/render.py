@@ -17,12 +17,13 @@ saddle points) only partly undoes that on an L-shaped corner: 0.3-0.5 px
 inward along the diagonal on rendered mirror scenes, 0.5-0.7 px RMS. Every
 tag's corners are therefore re-measured by :func:`refine_tag_corners`
 (the four border edges located to sub-pixel on profiles across them, lines
-fitted in undistorted coordinates and intersected): 0.02-0.04 px RMS on
+fitted in undistorted coordinates and intersected): ~0.013 px RMS on
 noise-free renders (``bench/bench_mirror_corners.py``).
 
 Rendering uses :func:`robocal.camera.render_planar_target` (distortion
-included) with the tag bitmaps box-filtered over each sample
-(:class:`_BoxFilteredTexture`): the virtual tag is the reflected tag frame
+included) with the tag bitmaps as :class:`~robocal.camera.PlaneTexture`
+(``"nearest"``: box-filtered over each sample, edges placed to < 0.01 px at
+2 x 2 samples per pixel): the virtual tag is the reflected tag frame
 with its x axis flipped (:func:`~robocal.rigs.mirror.model.virtual_transform`),
 carrying the left-right mirrored tag bitmap.
 """
@@ -35,8 +36,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from robocal.camera import CameraModel, add_blur_and_noise, blank_image, render_planar_target
-from robocal.camera._targets import PlaneTexture, _ramp
+from robocal.camera import CameraModel, PlaneTexture, add_blur_and_noise, blank_image, render_planar_target
 from robocal.diagnostics import Diagnostic
 from robocal.errors import DetectionError, InputError
 from robocal.geometry import apply_transform, transform_from
@@ -134,53 +134,6 @@ def _tag_bitmap(tag_id: int, cells: int = 6, px_per_cell: int = 10, dictionary: 
                               value=255)
 
 
-class _BoxFilteredTexture(PlaneTexture):
-    """A piecewise-constant texture box-filtered over each render sample's footprint (analytic anti-aliasing).
-
-    :class:`~robocal.camera.PlaneTexture` with ``"nearest"`` point-samples the
-    texels, so an edge is resolved only to the sub-sample grid: an edge
-    parallel to the pixel rows or columns sits on the nearest 1/s px (up to
-    1/(2 s) px off, coherently along the whole edge; 0.125 px at the default
-    s = 4, which showed as ~0.08 px RMS of the edge-fitted corners). Here
-    each sample averages the texels under its footprint (``dx``, ``dy`` in
-    plane units, at most one texel) exactly: a bilinear read at a shifted
-    coordinate. Edges are then placed to ~0.01 px at 2 x 2 samples per pixel.
-    """
-
-    analytic_aa = True
-
-    def shade(self, x, y, dx, dy):
-        h, w = self.texture.shape
-        x0, y0 = self.origin
-        with np.errstate(invalid="ignore", divide="ignore"):
-            mx = _box_coordinate((x - x0) / self.size[0] * w, dx / self.size[0] * w, w)
-            my = _box_coordinate((y - y0) / self.size[1] * h, dy / self.size[1] * h, h)
-        n = mx.size
-        width = 4096  # cv2.remap maps must be 2-D with sides < 32767
-        pad = (-n) % width
-        fx = np.concatenate([mx.ravel(), np.zeros(pad, np.float32)]).reshape(-1, width)
-        fy = np.concatenate([my.ravel(), np.zeros(pad, np.float32)]).reshape(-1, width)
-        val = cv2.remap(self.texture.astype(np.float32), fx, fy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        val = val.ravel()[:n].reshape(np.shape(x))
-        xmin, xmax, ymin, ymax = self.extent()
-        alpha = _ramp(np.minimum(x - xmin, xmax - x) / dx) * _ramp(np.minimum(y - ymin, ymax - y) / dy)
-        return val.astype(float), alpha
-
-
-def _box_coordinate(p, width, n):
-    """cv2.remap (centre-convention) coordinate whose linear read is the box average over ``p +- width / 2``.
-
-    ``p``: position in texel units with texel k covering [k, k + 1); ``width``:
-    the box [texels], clipped to (0, 1]. The box meets at most the boundary
-    ``b = round(p)`` between texels ``b - 1`` and ``b``; the fraction of it in
-    texel ``b`` is ``clip((p - b) / width + 1/2, 0, 1)``.
-    """
-    wd = np.clip(np.where(np.isfinite(width), width, 1.0), 1e-6, 1.0)
-    b = np.floor(p + 0.5)
-    m = b - 1.0 + np.clip((p - b) / wd + 0.5, 0.0, 1.0)
-    return np.where(np.isfinite(m), np.clip(m, -2.0, n + 1.0), -2.0).astype(np.float32)
-
-
 @dataclass(frozen=True)
 class BodyTags:
     """ArUco tags on the robot body.
@@ -267,9 +220,10 @@ def render_mirror_image(camera: CameraModel, scene: MirrorScene, tags: BodyTags,
     """A grey image of mirror placement ``placement``: reflected body tags and the mirror's tags.
 
     ``scene.body_points_r`` is ignored; the body points are ``tags``' corners.
-    The tags are box-filtered over each sample (:class:`_BoxFilteredTexture`),
+    The tags are :class:`~robocal.camera.PlaneTexture` (``"nearest"``: each
+    sample is the exact area average of the bitmap over its footprint),
     ``supersample x supersample`` samples per pixel (2: tag edges placed to
-    ~0.01 px). Returns uint8 (height, width).
+    < 0.01 px). Returns uint8 (height, width).
     """
     T_c_m = scene.T_c_m[placement]
     n, d = mirror_plane(T_c_m)
@@ -280,14 +234,14 @@ def render_mirror_image(camera: CameraModel, scene: MirrorScene, tags: BodyTags,
         T_c_vtag = virtual_transform(T_c_tag, n, d)
         bmp = np.fliplr(_tag_bitmap(tag_id, cells, dictionary=tags.dictionary))
         full = tags.size * (cells + 2) / cells
-        img = render_planar_target(camera, T_c_vtag, _BoxFilteredTexture(bmp, full, origin=(-full / 2, -full / 2)),
+        img = render_planar_target(camera, T_c_vtag, PlaneTexture(bmp, full, origin=(-full / 2, -full / 2)),
                                    supersample=supersample, image=img)
     w, h = scene.rectangle.width, scene.rectangle.height
     full = MIRROR_TAG_SIZE * (cells + 2) / cells
     mt = mirror_tags or MirrorTags()
     for tag_id, (x, y) in zip(mt.ids, [(0, 0), (w, 0), (w, h), (0, h)]):
-        tex = _BoxFilteredTexture(_tag_bitmap(tag_id, cells, dictionary=mt.dictionary), full,
-                                  origin=(x - full / 2, y - full / 2))
+        tex = PlaneTexture(_tag_bitmap(tag_id, cells, dictionary=mt.dictionary), full,
+                           origin=(x - full / 2, y - full / 2))
         img = render_planar_target(camera, T_c_m, tex, supersample=supersample, image=img)
     return add_blur_and_noise(img, blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng)
 
@@ -369,7 +323,8 @@ def refine_tag_corners(image, corners, camera: CameraModel | None = None, *, cel
     the input corners come back unchanged when a side cannot be fitted (too
     short, no contrast) or the fit moves a corner by more than
     ``max(2 px, 3/4 cell)`` (it met something else: a neighbouring tag, an
-    occluder).
+    occluder); :func:`detect_mirror_image` names such tags in a
+    ``low_quality`` warning.
     """
     img = np.asarray(image)
     img = img.astype(np.float32) if img.dtype != np.float32 else img
@@ -507,7 +462,11 @@ def detect_mirror_image(image, camera: CameraModel, tags: BodyTags, *, name: str
     missing from the body model?). With ``rectangle`` (the marker
     rectangle), also ``inconsistent_data`` for a mirror tag whose corners,
     mapped onto the mirror, are not a square (``MIRROR_TAG_SQUARENESS``):
-    a partly occluded tag can still decode with one corner off.
+    a partly occluded tag can still decode with one corner off. Code
+    ``low_quality`` when :func:`refine_tag_corners` could not fit a tag's
+    edges and its detector corners (about 0.5 px inside) were kept: one
+    warning for the body tags (``indices`` = their ``body_points`` rows),
+    one for the mirror tags (``indices`` = markers 0-3).
 
     Raises
     ------
@@ -542,8 +501,12 @@ def detect_mirror_image(image, camera: CameraModel, tags: BodyTags, *, name: str
             f"{name}: mirror tag id(s) {sorted(repeated)} found {sorted(repeated.values())} times; each of A-D must "
             "appear once (another print of the tag in view, or a body tag with a mirror tag's id?)")
     cells = aruco_dictionary(mt.dictionary).markerSize + 2
-    for i in mt.ids:
-        direct[i][0] = refine_tag_corners(img, direct[i][0], camera, cells=cells)
+    unrefined_mirror = []  # letters of mirror tags whose edge fit failed (detector corners kept)
+    for letter, i in zip("ABCD", mt.ids):
+        raw = direct[i][0]
+        direct[i][0] = refine_tag_corners(img, raw, camera, cells=cells)
+        if np.array_equal(direct[i][0], raw):  # refine_tag_corners gives its input back when the fit fails
+            unrefined_mirror.append(letter)
     marker_uv = np.stack([_centre(camera, direct[i][0]) for i in mt.ids])
     warnings = [] if rectangle is None else _mirror_tag_shape_warnings(
         camera, [direct[i][0] for i in mt.ids], marker_uv, rectangle, mt, name)
@@ -551,7 +514,7 @@ def detect_mirror_image(image, camera: CameraModel, tags: BodyTags, *, name: str
     W = img.shape[1]
     body_cells = aruco_dictionary(tags.dictionary).markerSize + 2
     uv, ids = [], []
-    not_found, twice = [], []
+    not_found, twice, unrefined = [], [], []
     for k, tag_id in enumerate(tags.ids):
         found = flipped.get(int(tag_id), [])
         if len(found) != 1:
@@ -560,6 +523,8 @@ def detect_mirror_image(image, camera: CameraModel, tags: BodyTags, *, name: str
         c = found[0].copy()
         c[:, 0] = (W - 1) - c[:, 0]  # pixel centres at integers: column j of the flip is column W - 1 - j
         uv.append(refine_tag_corners(img, c, camera, cells=body_cells))
+        if np.array_equal(uv[-1], c):
+            unrefined.append(k)
         ids.extend(range(4 * k, 4 * k + 4))
 
     def rows(ks):
@@ -575,6 +540,19 @@ def detect_mirror_image(image, camera: CameraModel, tags: BodyTags, *, name: str
             "dropped", f"{name}: body tag id(s) {[tags.ids[k] for k in not_found]} not found in the flipped image "
             f"({len(ids) // 4} of {len(tags.ids)} found): occluded, outside the image or too small; their corners "
             "are left out", params=("body_uv",), indices=rows(not_found)))
+    why = ("the sub-pixel edge fit failed (a side too short or without contrast, or the fit moved a corner by more "
+           "than max(2 px, 3/4 cell): an occluder, a neighbouring tag)")
+    if unrefined:
+        warnings.append(Diagnostic(
+            "low_quality", f"{name}: body tag id(s) {[tags.ids[k] for k in unrefined]} ({4 * len(unrefined)} "
+            f"corners): {why}; the detector's corners are kept, about 0.5 px inside the tag along each axis",
+            params=("body_uv",), indices=rows(unrefined)))
+    if unrefined_mirror:
+        warnings.append(Diagnostic(
+            "low_quality", f"{name}: mirror tag(s) {', '.join(unrefined_mirror)} ({4 * len(unrefined_mirror)} "
+            f"corners): {why}; the detector's corners are kept, about 0.5 px inside the tag along each axis (the "
+            "tag's centre, the marker, moves less)",
+            params=("marker_uv",), indices=tuple("ABCD".index(x) for x in unrefined_mirror)))
     symmetric = sorted(int(tags.ids[k]) for k in range(len(tags.ids))
                        if int(tags.ids[k]) in mirror_symmetric_ids(tags.dictionary) and int(tags.ids[k]) in flipped)
     if symmetric:
