@@ -21,7 +21,7 @@ CODES = {
     "inconsistent_data": "measurements disagree beyond their noise",
     "not_converged": "the solver stopped before convergence",
     "near_singularity": "configuration close to a kinematic singularity",
-    "low_quality": "measurements of low quality were excluded (indices in `indices`)",
+    "low_quality": "measurements of low quality (indices in `indices`): excluded, or kept at a lower accuracy as the message says",
     "dropped": "inputs were dropped (indices in `indices`)",
 }
 
