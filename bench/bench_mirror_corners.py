@@ -66,22 +66,9 @@ def true_corners(cam, sc, tags):
     return out
 
 
-class PointSampledTexture(PlaneTexture):
-    """``PlaneTexture("nearest")`` before the core fix: the texel under each sample point, no area average."""
-
-    def shade(self, x, y, dx, dy):
-        _, alpha = super().shade(x, y, dx, dy)
-        h, w = self.texture.shape
-        with np.errstate(invalid="ignore"):
-            j = np.floor((x - self.origin[0]) / self.size[0] * w)
-            i = np.floor((y - self.origin[1]) / self.size[1] * h)
-        j = np.clip(np.nan_to_num(j, nan=0.0, posinf=0.0, neginf=0.0), 0, w - 1).astype(int)
-        i = np.clip(np.nan_to_num(i, nan=0.0, posinf=0.0, neginf=0.0), 0, h - 1).astype(int)
-        return self.texture[i, j], alpha
-
-
 def render_plane_texture(cam, T, bitmap, size, *, origin, image):
-    return render_planar_target(cam, T, PointSampledTexture(bitmap, size, origin=origin), image=image)
+    """The renderer before the core fix: the texel under each sample point (``interpolation="point"``)."""
+    return render_planar_target(cam, T, PlaneTexture(bitmap, size, origin=origin, interpolation="point"), image=image)
 
 
 def render_legacy(cam, sc, tags, *, blur_sigma=0.0, noise_sigma=0.0, rng=None):

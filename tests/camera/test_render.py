@@ -187,20 +187,6 @@ SQUARE_TEX = np.full((8, 8), 255, np.uint8)
 SQUARE_TEX[2:6, 2:6] = 0
 
 
-class _PointSampledTexture(PlaneTexture):
-    """The former PlaneTexture("nearest"): the texel under each sample point, no area average."""
-
-    def shade(self, x, y, dx, dy):
-        _, alpha = super().shade(x, y, dx, dy)
-        h, w = self.texture.shape
-        with np.errstate(invalid="ignore"):
-            j = np.floor((x - self.origin[0]) / self.size[0] * w)
-            i = np.floor((y - self.origin[1]) / self.size[1] * h)
-        j = np.clip(np.nan_to_num(j, nan=0.0, posinf=0.0, neginf=0.0), 0, w - 1).astype(int)
-        i = np.clip(np.nan_to_num(i, nan=0.0, posinf=0.0, neginf=0.0), 0, h - 1).astype(int)
-        return self.texture[i, j], alpha
-
-
 def _square_edge_errors(img, T):
     """Per row (column) across each side of the square: measured minus true edge position [px].
 
@@ -250,6 +236,6 @@ def test_nearest_texture_is_area_sampled_edges_exact(T, supersample):
     # Reference, the former point-sampled "nearest": an edge parallel to the pixel grid snaps to
     # the 1/s px sub-sample grid (0.13 px off at s = 2, 0.12 px at s = 4, the same on every row);
     # a slanted edge is jagged by the same amount (max per row 0.21 / 0.078 px at s = 2 / 4).
-    ref = _square_edge_errors(render_planar_target(PLAIN, T, _PointSampledTexture(SQUARE_TEX, 0.08),
+    ref = _square_edge_errors(render_planar_target(PLAIN, T, PlaneTexture(SQUARE_TEX, 0.08, interpolation="point"),
                                                    supersample=supersample, black=0, white=255), T)
     assert np.abs(ref).max() > 0.05

@@ -274,6 +274,8 @@ class PlaneTexture:
         Footprints wider than a texel (a minified
         texture) are averaged exactly too (summed-area table).
         "linear": bilinear point samples, for photographs.
+        "point": the texel under each sample point, no area average (what
+        "nearest" did before; aliased, kept to reproduce and compare).
     """
 
     analytic_aa = False
@@ -294,8 +296,8 @@ class PlaneTexture:
         self.size = (float(size[0]), float(size[1]))
         o = check_array(origin, "origin", shape=(2,))
         self.origin = (float(o[0]), float(o[1]))
-        if interpolation not in ("nearest", "linear"):
-            raise InputError(f"interpolation must be 'nearest' or 'linear', got {interpolation!r}")
+        if interpolation not in ("nearest", "linear", "point"):
+            raise InputError(f"interpolation must be 'nearest', 'linear' or 'point', got {interpolation!r}")
         self.interpolation = interpolation
 
     def extent(self):
@@ -308,6 +310,12 @@ class PlaneTexture:
             alpha = _ramp(np.minimum(x - xmin, xmax - x) / dx) * _ramp(np.minimum(y - ymin, ymax - y) / dy)
         if self.interpolation == "nearest":
             return self._box_average(x, y, dx, dy), alpha
+        if self.interpolation == "point":
+            h, w = self.texture.shape
+            px, py, _, _ = self._texel_coords(x, y, dx, dy)
+            i = np.clip(np.floor(py), 0, h - 1).astype(np.intp)
+            j = np.clip(np.floor(px), 0, w - 1).astype(np.intp)
+            return self.texture[i, j], alpha
         return self._bilinear(x, y), alpha
 
     def _texel_coords(self, x, y, dx, dy):
