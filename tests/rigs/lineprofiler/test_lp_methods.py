@@ -138,6 +138,37 @@ def test_refine_with_joint_noise_is_consistent_and_beats_fpdp():
     assert np.sqrt(np.mean(np.square(err_g))) < 0.5 * np.sqrt(np.mean(np.square(err_f)))
 
 
+def test_refine_joint_sigma_presolve_reaches_the_core_solution():
+    """With ``joint_sigma`` the refinement first converges on the block-arrow normal equations (the
+    per-pose joint corrections eliminated by Schur complement), then hands over to the core's solve.
+    Same minimum, std and diagnostics as the core alone from the start values (which converges more
+    slowly: one dense SVD of the whole Jacobian per iteration); without ``hold`` the X.ty / Q.z pair
+    is still named."""
+    from robocal.estimation import solve
+
+    sq = np.array([0.02e-3, np.deg2rad(0.02), 0.02e-3])
+    d, _ = simulate_fpdp(RIG, np.random.default_rng(3), n_poses=10, sigma_q=sq)
+    f = fpdp_calibrate(d.q, d.profiles, RIG.chain, d.sphere_radius)
+    labs = ("X.rx", "X.ry", "X.rz", "X.tx", "X.tz", "Q.x", "Q.y")
+    for hold in (["X.ty"], []):
+        args = (d.q, d.profiles, RIG.chain, d.sphere_radius, f.X, f.Q)
+        g = refine_sphere(*args, hold=hold, joint_sigma=sq)
+        prob = refine_sphere(*args, hold=hold, joint_sigma=sq, return_problem=True)
+        ref = solve(prob, method="trf", loss="soft_l1", f_scale=3.0, x_scale="jac", xtol=1e-12, ftol=1e-12,
+                    outlier_sigma=4.0)
+        assert g.lsq.success and g.lsq.iterations <= 2 < ref.iterations
+        assert g.lsq.cost <= ref.cost * (1 + 1e-12)
+        x_g = np.r_[g.lsq.params["X"], g.lsq.params["Q"]]
+        x_r = np.r_[ref.params["X"], ref.params["Q"]]
+        det = [0, 1, 2, 3, 5, 6, 7]  # X.ty, Q.z: undetermined (arbitrary) without hold
+        assert np.allclose(x_g[det], x_r[det], rtol=1e-8, atol=1e-12)
+        for k in labs:
+            assert g.std[k] == pytest.approx(ref.std[k], rel=1e-6)
+        assert set(g.undetermined) == {k for k in ref.unidentifiable if not k.startswith("dq[")} | {"X.ty"}
+    assert {"X.ty", "Q.z"} <= set(g.undetermined)
+    assert any(w.code == "rank_deficient" and set(w.params) == {"X.ty", "Q.z"} for w in g.warnings)
+
+
 def test_refine_names_outlier_points_by_profile_and_the_unidentifiable_pair():
     """On ``robocal.estimation.solve``: gross points are named by index and by profile, and without
     ``hold`` the core finds what the P1R2P3 poses cannot determine (X.ty with the sphere's Q.z)."""

@@ -27,11 +27,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse as sps
 
 from robocal.diagnostics import Diagnostic
 from robocal.errors import InputError, NotEnoughDataError, RobocalError
-from robocal.estimation import Problem, solve
-from robocal.geometry import matrix_from_rotvec, transform_from
+from robocal.estimation import Problem, robust_cost, solve
+from robocal.geometry import matrix_from_rotvec, rotvec_from_matrix, transform_from
 from robocal.kinematics import DHChain
 from robocal.validation import check_array
 
@@ -251,10 +252,11 @@ def _refine_eiv(q, profiles, chain, Rr, X0, Q0, m, idx, *, loss, sigma, hold, jo
         u = d / np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
         uE = np.einsum("nji,nj->ni", T[idx, :3, :3], u)
         Jr = np.cross(m @ RX.T, uE)
-        Jg = chain.jacobian(qq)[idx]  # (P, 6, dof): tip velocity and angular velocity in W
-        dw = Jg[:, :3, :] + np.cross(Jg[:, 3:, :], (w - T[idx, :3, 3])[:, :, None], axis=1)
+        # the point moves by v_j + w_j x (w - tip) per joint (geometric Jacobian, in W):
+        # d r / d q_j = u . v_j + ((w - tip) x u) . w_j
+        uc = np.column_stack([u, np.cross(w - T[idx, :3, 3], u)])
         Jq = np.zeros((P, n * dof))
-        Jq[rows, cols] = np.einsum("ni,nij->nj", u, dw)
+        Jq[rows, cols] = np.einsum("nk,nkj->nj", uc, chain.jacobian(qq)[idx])
         return {"X": np.column_stack([Jr, uE]), "Q": -u, "dq": Jq}
 
     labels = list(_LAB) + ["Q.x", "Q.y", "Q.z"]
@@ -268,13 +270,34 @@ def _refine_eiv(q, profiles, chain, Rr, X0, Q0, m, idx, *, loss, sigma, hold, jo
                    unit=[("rad" if jt[j] == "revolute" else "m") for _ in range(n) for j in range(dof)],
                    fixed=np.tile(sj == 0, (n, 1)))
     prob.add_residuals(fun, name="point_to_sphere", jacobian=jac, residual_dim=1, sigma=sp)
-    prob.add_residuals(lambda p: p["dq"].ravel(), name="joint_prior", blocks=["dq"],
+    # no blocks=["dq"]: a block structure would make the core build an m x n sparsity pattern on
+    # every call (~15 ms) that it does not use here (analytic Jacobian, dense: density ~1 either way)
+    prob.add_residuals(lambda p: p["dq"].ravel(), name="joint_prior",
                        jacobian=lambda p: {"dq": np.eye(n * dof)}, residual_dim=1,
                        sigma=np.tile(np.where(sj > 0, sj, 1.0), n))
     if return_problem:
         return prob
+    # The core's dense trust-region solver costs an SVD of the whole (points x (9 + dof N)) Jacobian
+    # per iteration (and ~3-90 iterations); the joint corrections couple only to their own profile
+    # and to X, Q (block-arrow normal equations). Converge on those with the per-pose blocks
+    # eliminated (Schur complement), then hand the point to the core for the analysis (covariance,
+    # rank, outliers: unchanged, on the full Jacobian).
+    try:
+        pre = _presolve_eiv(q, chain, m, idx, Rr, R0, sp, sj, np.r_[0.0, 0.0, 0.0, X0[:3, 3]], Q0,
+                            np.array([k not in hold for k in labels]), loss)
+    except (np.linalg.LinAlgError, FloatingPointError, ValueError):
+        pre = None  # numerical trouble: the core alone, from the given start, as without the presolve
+    gtol = 1e-8  # the core's default
+    if pre is not None:
+        prob.set_x0("X", pre[0]).set_x0("Q", pre[1]).set_x0("dq", pre[2])
+        if pre[3] is not None:
+            # converged (the Gauss-Newton step left is < ~1e-8 std): the gradient there is rounding;
+            # let the core accept the point as it is (status 'gtol', 0 iterations) and only analyse
+            # it, instead of one more dense SVD step that cannot improve it. Not converged: the core
+            # goes on from the point with its usual tolerances.
+            gtol = max(gtol, pre[3])
     lsq = solve(prob, method="trf", loss=loss, f_scale=3.0, x_scale="jac", xtol=1e-12, ftol=1e-12,
-                outlier_sigma=4.0)
+                gtol=gtol, outlier_sigma=4.0)
     p = lsq.params
     r = lsq.obs_residuals("point_to_sphere")
     cov = np.full((9, 9), np.nan)
@@ -314,3 +337,166 @@ def _refine_eiv(q, profiles, chain, Rr, X0, Q0, m, idx, *, loss, sigma, hold, jo
     return RefineResult(X=X, Q=p["Q"].copy(), cov=cov, std=std, rms=float(np.sqrt(np.mean(r**2))), residuals=r,
                         n_points=P, undetermined=tuple(k for k in labels if std[k] is None), warnings=warnings,
                         lsq=lsq, per_profile_rms=per_profile, sigma=sp * s, dq=p["dq"].copy())
+
+
+def _loss_weights(z: np.ndarray, loss: str) -> tuple[np.ndarray, np.ndarray]:
+    """``rho'(z)`` and ``rho'(z) + 2 z rho''(z)`` of SciPy's losses, ``z = (f / f_scale)^2``.
+
+    The gradient of the cost is ``J^T rho' f``; ``J^T (rho' + 2 z rho'') J`` is the Gauss-Newton
+    matrix SciPy's trust-region method uses for a robust loss (floored at machine epsilon)."""
+    if loss == "soft_l1":
+        r1 = 1.0 / np.sqrt(1.0 + z)
+        r2 = -0.5 * r1**3
+    elif loss == "huber":
+        big = z > 1.0
+        r1 = np.where(big, 1.0 / np.sqrt(np.where(big, z, 1.0)), 1.0)
+        r2 = np.where(big, -0.5 * r1**3, 0.0)
+    elif loss == "cauchy":
+        r1 = 1.0 / (1.0 + z)
+        r2 = -(r1**2)
+    elif loss == "arctan":
+        r1 = 1.0 / (1.0 + z**2)
+        r2 = -2.0 * z * r1**2
+    else:
+        return np.ones_like(z), np.ones_like(z)
+    return r1, np.maximum(r1 + 2.0 * z * r2, np.finfo(float).eps)
+
+
+def _presolve_eiv(q, chain, m, idx, Rr, R0, sp, sj, x_X, x_Q, free_g, loss, *, f_scale=3.0, max_iter=200):
+    """Minimise the errors-in-variables cost on its block-arrow normal equations.
+
+    Same residuals (``r / sp`` per point, ``dq / joint_sigma`` per free joint of each pose), loss,
+    ``f_scale`` and Jacobian as the problem handed to the core (rotation as a left increment), so
+    the minimum is the same; losses ``linear``, ``soft_l1``, ``huber`` (convex) only. Levenberg-
+    Marquardt on the reweighted Gauss-Newton system (SciPy's weights for a robust loss): the joint
+    corrections ``dq_i`` (a few per pose) are eliminated pose by pose (``S = A - sum_i B_i D_i^-1
+    B_i^T``, 9 x 9 at most; a direction ``S`` does not see, X.ty with Q.z without ``hold``, is not
+    moved), so an iteration costs O(points), not an SVD of the dense Jacobian. Returns ``(X, Q, dq,
+    gtol)``: start values for the core and, if converged (step left < ~1e-8 std), a gradient
+    tolerance above the rounding of the gradient there (else None); None if it cannot start.
+    """
+    if loss not in ("linear", "soft_l1", "huber"):
+        # a redescending loss (cauchy, arctan) is not convex: its Gauss-Newton weights vanish and a
+        # different descent path can end in a different minimum (with arctan even dq -> infinity,
+        # where the prior's cost saturates); the core alone, as without the presolve
+        return None
+    n, dof = q.shape
+    P = len(m)
+    fj = sj > 0
+    nd = int(fj.sum())
+    sjf = sj[fj]
+    gi = np.flatnonzero(free_g)
+    ng = gi.size
+    E = sps.csr_array((np.ones(P), (idx, np.arange(P))), shape=(n, P))  # sums over each profile's points
+    pX, Q, dq = np.array(x_X, float), np.array(x_Q, float), np.zeros((n, dof))
+    # The Jacobian's rotation columns are derivatives for a left increment, exp(w) exp(p) R0, exact
+    # only at p = 0: compose the increments (R_X <- exp(w) R_X) so the model is exact at every step
+    # (else a linear crawl near the end). A held rotation component is a fixed coordinate of p,
+    # which composed increments do not keep, and with the core's additive steps in p the zero of
+    # the left-increment gradient is not the minimum: the core alone then, as without the presolve.
+    if not np.all(free_g[:3]):
+        return None
+    Ra = matrix_from_rotvec(pX[:3]) @ R0  # anchor: R_X = exp(pX[:3]) Ra, pX[:3] = 0
+    pX[:3] = 0.0
+
+    # the points are stored profile after profile: per-pose slices (BLAS on (M_i, 3) blocks) instead
+    # of gathering one 4 x 4 pose per point
+    cuts = np.searchsorted(idx, np.arange(n + 1))
+    segs = [(i, slice(cuts[i], cuts[i + 1])) for i in range(n) if cuts[i + 1] > cuts[i]]
+
+    def evaluate(pX, Q, dq, with_jac):
+        RX = matrix_from_rotvec(pX[:3]) @ Ra
+        qq = q + dq
+        T = chain.fk(qq)
+        pl = m @ RX.T + pX[3:]
+        w = np.empty_like(pl)
+        for i, sl in segs:
+            w[sl] = pl[sl] @ T[i, :3, :3].T + T[i, :3, 3]
+        d = w - Q
+        dn = np.linalg.norm(d, axis=1)
+        f = np.concatenate([(dn - Rr) / sp, (dq[:, fj] / sjf).ravel()])
+        cost = robust_cost(f, loss, f_scale)
+        if not with_jac:
+            return cost, f
+        u = d / np.maximum(dn, 1e-300)[:, None]
+        G = chain.jacobian(qq)[:, :, fj]  # (n, 6, nd)
+        uE = np.empty_like(u)
+        Jd = np.empty((P, nd))
+        for i, sl in segs:
+            uE[sl] = u[sl] @ T[i, :3, :3]
+            # as in _refine_eiv's jac: d r / d q_j = u . v_j + ((w - tip) x u) . w_j
+            Jd[sl] = u[sl] @ G[i, :3] + np.cross(w[sl] - T[i, :3, 3], u[sl]) @ G[i, 3:]
+        Jg = np.column_stack([np.cross(pl - pX[3:], uE), uE, -u])[:, gi] / sp
+        return cost, f, Jg, Jd / sp
+
+    try:
+        cost, f, Jg, Jd = evaluate(pX, Q, dq, True)
+    except RobocalError:
+        return None
+    if not np.isfinite(cost) or ng == 0:
+        return None
+
+    def _finish(gnorm=None):
+        out = pX.copy()
+        out[:3] = rotvec_from_matrix(Ra @ R0.T)
+        return out, Q, dq, gnorm
+
+    lam = 1e-4
+    eye_d = np.eye(nd)
+    for _ in range(max_iter):
+        wg, wh = _loss_weights((f / f_scale) ** 2, loss)  # gradient and Gauss-Newton weights
+        g = wg * f
+        gp, hp = g[:P], wh[:P]
+        Jgw = Jg * hp[:, None]
+        A = Jgw.T @ Jg
+        ga = Jg.T @ gp
+        B = (E @ (Jgw[:, :, None] * Jd[:, None, :]).reshape(P, ng * nd)).reshape(n, ng, nd)
+        D = (E @ ((Jd * hp[:, None])[:, :, None] * Jd[:, None, :]).reshape(P, nd * nd)).reshape(n, nd, nd)
+        D = D + (wh[P:].reshape(n, nd) / sjf**2)[:, :, None] * eye_d
+        gd = E @ (Jd * gp[:, None]) + g[P:].reshape(n, nd) / sjf
+        dA, dD = np.diag(A).copy(), np.einsum("nii->ni", D).copy()
+        accepted = False
+        while lam < 1e12:
+            Dl = D + (lam * dD)[:, :, None] * eye_d
+            Di = np.linalg.inv(Dl)
+            BDi = B @ Di  # (n, ng, nd)
+            S = A + lam * np.diag(dA) - np.einsum("nij,nkj->ik", BDi, B)
+            b = -ga + np.einsum("nij,nj->i", BDi, gd)
+            # scaled pseudo-inverse: a direction the poses cannot see (X.ty with Q.z) is not moved
+            s = np.sqrt(np.where(np.diag(S) > 0, np.diag(S), 1.0))
+            ev, V = np.linalg.eigh(S / np.outer(s, s))
+            keep = ev > 1e-12 * max(ev[-1], 1e-300)
+            dg = (V[:, keep] @ ((V[:, keep].T @ (b / s)) / ev[keep])) / s
+            ddq = -np.einsum("nij,nj->ni", Di, gd + np.einsum("nji,j->ni", B, dg))
+            step9 = np.zeros(9)
+            step9[gi] = dg
+            pX_new, Q_new = pX + step9[:6], Q + step9[6:]
+            # dec = -g.step ~ the step's size squared in units of the std: stop below ~1e-8 std (the
+            # cost itself is only resolved to ~1e-13 relative, hence the tolerance on accepting)
+            dec = -(ga @ dg + np.sum(gd * ddq))
+            if dec <= 1e-20 * (1.0 + cost):
+                # what is left of the gradient is rounding in sums of large terms of both signs
+                # (columns of norm ~1e6 here); its size depends on the order of summation, so the
+                # core's differs from this one: bound it scale-free, as MINPACK's gtol does, by
+                # 1e-10 x (largest column norm) x (norm of the weighted residuals)
+                cn = max(np.max(np.linalg.norm(Jg, axis=0)), np.sqrt(np.max(E @ Jd**2)), np.max(1.0 / sjf))
+                gmax = max(np.max(np.abs(ga), initial=0.0), np.max(np.abs(gd), initial=0.0))
+                return _finish(max(4.0 * gmax, 1e-10 * cn * float(np.linalg.norm(g))))
+            dq_new = dq.copy()
+            dq_new[:, fj] += ddq
+            try:
+                cost_new, f_new = evaluate(pX_new, Q_new, dq_new, False)
+            except RobocalError:
+                cost_new = np.inf
+            if np.isfinite(cost_new) and cost_new <= cost + 1e-13 * abs(cost):
+                accepted = True
+                break
+            lam *= 10.0
+        if not accepted:
+            break
+        pX, Q, dq = pX_new, Q_new, dq_new
+        Ra = matrix_from_rotvec(pX[:3]) @ Ra
+        pX[:3] = 0.0
+        cost, f, Jg, Jd = evaluate(pX, Q, dq, True)
+        lam = max(lam / 10.0, 1e-12)
+    return _finish()  # not converged: the core goes on from here
