@@ -19,9 +19,23 @@ in the flipped image). Rows isolate:
 (2) Monte Carlo of the ArUco path (random mirror placement around the
 published one, blur 0.6 px, grey noise 2, sigma estimated from the
 residuals as the CLI does): RMS over trials of error / reported std per
-component of T_r_c, for the pipeline before the fix, with the corner fix
-only (markers weighted like body corners) and after (markers, i.e. tag
-centres, weighted by ``TAG_CENTRE_SIGMA_SCALE``).
+component of T_r_c, for the pipeline before the corner fix, with the corner
+fix only (markers weighted like body corners, independent corners), with
+the markers (tag centres) weighted by the scalar ``TAG_CENTRE_SIGMA_SCALE``
+(0.265; the previous "after the fix"), and now: each tag's corners and
+centre with their covariance from the edge-fit geometry
+(:func:`~robocal.rigs.mirror.render.tag_corner_covariance`, whitened in the
+joint fit) and the std from a two-component noise model (edge-fit part +
+independent corner part, both variances from the residuals).
+
+(3) Why: ``--draws`` noise draws (grey noise 2) of one blurred render of
+the published scene. Per body tag: the empirical covariance of its 8 corner
+coordinates against the line-fit model (relative Frobenius difference after
+the best scale, and how much of the matrix is off-diagonal: 0 for the
+independent-corner model); the mirror markers' (tag centres') std against
+the model's and against the body corners' (the former scalar weight
+assumed 0.265); and the noise-free (systematic) errors of body corners and
+markers, which the residual-based sigma also sees.
 """
 
 from __future__ import annotations
@@ -181,13 +195,18 @@ def legacy_pipeline():
 
 
 @contextmanager
-def equal_weights():
-    """The fixed corners, but markers weighted like body corners (marker_sigma_scale 1)."""
-    old, R.TAG_CENTRE_SIGMA_SCALE = R.TAG_CENTRE_SIGMA_SCALE, 1.0
+def scalar_weights(scale):
+    """The fixed corners, independent corners, markers weighted by ``scale`` (no per-tag covariance)."""
+    old = R.detect_mirror_image
+
+    def detect(*a, **k):
+        return dataclasses.replace(old(*a, **k), body_cov=None, marker_cov=None, marker_sigma_scale=scale)
+
+    R.detect_mirror_image = detect
     try:
         yield
     finally:
-        R.TAG_CENTRE_SIGMA_SCALE = old
+        R.detect_mirror_image = old
 
 
 def monte_carlo(trials, legacy: bool, seed=7):
@@ -207,6 +226,8 @@ def monte_carlo(trials, legacy: bool, seed=7):
                 img = render_legacy(cam, sc, tags, blur_sigma=0.6, noise_sigma=2.0, rng=r)
                 with legacy_pipeline():
                     o = R.detect_mirror_image(img, cam, tags)
+                # independent corners, markers weighted like them (as before the fix)
+                o = dataclasses.replace(o, body_cov=None, marker_cov=None, marker_sigma_scale=1.0)
             else:
                 img = R.render_mirror_image(cam, sc, tags, blur_sigma=0.6, noise_sigma=2.0, rng=r)
                 o = R.detect_mirror_image(img, cam, tags)
@@ -227,10 +248,11 @@ def mc_report(trials):
           "blur 0.6 px, grey noise 2, sigma from the residuals")
     print("    pipeline          " + "  ".join(f"{lab:>6s}" for lab in LABELS)
           + "   <- RMS(error / reported std); median |t err|, |std_t| [mm]; mean(error / std)")
-    for label, legacy in (("before the fix", True), ("corners only", None), ("after the fix", False)):
+    for label, legacy, scale in (("before the fix", True, None), ("corners only", False, 1.0),
+                                 ("scalar 0.265", False, R.TAG_CENTRE_SIGMA_SCALE), ("tag covariance", False, None)):
         t0 = time.perf_counter()
-        if legacy is None:
-            with equal_weights():
+        if scale is not None:
+            with scalar_weights(scale):
                 z, te, st, failed = monte_carlo(trials, False)
         else:
             z, te, st, failed = monte_carlo(trials, legacy)
@@ -240,14 +262,60 @@ def mc_report(trials):
               + " ".join(f"{v:+.2f}" for v in z.mean(0)) + f"  ({failed} failed, {time.perf_counter() - t0:.0f} s)")
 
 
+def covariance_report(draws, seed=1):
+    from robocal.camera import add_blur_and_noise
+
+    print(f"(3) per-tag corner covariance over {draws} noise draws (published scene, blur 0.6, grey noise 2)")
+    cam, sc, tags = scene_with_tags()
+    img0 = R.render_mirror_image(cam, sc, tags, blur_sigma=0.0, noise_sigma=0.0)
+    clean = R.detect_mirror_image(add_blur_and_noise(img0, blur_sigma=0.6), cam, tags)
+    rng = np.random.default_rng(seed)
+    B, M = [], []
+    for _ in range(draws):
+        o = R.detect_mirror_image(add_blur_and_noise(img0, blur_sigma=0.6, noise_sigma=2.0, rng=rng), cam, tags)
+        if not np.array_equal(o.body_ids, clean.body_ids):
+            continue
+        B.append(o.body_uv - clean.body_uv)
+        M.append(o.marker_uv - clean.marker_uv)
+    B, M = np.array(B), np.array(M)
+    n = len(B)
+    corner_var = []
+    for k in range(B.shape[1] // 4):
+        C = np.cov(B[:, 4 * k:4 * k + 4].reshape(n, 8).T)
+        Cm = R.tag_corner_covariance(clean.body_uv[4 * k:4 * k + 4])
+        s = np.trace(C) / np.trace(Cm)
+        off = np.linalg.norm(C - np.diag(np.diag(C))) / np.linalg.norm(C)
+        r = np.sqrt(np.diag(C))
+        corner_var.append(np.mean(np.diag(C)))
+        print(f"    body tag {tags.ids[clean.body_ids[4 * k] // 4]}: corner std {np.sqrt(np.mean(np.diag(C))):.4f} px, "
+              f"|C - s C_model| / |C| {np.linalg.norm(C - s * Cm) / np.linalg.norm(C):.2f} (iid model: {off:.2f}), "
+              f"corr(ends of a side) {C[0, 6] / (r[0] * r[6]):+.2f} (model {Cm[0, 6] / np.sqrt(Cm[0, 0] * Cm[6, 6]):+.2f}), "
+              f"edge-point sigma_e {np.sqrt(s):.4f} px")
+    s_e = np.sqrt(np.mean(np.diag(np.cov(B.reshape(n, -1).T))) / np.mean([np.trace(R.tag_corner_covariance(
+        clean.body_uv[4 * k:4 * k + 4])) / 8 for k in range(B.shape[1] // 4)]))
+    print(f"    markers (tag centres): std {np.sqrt(M.var(axis=0).mean()):.4f} px, model (relative marker_cov x "
+          f"corner variance) {np.sqrt(np.mean(clean.marker_cov[:, [0, 1], [0, 1]]) * np.mean(corner_var)):.4f} px; "
+          f"centre / corner std {np.sqrt(M.var(axis=0).mean() / np.mean(corner_var)):.2f} (model "
+          f"{np.sqrt(np.mean(clean.marker_cov[:, [0, 1], [0, 1]])):.2f}, former scalar {R.TAG_CENTRE_SIGMA_SCALE:.3f})"
+          f"; sigma_e pooled {s_e:.4f} px")
+    truth = true_corners(cam, sc, tags)
+    e = np.concatenate([clean.body_uv[4 * k:4 * k + 4] - truth[("body", tags.ids[clean.body_ids[4 * k] // 4])]
+                        for k in range(len(clean.body_ids) // 4)])
+    m = clean.marker_uv - cam.project_points(sc.rectangle.object_points(), sc.T_c_m[0])
+    print(f"    noise-free (systematic) error: body corners {np.sqrt(np.mean(e**2)):.4f} px, markers "
+          f"{np.sqrt(np.mean(m**2)):.4f} px RMS per coordinate")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--trials", type=int, default=60)
+    ap.add_argument("--draws", type=int, default=100)
     ap.add_argument("--quick", action="store_true")
     a = ap.parse_args()
     detector_alone()
     per_cause()
     mc_report(8 if a.quick else a.trials)
+    covariance_report(20 if a.quick else a.draws)
 
 
 if __name__ == "__main__":

@@ -26,6 +26,7 @@ perturbation, as ``docs/conventions.md``), in radians; translation in metres.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -121,12 +122,22 @@ class MirrorObservation:
         on to the calibration's warnings.
     marker_sigma_scale : float
         Noise std of a marker coordinate relative to a body point's (1: the
-        same). The ArUco path sets it to
-        :data:`~robocal.rigs.mirror.render.TAG_CENTRE_SIGMA_SCALE` (~0.27): a
-        marker there is a tag's centre, fixed by four fitted edges, and is
-        several times more precise than a tag corner. The joint refinement
-        weights the markers by it; with equal weights the reported std was
-        ~3x too large on that path.
+        same); multiplies ``marker_cov`` when both are given. The joint
+        refinement weights the markers by it. The ArUco path leaves it at 1
+        and gives ``marker_cov`` instead (a tag centre is ~0.6-0.7 x as
+        noisy as a tag corner; the former scalar 0.265 was too optimistic).
+    body_cov : ndarray, shape (N // 4, 8, 8), optional
+        Noise covariance of the body points in groups of four consecutive
+        rows of ``body_uv`` (the corners of one tag, order ``u0, v0, ..., u3,
+        v3``), relative: times ``sigma_px^2``. The ArUco path sets it from
+        the edge-fit geometry (:func:`~robocal.rigs.mirror.render.tag_corner_covariance`):
+        a tag's corners share its four fitted border lines, so their errors
+        are correlated (-0.68 between the ends of one side); the joint
+        refinement whitens each tag's residuals with it. None: independent,
+        unit variance.
+    marker_cov : ndarray, shape (4, 2, 2), optional
+        Relative noise covariance of each marker (times
+        ``(marker_sigma_scale sigma_px)^2``); None: identity.
     """
 
     marker_uv: np.ndarray
@@ -135,11 +146,25 @@ class MirrorObservation:
     name: str = "image"
     warnings: list = field(default_factory=list)
     marker_sigma_scale: float = 1.0
+    body_cov: np.ndarray | None = None
+    marker_cov: np.ndarray | None = None
 
     def __post_init__(self):
         s = self.marker_sigma_scale
         if isinstance(s, bool) or not isinstance(s, (int, float, np.floating, np.integer)) or not 0 < s < np.inf:
             raise InputError(f"{self.name}: marker_sigma_scale must be a number > 0, got {s!r}")
+        for fld, shape in (("body_cov", (None, 8, 8)), ("marker_cov", (4, 2, 2))):
+            c = getattr(self, fld)
+            if c is None:
+                continue
+            c = check_array(c, f"{self.name}: {fld}")
+            if c.ndim != 3 or c.shape[1:] != shape[1:] or (shape[0] is not None and c.shape[0] != shape[0]):
+                want = "(N // 4, 8, 8)" if shape[0] is None else "(4, 2, 2)"
+                raise ShapeError(f"{self.name}: {fld} must have shape {want}, got {c.shape}")
+            if not np.allclose(c, np.swapaxes(c, 1, 2), rtol=1e-6, atol=1e-12 * max(np.abs(c).max(), 1e-300)) \
+                    or np.any(np.linalg.eigvalsh(0.5 * (c + np.swapaxes(c, 1, 2)))[:, 0] <= 0):
+                raise InputError(f"{self.name}: {fld} must be symmetric positive definite matrices")
+            object.__setattr__(self, fld, c)
 
     def to_dict(self) -> dict:
         d = {
@@ -150,6 +175,10 @@ class MirrorObservation:
         }
         if self.marker_sigma_scale != 1.0:
             d["marker_sigma_scale"] = float(self.marker_sigma_scale)
+        if self.body_cov is not None:
+            d["body_cov"] = np.asarray(self.body_cov).tolist()
+        if self.marker_cov is not None:
+            d["marker_cov"] = np.asarray(self.marker_cov).tolist()
         return d
 
 
@@ -607,6 +636,33 @@ class _Layout:
     marker_uv: np.ndarray
     body_uv: list
     marker_scale: np.ndarray  # (K,) marker noise relative to the body points'
+    marker_cov: list = None  # per image: (4, 2, 2) relative marker covariance or None
+    body_cov: list = None  # per image: (N_k // 4, 8, 8) relative covariance of each tag's corners, or None
+
+    @property
+    def correlated(self) -> bool:
+        """True when some image gives a body or marker covariance (the residuals are whitened)."""
+        return any(c is not None for c in (self.marker_cov or []) + (self.body_cov or []))
+
+    def whitening(self):
+        """``(W_markers (8K, 8K), W_body (2 sum N, 2 sum N))``: ``W^T W = C^-1`` of the relative covariances."""
+        from scipy.linalg import block_diag, cholesky, solve_triangular
+
+        def w(C):
+            L = cholesky(C, lower=True)
+            return solve_triangular(L, np.eye(len(C)), lower=True)
+
+        wm, wb = [], []
+        for k in range(self.K):
+            s2 = float(self.marker_scale[k]) ** 2
+            mc = self.marker_cov[k] if self.marker_cov[k] is not None else np.broadcast_to(np.eye(2), (4, 2, 2))
+            wm += [w(s2 * C) for C in mc]
+            n = len(self.ids[k])
+            if self.body_cov[k] is None:
+                wb.append(np.eye(2 * n))
+            else:
+                wb += [w(C) for C in self.body_cov[k]]
+        return block_diag(*wm), block_diag(*wb)
 
 
 def _left_jacobian(v: np.ndarray) -> np.ndarray:
@@ -722,6 +778,27 @@ def _problem(camera, rectangle, layout, T_r_c0, T_c_m0, sigma_px):
     prob.add_block("t_cm", T_c_m0[:, :3, 3], labels=lab["t_cm"], unit="m", scale=1e-3)
     sig = None if sigma_px is None else float(sigma_px)
     msig = sig
+    if layout.correlated:
+        # per-tag covariances (ArUco path): whiten each image's marker and body residuals
+        Wm, Wb = layout.whitening()
+
+        def wrap(f, W):
+            return lambda p: (W @ np.asarray(f(p)).reshape(-1)).reshape(-1, 2)
+
+        def wrap_jac(f, W):
+            return lambda p: {b: W @ J for b, J in f(p).items()}
+
+        markers, mjac = wrap(markers, Wm), wrap_jac(mjac, Wm)
+        body, bjac = wrap(body, Wb), wrap_jac(bjac, Wb)
+        prob.add_residuals(markers, name="markers", jacobian=mjac, residual_dim=2, sigma=sig)
+        prob.add_residuals(body, name="body", jacobian=bjac, residual_dim=2, sigma=sig)
+        # second component of the noise model (_two_component_covariance), raw: independent body points;
+        # none on tag centres (marker_cov given: their systematic error is 0.004 px against 0.022 px for a
+        # body tag's corner on noise-free renders), else marker_sigma_scale^2
+        v_m = np.concatenate([np.full(8, 0.0 if layout.marker_cov[k] is not None else layout.marker_scale[k] ** 2)
+                              for k in range(layout.K)])
+        prob.mirror_whitened = (markers, body, (Wm * v_m) @ Wm.T, Wb @ Wb.T)
+        return prob, poses
     if np.any(layout.marker_scale != 1.0):  # relative weights (absolute only with sigma_px)
         sig = 1.0 if sig is None else sig
         msig = sig * np.repeat(layout.marker_scale, 4)[:, None]
@@ -739,7 +816,66 @@ def _layout(obs_list, body_points_r, rectangle):
         marker_uv=np.stack([c[0] for c in checked]),
         body_uv=[c[1] for c in checked],
         marker_scale=np.array([float(getattr(o, "marker_sigma_scale", 1.0)) for o in obs_list]),
+        marker_cov=[getattr(o, "marker_cov", None) for o in obs_list],
+        body_cov=[_checked_body_cov(o, len(c[2])) for o, c in zip(obs_list, checked)],
     )
+
+
+def _checked_body_cov(obs, n_body: int):
+    c = getattr(obs, "body_cov", None)
+    if c is not None and 4 * len(c) != n_body:
+        raise InputError(f"{obs.name}: body_cov has {len(c)} tag blocks (8 x 8, four body points each) but there "
+                         f"are {n_body} body points; expected {n_body / 4:g}")
+    return c
+
+
+def _two_component_covariance(prob, res) -> tuple[np.ndarray, np.ndarray]:
+    """Covariance of the whitened fit with the noise split into the modelled part and an iid part.
+
+    The body-corner errors of the ArUco path are the edge-fit noise, whose
+    per-tag structure the whitening models (``C_fit``, scale ``s1^2``), plus
+    a systematic part from the rendering/edge localisation (0.022 px RMS at
+    blur 0.6 on noise-free renders, against 0.014 px of noise at grey noise
+    2) that is dominated by the lines' *offsets*, which ``C_fit`` says are
+    the precise part: scaling ``C_fit`` by the residual variance then
+    over-states the std 2x. Model ``C = s1^2 C_fit + s2^2 C_iid`` (``C_iid``:
+    independent body corners, ``I``; nothing on tag centres, whose
+    systematic error is 0.003 px: a common offset of a tag's four sides
+    does not move its centre; plain markers ``marker_sigma_scale^2 I``) and
+    estimate both variances from the whitened residuals ``r`` (MINQUE moments, ``M`` the residual projector): ``r^T r`` and
+    ``r^T V2 r`` against their expectations ``tr(M V_j)``, ``tr(V2 M V_j M)``.
+    The estimate is the whitened fit's; its covariance the sandwich
+    ``(J^T J)^-1 J^T C J (J^T J)^-1`` in whitened units. Returns ``(cov
+    (6 + 6K, 6 + 6K), (s1^2, s2^2))``.
+
+    Limits: from one image the two variances are estimated with few
+    effective degrees of freedom (on noise drawn from this very model with
+    equal parts: ~55 % relative sd of ``s1^2`` per image, unbiased), so
+    error / std has heavier tails than a Gaussian (RMS 1.3 on that model,
+    1.1 with the edge-fit part alone); when the moments give a negative
+    variance the single-component (whitened-only) covariance is used, which
+    is conservative (RMS 0.6 when the independent part dominates).
+    """
+    markers, body, V2_m, V2_b = prob.mirror_whitened
+    J = np.asarray(prob.jacobian_at(res.params, jac="analytic"))
+    r = np.concatenate([np.ravel(markers(res.params)), np.ravel(body(res.params))])
+    m = len(r)
+    n_m = len(V2_m)
+    V2 = np.zeros((m, m))
+    V2[:n_m, :n_m] = V2_m
+    V2[n_m:, n_m:] = V2_b
+    A = np.linalg.inv(J.T @ J)
+    M = np.eye(m) - J @ A @ J.T
+    MV2M = M @ V2 @ M
+    E = np.array([[np.trace(M), np.trace(MV2M)], [np.trace(V2 @ M @ M), np.trace(V2 @ MV2M)]])
+    q = np.array([r @ r, r @ V2 @ r])
+    s = np.linalg.solve(E, q)
+    if not np.all(s >= 0):
+        # the components are not separated: the modelled part alone, scaled by the residual variance
+        # (conservative: it charges the whole residual to the edge-fit structure, markers included)
+        s = np.array([q[0] / E[0, 0], 0.0])
+    C = s[0] * np.eye(m) + s[1] * V2
+    return A @ (J.T @ C @ J) @ A, s
 
 
 def predicted_covariance(camera: CameraModel, rectangle: MarkerRectangle, body_points_r, T_r_c, T_c_m,
@@ -780,6 +916,11 @@ class MirrorCalibration:
     lsq : LSQResult or None
         The joint problem's solution (None with ``refine=False``).
     warnings : list of Diagnostic
+    noise_components : ndarray, shape (2,) or None
+        With per-tag covariances (ArUco path) and sigma estimated: the two
+        noise variances ``(s1^2, s2^2)`` [px^2] of the edge-fit part and of
+        the independent-corner part (:func:`_two_component_covariance`;
+        ``s2^2 = 0`` when they could not be separated).
     """
 
     T_r_c: np.ndarray
@@ -792,6 +933,7 @@ class MirrorCalibration:
     rectangle: MarkerRectangle
     body_points_r: np.ndarray
     camera: CameraModel
+    noise_components: np.ndarray | None = None
 
     @property
     def T_c_r(self) -> np.ndarray:
@@ -941,7 +1083,7 @@ def calibrate(camera: CameraModel, rectangle: MarkerRectangle, body_points_r, ob
         raise NotEnoughDataError("observations: need at least one image")
     names = [o.name for o in obs_list]
     if len(set(names)) != len(names):
-        obs_list = [MirrorObservation(o.marker_uv, o.body_uv, o.body_ids, f"{o.name} #{i}", list(o.warnings))
+        obs_list = [dataclasses.replace(o, name=f"{o.name} #{i}", warnings=list(o.warnings))
                     for i, o in enumerate(obs_list)]
     P_all = check_array(body_points_r, "body_points_r")
     if P_all.ndim != 2 or P_all.shape[1] != 3:
@@ -976,10 +1118,15 @@ def calibrate(camera: CameraModel, rectangle: MarkerRectangle, body_points_r, ob
                 outlier_sigma=outlier_sigma(n_obs))
     T_r_c, T_c_m = poses(res.params)
     cov = res.cov[:6, :6]
+    components = None
+    if layout.correlated and sigma_px is None:
+        full, components = _two_component_covariance(prob, res)
+        cov = full[:6, :6]
     warnings.extend(_name_outliers(w, layout, obs_list) for w in res.warnings)
     if len(singles) > 1:
         warnings.extend(_consistency_warnings(camera, rectangle, P_all, singles, obs_list, T_r_c, sigma_px))
-    return MirrorCalibration(T_r_c, T_c_m, cov, singles, res, warnings, obs_list, rectangle, P_all, camera)
+    return MirrorCalibration(T_r_c, T_c_m, cov, singles, res, warnings, obs_list, rectangle, P_all, camera,
+                             components)
 
 
 def result_estimate(cal: MirrorCalibration) -> tuple[dict, dict, dict]:

@@ -22,7 +22,9 @@ Layout (lengths in the unit given by ``units.length`` or inline
         marker_uv: [[u, v], ...]   # A (top left), B, C, D, clockwise [px]
         body_uv: [[u, v], ...]     # reflections of body points [px]
         body_ids: [0, 1, ...]      # optional: row of body_points for each body_uv
-        marker_sigma_scale: 1.0    # optional: marker noise / body-point noise (ArUco tag centres: 0.265)
+        marker_sigma_scale: 1.0    # optional: marker noise / body-point noise
+        body_cov: [[[...8 x 8...]], ...]  # optional: relative covariance of each 4 body_uv rows (one tag's corners)
+        marker_cov: [[[..2 x 2..]], ...]  # optional: relative covariance of each marker (4)
       - name: shot 2
         image: shot2.png           # or a photo: ArUco tags are detected (needs body_tags)
     body_tags:                   # only with image entries; replaces body_points
@@ -304,8 +306,18 @@ def load_input(path) -> MirrorInput:
                 raise e.error("body_ids", "must be a list of integers")
             ids = np.array(raw, dtype=int)
         scale = e.float("marker_sigma_scale", default=1.0, positive=True) if "marker_sigma_scale" in e else 1.0
-        obs.append(MirrorObservation(_uv(e, "marker_uv", 4), _uv(e, "body_uv"), ids, name,
-                                     marker_sigma_scale=scale))
+        covs = {}
+        for fld in ("body_cov", "marker_cov"):  # optional relative covariances (written for ArUco detections)
+            if fld in e:
+                try:
+                    covs[fld] = np.asarray(e.raw(fld), dtype=float)
+                except (TypeError, ValueError):
+                    raise e.error(fld, "must be a list of square matrices of numbers") from None
+        try:
+            obs.append(MirrorObservation(_uv(e, "marker_uv", 4), _uv(e, "body_uv"), ids, name,
+                                         marker_sigma_scale=scale, **covs))
+        except RobocalError as exc:
+            raise exc.with_source(f"{src}: {e.prefix}") from None
     return MirrorInput(cam, rect, body, obs, sigma, tags, images, src, mirror_tags, camera_file)
 
 
@@ -354,6 +366,9 @@ def write_input(path, camera: CameraModel, rectangle: MarkerRectangle, body_poin
             entry["body_ids"] = [int(i) for i in o.body_ids]
         if getattr(o, "marker_sigma_scale", 1.0) != 1.0:
             entry["marker_sigma_scale"] = float(o.marker_sigma_scale)
+        for fld in ("body_cov", "marker_cov"):
+            if getattr(o, fld, None) is not None:
+                entry[fld] = np.round(np.asarray(getattr(o, fld), dtype=float), 8).tolist()
         imgs.append(entry)
     doc["images"] = imgs
     text = (f"# {comment}\n" if comment else "") + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)

@@ -8,7 +8,10 @@ the tags are detected there, and the corners are mapped back. The four
 markers on the mirror are ArUco tags too (ids 40-43, read in the unflipped
 image); each mirror marker point is the tag's centre, found as the
 intersection of the tag's diagonals in undistorted coordinates (exact under
-perspective, unlike the mean of the corners).
+perspective, unlike the mean of the corners). The observation carries each
+tag's corner covariance and each marker's from the edge-fit geometry
+(:func:`tag_corner_covariance`: a tag's corners share its fitted lines), in
+units of the mean body-corner variance.
 
 Corners: OpenCV's ArUco detector places a corner on the centre of the
 outermost black pixels, i.e. about half a pixel inside the black border along
@@ -56,6 +59,7 @@ __all__ = [
     "detect_mirror_image",
     "refine_tag_corners",
     "TAG_CENTRE_SIGMA_SCALE",
+    "tag_corner_covariance",
 ]
 
 #: Dictionary of every tag (OpenCV name).
@@ -248,12 +252,78 @@ def render_mirror_image(camera: CameraModel, scene: MirrorScene, tags: BodyTags,
 
 #: Where along each tag side the edge is measured (fractions of the side, away from the corners).
 _EDGE_SPAN = (0.15, 0.85)
-#: Noise std of a tag centre (a mirror marker) relative to a tag corner (a body point), per coordinate,
-#: for edges fitted over a fraction w of each side (equal noise per edge point): a corner is two lines
-#: extrapolated to the side's end (variance (1 + 3 / w^2) x a line's at its middle), the centre is the
-#: mean of two opposite lines at their middles (1/2 x): sqrt(1 / (2 (1 + 3 / w^2))) = 0.265 at w = 0.7.
-#: Measured on renders of the published scene (blur 0.6, noise 2): 0.012 px vs ~0.04 px.
+#: Former scalar weight of a tag centre (a mirror marker) relative to a tag corner, no longer set by
+#: :func:`detect_mirror_image` (kept for comparisons, ``bench/bench_mirror_corners.py``): it took the
+#: centre as the mean of two opposite lines at their middles, sqrt(1 / (2 (1 + 3 / w^2))) = 0.265 at
+#: w = 0.7, but the centre is the diagonals' intersection, which also takes the lines' angles: 0.70 x a
+#: corner's std measured (0.0097 vs 0.0138 px, blur 0.6, grey noise 2), 0.59 by
+#: :func:`tag_corner_covariance`. Detection now gives per-tag covariances (``body_cov``, ``marker_cov``).
 TAG_CENTRE_SIGMA_SCALE = float(np.sqrt(1.0 / (2.0 * (1.0 + 3.0 / (_EDGE_SPAN[1] - _EDGE_SPAN[0]) ** 2))))
+
+
+def tag_corner_covariance(corners, *, span=_EDGE_SPAN) -> np.ndarray:
+    """Relative covariance (8, 8) of a tag's four corners from :func:`refine_tag_corners`' line fits.
+
+    Order ``(u0, v0, u1, v1, u2, v2, u3, v3)``, units: the variance of one
+    edge point's offset (``sigma_e = 1``). Each side's edge is located at
+    ``m = max(5, ceil(L (span[1] - span[0])))`` points spread uniformly over
+    ``span`` of its length ``L`` [px]; a least-squares line through them has
+    independent errors in its offset at the side's middle (variance ``1/m``)
+    and in its angle (``1 / sum u_j^2``, ``u_j`` the points' positions from
+    the middle). A corner is the intersection of two sides' lines: its error
+    ``d`` solves ``n_a . d = delta_a``, ``n_b . d = delta_b`` with
+    ``delta = offset + angle x (+-L/2)`` the line's normal displacement at
+    the corner. So the two corners at the ends of one side share that side's
+    errors: the angle (which dominates, 3 / w^2 = 6.1 x the offset's variance
+    at w = 0.7) moves them in opposite directions along the normal
+    (correlation -0.68 on a square tag), the offset together. Measured on
+    300 noise draws of the published scene (blur 0.6, grey noise 2): the
+    empirical covariance of every body tag agrees with this one times a
+    scale to 0.17-0.31 (relative Frobenius norm; the off-diagonal part is
+    0.6 of the matrix), ``bench/bench_mirror_corners.py`` section (3).
+    Distortion is ignored (it is nearly affine over a tag). ``sigma_e`` is
+    taken equal for all tags: measured 0.024 px on the mirror tags (sides
+    28 px, seen square) vs 0.018-0.023 px on the body tags (24 x 17 px), so
+    the model puts the mirror markers' std ~15 % low relative to the corners.
+    """
+    c = np.asarray(corners, dtype=float).reshape(4, 2)
+    centre = c.mean(axis=0)
+    nrm, half, var = [], [], []
+    w = span[1] - span[0]
+    for i in range(4):
+        a, b = c[i], c[(i + 1) % 4]
+        L = float(np.linalg.norm(b - a))
+        t = (b - a) / max(L, 1e-12)
+        n = np.array([t[1], -t[0]])
+        if n @ (0.5 * (a + b) - centre) < 0:
+            n = -n
+        m = max(5, int(np.ceil(L * w)))
+        u = (np.linspace(*span, m) - 0.5) * L
+        nrm.append(n)
+        half.append(0.5 * L)
+        var += [1.0 / m, 1.0 / max(float(np.sum(u**2)), 1e-12)]
+    G = np.zeros((8, 8))  # corner coordinates from (offset, angle) of the four sides
+    for i in range(4):
+        p = (i - 1) % 4  # side p ends at corner i (u = +L/2), side i starts there (u = -L/2)
+        rows = np.zeros((2, 8))
+        rows[0, 2 * p], rows[0, 2 * p + 1] = 1.0, half[p]
+        rows[1, 2 * i], rows[1, 2 * i + 1] = 1.0, -half[i]
+        G[2 * i:2 * i + 2] = np.linalg.solve(np.array([nrm[p], nrm[i]]), rows)
+    return G @ np.diag(var) @ G.T
+
+
+def _centre_jacobian(camera: CameraModel, corners_uv: np.ndarray) -> np.ndarray:
+    """(2, 8) derivative of :func:`_centre` with respect to the corners (central differences)."""
+    c = np.asarray(corners_uv, dtype=float).reshape(8)
+    J = np.empty((2, 8))
+    h = 1e-3
+    for j in range(8):
+        e = np.zeros(8)
+        e[j] = h
+        J[:, j] = (_centre(camera, (c + e).reshape(4, 2)) - _centre(camera, (c - e).reshape(4, 2))) / (2 * h)
+    return J
+
+
 #: Profile sampling step along the edge normal [px].
 _EDGE_STEP = 0.25
 
@@ -508,12 +578,16 @@ def detect_mirror_image(image, camera: CameraModel, tags: BodyTags, *, name: str
         if np.array_equal(direct[i][0], raw):  # refine_tag_corners gives its input back when the fit fails
             unrefined_mirror.append(letter)
     marker_uv = np.stack([_centre(camera, direct[i][0]) for i in mt.ids])
+    marker_cov = []
+    for i in mt.ids:
+        J = _centre_jacobian(camera, direct[i][0])
+        marker_cov.append(J @ tag_corner_covariance(direct[i][0]) @ J.T)
     warnings = [] if rectangle is None else _mirror_tag_shape_warnings(
         camera, [direct[i][0] for i in mt.ids], marker_uv, rectangle, mt, name)
     flipped = _detect(np.ascontiguousarray(img[:, ::-1]), tags.dictionary)
     W = img.shape[1]
     body_cells = aruco_dictionary(tags.dictionary).markerSize + 2
-    uv, ids = [], []
+    uv, ids, body_cov = [], [], []
     not_found, twice, unrefined = [], [], []
     for k, tag_id in enumerate(tags.ids):
         found = flipped.get(int(tag_id), [])
@@ -523,6 +597,7 @@ def detect_mirror_image(image, camera: CameraModel, tags: BodyTags, *, name: str
         c = found[0].copy()
         c[:, 0] = (W - 1) - c[:, 0]  # pixel centres at integers: column j of the flip is column W - 1 - j
         uv.append(refine_tag_corners(img, c, camera, cells=body_cells))
+        body_cov.append(tag_corner_covariance(uv[-1]))
         if np.array_equal(uv[-1], c):
             unrefined.append(k)
         ids.extend(range(4 * k, 4 * k + 4))
@@ -570,5 +645,9 @@ def detect_mirror_image(image, camera: CameraModel, tags: BodyTags, *, name: str
         rep = f"; repeated ids {[tags.ids[k] for k in twice]}" if twice else ""
         raise DetectionError(f"{name}: no body tag found in the flipped image (ids {list(tags.ids)}, "
                              f"{tags.dictionary}{rep})")
+    # relative covariances in units of the mean body-corner variance per coordinate (so sigma_px keeps
+    # meaning "corner noise"); the markers (tag centres) in the same units
+    body_cov = np.stack(body_cov)
+    unit = float(np.mean(np.trace(body_cov, axis1=1, axis2=2))) / 8.0
     return MirrorObservation(marker_uv, np.concatenate(uv), np.array(ids), name, warnings,
-                             marker_sigma_scale=TAG_CENTRE_SIGMA_SCALE)
+                             body_cov=body_cov / unit, marker_cov=np.stack(marker_cov) / unit)

@@ -228,7 +228,9 @@ def build_report(result: CalibrationResult, *, title: str = "robocal mirror — 
     body = np.asarray(d["body_points_r"], dtype=float)
     obs = [MirrorObservation(np.asarray(o["marker_uv"]), np.asarray(o["body_uv"]),
                              None if o["body_ids"] is None else np.asarray(o["body_ids"], dtype=int), o["name"],
-                             marker_sigma_scale=float(o.get("marker_sigma_scale", 1.0)))
+                             marker_sigma_scale=float(o.get("marker_sigma_scale", 1.0)),
+                             body_cov=None if o.get("body_cov") is None else np.asarray(o["body_cov"], dtype=float),
+                             marker_cov=None if o.get("marker_cov") is None else np.asarray(o["marker_cov"], dtype=float))
            for o in d["observations"]]
     T_r_c = np.asarray(result.estimate["T_r_c"])
     T_c_m = np.asarray(result.estimate["T_c_m"]).reshape(-1, 4, 4)
