@@ -86,6 +86,17 @@ def test_column_scaling_makes_units_irrelevant():
     assert "+0.71 a" in ident2.null_directions()[0].replace("-", "+")
 
 
+def test_null_direction_sign_does_not_flip_on_a_tie():
+    """Two columns that cancel exactly: the direction is +-(a - b)/sqrt(2), written with a first."""
+    rng = np.random.default_rng(5)
+    base = rng.normal(size=(30, 2))
+    for flip in (1.0, -1.0):  # the null vector's sign as the SVD returns it is arbitrary
+        J = np.column_stack([base[:, 0], -base[:, 0], base[:, 1]])
+        ident = analyze_jacobian(J, ["a", "b", "c"])
+        ident.null_space[:] *= flip
+        assert ident.null_directions() == ["+0.71 a +0.71 b"]
+
+
 def test_analyze_jacobian_wide_and_sparse():
     import scipy.sparse as sp
 

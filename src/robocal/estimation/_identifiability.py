@@ -82,10 +82,17 @@ class Identifiability:
         return replace(self, cov=self.cov * k, std=self.std * np.sqrt(k), residual_variance=float(residual_variance))
 
     def null_directions(self, *, min_component: float = 0.1, max_vectors: int = 3) -> list[str]:
-        """Human-readable null-space directions, e.g. ``'+0.71 a -0.71 b'``."""
+        """Human-readable null-space directions, e.g. ``'+0.71 a -0.71 b'``.
+
+        Each direction's sign makes its largest component positive; among
+        components equal to within rounding (an exact +-0.7071 pair is common)
+        the first in label order, so the text does not flip with rounding.
+        """
         out = []
         for v in self.null_space.T[:max_vectors]:
-            v = v * np.sign(v[np.argmax(np.abs(v))])
+            a = np.abs(v)
+            lead = int(np.flatnonzero(a >= a.max() * (1.0 - 1e-9))[0])
+            v = v * np.sign(v[lead])
             terms = [f"{c:+.2f} {self.labels[j]}" for j, c in enumerate(v) if abs(c) >= min_component]
             out.append(" ".join(terms))
         return out
