@@ -427,3 +427,11 @@ def test_a_column_without_a_unit_gets_a_hint_of_its_own_kind(tmp_path):
         tab.column("t", kind="time")
     with pytest.raises(UnitError, match=r"e.g. 't \[rad\]'"):
         tab.column("t", kind="angle")
+
+
+def test_an_unquoted_dimensionless_unit_reads_like_the_units_mapping():
+    doc = parse_document("k: {value: 2.5, unit: 1}\nj: 3.0\nunits: {dimensionless: 1}\n")
+    assert doc.array("k", kind="dimensionless") == 2.5
+    assert doc.array("j", kind="dimensionless") == 3.0
+    with pytest.raises(UnitError, match="unknown unit '2'"):
+        parse_document("k: {value: 2.5, unit: 2}\n").array("k", kind="dimensionless")

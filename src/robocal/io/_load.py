@@ -232,6 +232,9 @@ class Document:
             if "value" not in value:
                 raise self.error(key, "a quantity mapping needs 'value' and 'unit'")
             unit = value.get("unit")
+            # `unit: 1` (dimensionless) is a YAML integer: read it as text, as the `units:` mapping does
+            if isinstance(unit, int) and not isinstance(unit, bool):
+                unit = str(unit)
             return value["value"], unit
         if kind is None:
             return value, None
