@@ -1,4 +1,4 @@
-"""``robocal flow simulate | odometry | calibrate | evaluate`` and the demo."""
+"""``robocal flow simulate | odometry | calibrate | evaluate | convert-mavlink`` and the demo."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ if TYPE_CHECKING:
 __all__ = ["RIG", "demo"]
 
 #: :data:`robocal.rigs.flow.simulate.TEXTURES` (the ``--texture`` choices), repeated here so that ``--help``
-#: does not import the simulator (numba, ~0.3 s); a test (tests/rigs/flow/test_flow_import_light.py) asserts that
+#: does not import the simulator (numba, ~0.3 s); a test (tests/rigs/flow/test_cli.py) asserts that
 #: they are equal.
 TEXTURES = ("gravel", "grass", "brick", "moon")
 
@@ -37,7 +37,8 @@ examples:
   robocal flow odometry examples/flow/loop/run.yaml --out odo
   robocal flow odometry examples/flow/frames/run.yaml --out odof     (raw frames)
   robocal flow calibrate examples/flow/calibration/run.yaml --out cal
-  robocal flow evaluate examples/flow/loop/run.yaml --array cal/array_calibrated.yaml --out ev"""
+  robocal flow evaluate examples/flow/loop/run.yaml --array cal/array_calibrated.yaml --out ev
+  robocal flow convert-mavlink flow.tlog --array array.yaml --sensor-map 0:s60,1:s120,2:s270 --out conv"""
 
 
 _KERNEL_ARGS = ("subpixel", "refine", "search", "aggregate")
@@ -309,6 +310,61 @@ def cmd_evaluate(args) -> int:
     return 0
 
 
+def cmd_convert_mavlink(args) -> int:
+    from robocal.io import load_document
+    from robocal.rigs.flow.log import load_run
+    from robocal.rigs.flow.mavlink import flow_records, parse_sensor_map, read_tlog, write_flow_log
+    from robocal.rigs.flow.model import SensorArray
+    from robocal.rigs.flow.workflow import array_yaml
+
+    if args.focal_px is not None and not args.focal_px > 0:
+        raise InputError(f"--focal-px must be > 0 px, got {args.focal_px}")
+    if not args.sigma_px > 0:
+        raise InputError(f"--sigma-px must be > 0 px, got {args.sigma_px}")
+    if not args.frame_rate > 0:
+        raise InputError(f"--frame-rate must be > 0 Hz, got {args.frame_rate}")
+    if args.rate is not None and not args.rate > 0:
+        raise InputError(f"--rate must be > 0 Hz, got {args.rate}")
+    doc = load_document(args.array)
+    array = SensorArray.from_document(doc)
+    smap = parse_sensor_map(args.sensor_map, array.names)
+    unmapped = [nm for i, nm in enumerate(array.names) if i not in smap.values()]
+    if unmapped:
+        raise InputError(f"--sensor-map: the array's sensor(s) {', '.join(unmapped)} have no sensor_id; map every "
+                         f"sensor of {args.array} (or give an array with only the logged sensors)")
+    focal = args.focal_px
+    if focal is None:
+        cam = doc.sub("camera") if "camera" in doc else None
+        focal = cam.float("focal_px", positive=True) if cam is not None and "focal_px" in cam else 666.7
+    log = read_tlog(args.input)
+    conv = flow_records(log, smap, array.n, focal, clock=args.clock, rate=args.rate, sysid=args.sysid,
+                        source=str(args.input))
+    out = prepare_out_dir(args.out, "flow-convert-mavlink")
+    note = (f"converted by robocal flow convert-mavlink from {Path(args.input).name}: OPTICAL_FLOW_RAD, "
+            f"clock '{args.clock}', t = 0 at {conv.t0_us} us; sensor map {args.sensor_map}\n"
+            f"flow_u = -f integrated_y, flow_v = f integrated_x (f = {focal:g} px), gyro = integrated_*gyro / dt")
+    write_flow_log(out / "flow.csv", conv, comment=note)
+    # a record integrates several of the sensor's frames: its flow error grows as the root of their number
+    n_frames = max(1.0, float(np.median(np.diff(conv.t))) * args.frame_rate)
+    sigma = float(args.sigma_px) * float(np.sqrt(n_frames))
+    cam = {"focal_px": float(focal), "window": 64, "sigma_px": round(sigma, 6)}
+    atomic_write_text(out / "run.yaml", array_yaml(array, cam, {"flow_log": "flow.csv"}))
+    spec = load_run(out / "run.yaml")   # the written run must read back
+    print(f"wrote {out / 'flow.csv'}")
+    print(f"wrote {spec.path}")
+    print(f"log: {log.stats.summary()}")
+    K = conv.quality.shape[1]
+    print(f"{K} intervals of {np.median(np.diff(conv.t)) * 1e3:.3f} ms (median), {conv.t[-1]:.3f} s; records per sensor: "
+          + ", ".join(f"{array.names[i]} {c}" for i, c in conv.records.items()))
+    print(f"flow error per interval: {sigma:.4g} px (--sigma-px {args.sigma_px:g} per frame x sqrt({n_frames:.3g} frames "
+          f"at --frame-rate {args.frame_rate:g} Hz)), written as camera: sigma_px")
+    for n in conv.notes:
+        print(f"  note: {n}")
+    if not conv.present.all():
+        print("  note: some intervals have no record of some sensor: run odometry with --allow-missing")
+    return 0
+
+
 def add_commands(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="flow_command", metavar="COMMAND")
     p = sub.add_parser("simulate", help="simulate a drive: frames, flow log, gyro, height, truth, wheel odometry",
@@ -365,6 +421,34 @@ def add_commands(parser: argparse.ArgumentParser) -> None:
     add_out_argument(p)
     _add_flow_args(p)
     p.set_defaults(func=cmd_evaluate)
+
+    p = sub.add_parser("convert-mavlink", help="MAVLink telemetry log (.tlog, OPTICAL_FLOW_RAD) -> flow log + run.yaml",
+                       formatter_class=RawHelp, epilog=examples_epilog(
+                           "robocal flow convert-mavlink examples/flow/mavlink/flow.tlog --array examples/flow/mavlink/array.yaml \\\n"
+                           "      --sensor-map 0:s60,1:s120,2:s270 --out conv",
+                           "robocal flow odometry conv/run.yaml --out odo",
+                           "robocal flow convert-mavlink my.tlog --array array.yaml --sensor-map 0:left,1:right --rate 100 --out conv"))
+    p.add_argument("input", type=Path, help=".tlog: records of an 8-byte big-endian timestamp (us) + one MAVLink 1/2 frame")
+    p.add_argument("--array", type=Path, required=True,
+                   help="YAML with the array's 'sensors' (name, R, psi, phi, scale; as in run.yaml)")
+    p.add_argument("--sensor-map", required=True, metavar="ID:NAME,...",
+                   help="OPTICAL_FLOW_RAD sensor_id -> sensor name of the array, e.g. 0:s60,1:s120,2:s270")
+    p.add_argument("--focal-px", type=float, default=None,
+                   help="focal length written to run.yaml, px (flow is logged in rad: it only sets the flow-error "
+                        "scale; default the array file's camera.focal_px, else 666.7 = PX4FLOW, 16 mm lens)")
+    p.add_argument("--sigma-px", type=float, default=0.16,
+                   help="the sensors' flow error per camera frame, px (default 0.16: PX4FLOW half-pixel firmware); "
+                        "run.yaml gets it times sqrt(frames per interval)")
+    p.add_argument("--frame-rate", type=float, default=400.0,
+                   help="the sensors' camera frame rate, Hz (default 400: PX4FLOW), to count the frames a record integrates")
+    p.add_argument("--clock", default="log", choices=("log", "message"),
+                   help="record end times: log = the tlog's timestamps (one clock for all sensors); message = "
+                        "time_usec (only when every sensor stamps on one clock, e.g. one autopilot)")
+    p.add_argument("--rate", type=float, default=None,
+                   help="resample onto a uniform grid at this rate, Hz (default: the first mapped sensor's records)")
+    p.add_argument("--sysid", type=int, default=None, help="use only messages from this MAVLink system id")
+    add_out_argument(p)
+    p.set_defaults(func=cmd_convert_mavlink)
 
 
 def demo(ctx: DemoContext) -> DemoOutcome:

@@ -1,0 +1,643 @@
+"""MAVLink telemetry logs (``.tlog``) of PX4FLOW-class sensors -> the flow rig's per-sensor flow log.
+
+Written from the published MAVLink protocol (mavlink.io, "Packet Serialization"
+and "CRC_EXTRA calculation") and the message definitions of ``common.xml``;
+no pymavlink code is used (pymavlink is LGPL, robocal BSD-3-Clause).
+
+The tlog container
+------------------
+A ``.tlog`` is a sequence of records: an 8-byte **big-endian** uint64
+timestamp (microseconds, the recorder's clock, usually UNIX time) followed by
+one raw MAVLink frame:
+
+* MAVLink 1: ``0xFE len seq sysid compid msgid payload[len] crc_lo crc_hi``
+* MAVLink 2: ``0xFD len incompat compat seq sysid compid msgid(3, LE) payload[len]
+  crc_lo crc_hi [signature(13) if incompat & 0x01]``
+
+The checksum is CRC-16/MCRF4XX (MAVLink's "X.25": reflected polynomial 0x8408,
+initial value 0xFFFF, no final XOR) over every byte after the magic byte up to
+the end of the payload, then the message's ``CRC_EXTRA`` byte. ``CRC_EXTRA`` is
+computed here from the field definitions (:func:`crc_extra`): the CRC of
+``"NAME "`` followed by ``"type name "`` of every non-extension field in wire
+order (plus a byte with the array length for array fields), folded to 8 bits as
+``(crc & 0xFF) ^ (crc >> 8)``. Fields go on the wire sorted by the size of their
+base type, largest first (stable for equal sizes); extension fields follow in
+definition order. MAVLink 2 drops trailing zero bytes of the payload: the
+reader pads it back with zeros.
+
+The parser (:func:`read_tlog`) resynchronises after garbage (it scans for the
+next magic byte whose frame checks), checks the CRC of every known message,
+skips (does not verify) the signature of signed MAVLink 2 frames and counts
+every frame or byte it could not use (:class:`ParseStats`).
+
+From OPTICAL_FLOW_RAD to the rig's flow log
+-------------------------------------------
+See :func:`flow_records` and docs/rigs/flow.md ("MAVLink logs"): the sensor's
+axes are taken as the rig's camera axes (x = image u, y = image v, z = optical
+axis, down), and by the message definition's sign rules
+(RH rotation about X gives positive ``integrated_x``, motion along +Y negative;
+RH rotation about Y gives positive ``integrated_y``, motion along +X positive)
+the kernel-convention image flow in pixels is::
+
+    flow_u = -f * integrated_y,   flow_v = +f * integrated_x,   gyro = integrated_*gyro / dt
+
+which the rig's eqs. 3-5 (:func:`~robocal.rigs.flow.kernel.compensate_rotation`,
+:func:`~robocal.rigs.flow.kernel.metric_displacement`) turn into the ground
+displacement ``dS = ((iy - iy_gyro) h, (ix - ix_gyro) h)`` in the sensor frame S:
+the focal length ``f`` cancels exactly.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from robocal.errors import FileFormatError, InputError
+
+__all__ = [
+    "MessageDef",
+    "MESSAGES",
+    "OPTICAL_FLOW",
+    "OPTICAL_FLOW_RAD",
+    "ParseStats",
+    "MavlinkLog",
+    "crc16_mcrf4xx",
+    "crc_extra",
+    "read_tlog",
+    "parse_tlog",
+    "encode_frame",
+    "parse_sensor_map",
+    "flow_records",
+    "write_flow_log",
+]
+
+# ---------------------------------------------------------------------------------------------------------------
+# CRC-16/MCRF4XX (MAVLink "X.25"): poly 0x1021 reflected (0x8408), init 0xFFFF, refin/refout, xorout 0
+
+
+def _make_table():
+    tab = []
+    for b in range(256):
+        c = b
+        for _ in range(8):
+            c = (c >> 1) ^ 0x8408 if c & 1 else c >> 1
+        tab.append(c)
+    return tuple(tab)
+
+
+_CRC_TABLE = _make_table()
+
+
+def crc16_mcrf4xx(data: bytes, crc: int = 0xFFFF) -> int:
+    """CRC-16/MCRF4XX of ``data`` continuing from ``crc`` (check value of b"123456789": 0x6F91)."""
+    tab = _CRC_TABLE
+    for b in data:
+        crc = (crc >> 8) ^ tab[(crc ^ b) & 0xFF]
+    return crc
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# message definitions
+
+_TYPES = {  # MAVLink type -> (struct code, size)
+    "uint64_t": ("Q", 8), "int64_t": ("q", 8), "double": ("d", 8),
+    "uint32_t": ("I", 4), "int32_t": ("i", 4), "float": ("f", 4),
+    "uint16_t": ("H", 2), "int16_t": ("h", 2),
+    "uint8_t": ("B", 1), "int8_t": ("b", 1), "char": ("c", 1),
+}
+
+
+@dataclass(frozen=True)
+class MessageDef:
+    """One message of a MAVLink dialect: fields ``(type, name)`` in definition (XML) order."""
+
+    id: int
+    name: str
+    fields: tuple          # base fields, XML order
+    extensions: tuple = ()  # extension fields, XML order (MAVLink 2 only; not in CRC_EXTRA)
+
+    @property
+    def wire_fields(self) -> tuple:
+        """Fields in wire order: base fields sorted by type size (largest first, stable), then extensions."""
+        return tuple(sorted(self.fields, key=lambda f: -_TYPES[f[0]][1])) + tuple(self.extensions)
+
+    @property
+    def min_length(self) -> int:
+        return sum(_TYPES[t][1] for t, _ in self.fields)
+
+    @property
+    def max_length(self) -> int:
+        return self.min_length + sum(_TYPES[t][1] for t, _ in self.extensions)
+
+    @property
+    def struct(self) -> struct.Struct:
+        return struct.Struct("<" + "".join(_TYPES[t][0] for t, _ in self.wire_fields))
+
+    @property
+    def crc_extra(self) -> int:
+        return crc_extra(self)
+
+    def decode(self, payload: bytes) -> dict:
+        """Field values of a payload (zero-padded to the full length, as MAVLink 2 truncation requires)."""
+        n = self.max_length
+        if len(payload) < n:
+            payload = bytes(payload) + bytes(n - len(payload))
+        vals = self.struct.unpack(payload[:n])
+        return {name: v for (_, name), v in zip(self.wire_fields, vals)}
+
+    def encode(self, values: dict, *, extensions: bool = True) -> bytes:
+        """Payload of ``values`` in wire order (missing fields are 0); without the extensions if asked."""
+        flds = self.wire_fields if extensions else self.wire_fields[:len(self.fields)]
+        fmt = "<" + "".join(_TYPES[t][0] for t, _ in flds)
+        return struct.pack(fmt, *(values.get(nm, 0) for _, nm in flds))
+
+
+def crc_extra(msg: MessageDef) -> int:
+    """``CRC_EXTRA`` of a message from its definition (mavlink.io "CRC_EXTRA calculation").
+
+    CRC-16/MCRF4XX over ``name + " "``, then for each non-extension field in wire order
+    ``type + " "`` and ``name + " "`` (array fields would add one byte with their length; the
+    messages here have none), folded to one byte: ``(crc & 0xFF) ^ (crc >> 8)``.
+    """
+    crc = crc16_mcrf4xx((msg.name + " ").encode("ascii"))
+    for t, nm in sorted(msg.fields, key=lambda f: -_TYPES[f[0]][1]):
+        crc = crc16_mcrf4xx((t + " ").encode("ascii"), crc)
+        crc = crc16_mcrf4xx((nm + " ").encode("ascii"), crc)
+    return (crc & 0xFF) ^ (crc >> 8)
+
+
+#: common.xml, message 106 (in XML order)
+OPTICAL_FLOW_RAD = MessageDef(106, "OPTICAL_FLOW_RAD", (
+    ("uint64_t", "time_usec"), ("uint8_t", "sensor_id"), ("uint32_t", "integration_time_us"),
+    ("float", "integrated_x"), ("float", "integrated_y"), ("float", "integrated_xgyro"),
+    ("float", "integrated_ygyro"), ("float", "integrated_zgyro"), ("int16_t", "temperature"),
+    ("uint8_t", "quality"), ("uint32_t", "time_delta_distance_us"), ("float", "distance")))
+
+#: common.xml, message 100 (in XML order); flow_rate_x/y are MAVLink 2 extensions
+OPTICAL_FLOW = MessageDef(100, "OPTICAL_FLOW", (
+    ("uint64_t", "time_usec"), ("uint8_t", "sensor_id"), ("int16_t", "flow_x"), ("int16_t", "flow_y"),
+    ("float", "flow_comp_m_x"), ("float", "flow_comp_m_y"), ("uint8_t", "quality"), ("float", "ground_distance")),
+    extensions=(("float", "flow_rate_x"), ("float", "flow_rate_y")))
+
+#: common.xml, message 0: not used, but recognised (its CRC checked) so that a log's heartbeats are not "unknown"
+HEARTBEAT = MessageDef(0, "HEARTBEAT", (
+    ("uint8_t", "type"), ("uint8_t", "autopilot"), ("uint8_t", "base_mode"), ("uint32_t", "custom_mode"),
+    ("uint8_t", "system_status"), ("uint8_t", "mavlink_version")))
+
+MESSAGES = {m.id: m for m in (HEARTBEAT, OPTICAL_FLOW, OPTICAL_FLOW_RAD)}
+_CRC_EXTRA = {m.id: crc_extra(m) for m in MESSAGES.values()}
+
+
+def encode_frame(msg: MessageDef, values: dict, *, version: int = 2, seq: int = 0, sysid: int = 1, compid: int = 100,
+                 signature: bytes | None = None, truncate: bool = True, crc_extra_byte: int | None = None) -> bytes:
+    """One MAVLink frame (for tests and examples). MAVLink 2 drops trailing zero payload bytes when ``truncate``."""
+    extra = _CRC_EXTRA.get(msg.id, crc_extra(msg)) if crc_extra_byte is None else crc_extra_byte
+    if version == 1:
+        payload = msg.encode(values, extensions=False)
+        hdr = bytes([len(payload), seq & 0xFF, sysid, compid, msg.id])
+        magic = b"\xfe"
+    else:
+        payload = msg.encode(values)
+        if truncate:
+            payload = payload.rstrip(b"\x00") or payload[:1]   # a v2 payload keeps at least one byte
+        incompat = 0x01 if signature is not None else 0
+        hdr = bytes([len(payload), incompat, 0, seq & 0xFF, sysid, compid]) + msg.id.to_bytes(3, "little")
+        magic = b"\xfd"
+    crc = crc16_mcrf4xx(bytes([extra]), crc16_mcrf4xx(hdr + payload))
+    out = magic + hdr + payload + crc.to_bytes(2, "little")
+    if version != 1 and signature is not None:
+        if len(signature) != 13:
+            raise InputError("a MAVLink 2 signature is 13 bytes (link id, 6-byte timestamp, 6-byte signature)")
+        out += signature
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# the tlog parser
+
+
+@dataclass
+class ParseStats:
+    """What the parser met: good frames per message name, and everything it skipped."""
+
+    frames: dict = field(default_factory=dict)        # message name -> good frames
+    crc_errors: int = 0                                # known message, checksum wrong
+    bad_length: int = 0                                # known message, payload length impossible
+    unknown: dict = field(default_factory=dict)        # message id -> frames of messages this reader does not know
+    unsupported_flags: int = 0                         # MAVLink 2 incompat flags other than "signed"
+    signed: int = 0                                    # signed MAVLink 2 frames (signature skipped, not verified)
+    truncated_end: int = 0                             # bytes of an incomplete record at the end of the file
+    garbage_bytes: int = 0                             # bytes skipped while resynchronising (rejected frames too)
+
+    @property
+    def bad_frames(self) -> int:
+        return self.crc_errors + self.bad_length + self.unsupported_flags
+
+    def summary(self) -> str:
+        good = ", ".join(f"{k} {v}" for k, v in sorted(self.frames.items())) or "none"
+        parts = [f"good frames: {good}"]
+        if self.signed:
+            parts.append(f"{self.signed} signed (signature not verified)")
+        if self.crc_errors:
+            parts.append(f"{self.crc_errors} with a bad CRC")
+        if self.bad_length:
+            parts.append(f"{self.bad_length} with an impossible length")
+        if self.unsupported_flags:
+            parts.append(f"{self.unsupported_flags} with unsupported MAVLink 2 flags")
+        if self.unknown:
+            parts.append(f"{sum(self.unknown.values())} of unknown messages (ids "
+                         f"{', '.join(str(k) for k in sorted(self.unknown)[:10])}{', ...' if len(self.unknown) > 10 else ''})")
+        if self.garbage_bytes:
+            parts.append(f"{self.garbage_bytes} garbage bytes skipped")
+        if self.truncated_end:
+            parts.append(f"{self.truncated_end} bytes of an incomplete record at the end")
+        return "; ".join(parts)
+
+
+@dataclass
+class MavlinkLog:
+    """Decoded messages of a tlog: per message name, a dict of numpy arrays (one entry per frame).
+
+    Every message table also has ``log_time_us`` (the tlog record's timestamp), ``sysid``,
+    ``compid``, ``version`` (1 or 2).
+    """
+
+    messages: dict
+    stats: ParseStats
+
+    def table(self, name: str) -> dict:
+        return self.messages.get(name, {})
+
+
+def _try_frame(buf, p: int, n: int):
+    """Parse the frame whose magic byte is at ``p``: ``(status, end, msgid, version, header, payload)``.
+
+    status: "ok", "crc", "length", "unknown", "flags", "short" (runs past the end of the data).
+    """
+    magic = buf[p]
+    if magic == 0xFE:
+        if p + 6 > n:
+            return "short", n, None, 1, None, None
+        ln = buf[p + 1]
+        end = p + 6 + ln + 2
+        if end > n:
+            return "short", n, None, 1, None, None
+        msgid = buf[p + 5]
+        hdr = (buf[p + 1], buf[p + 2], buf[p + 3], buf[p + 4])
+        ver, body, payload, crc_at = 1, buf[p + 1:p + 6 + ln], buf[p + 6:p + 6 + ln], p + 6 + ln
+        flags = 0
+    else:
+        if p + 10 > n:
+            return "short", n, None, 2, None, None
+        ln = buf[p + 1]
+        flags = buf[p + 2]
+        end = p + 10 + ln + 2 + (13 if flags & 0x01 else 0)
+        if end > n:
+            return "short", n, None, 2, None, None
+        msgid = buf[p + 7] | (buf[p + 8] << 8) | (buf[p + 9] << 16)
+        hdr = (ln, buf[p + 4], buf[p + 5], buf[p + 6])
+        ver, body, payload, crc_at = 2, buf[p + 1:p + 10 + ln], buf[p + 10:p + 10 + ln], p + 10 + ln
+    msg = MESSAGES.get(msgid)
+    if msg is None:
+        return "unknown", end, msgid, ver, hdr, None
+    if ver == 2 and flags & ~0x01:
+        return "flags", end, msgid, ver, hdr, None
+    if (ver == 1 and not msg.min_length <= ln <= msg.max_length) or (ver == 2 and ln > msg.max_length):
+        return "length", end, msgid, ver, hdr, None
+    crc = crc16_mcrf4xx(bytes([_CRC_EXTRA[msgid]]), crc16_mcrf4xx(body))
+    if crc != (buf[crc_at] | (buf[crc_at + 1] << 8)):
+        return "crc", end, msgid, ver, hdr, None
+    return "ok", end, msgid, ver, hdr, bytes(payload)
+
+
+def parse_tlog(data: bytes) -> MavlinkLog:
+    """Parse the bytes of a tlog (see module doc) into decoded messages and :class:`ParseStats`.
+
+    A record is accepted when its frame checks (known message: length and CRC). After anything
+    else the parser moves one byte on and looks for the next magic byte (0xFE/0xFD) that has 8
+    bytes of timestamp before it. A frame of an unknown message cannot be checked: it is skipped
+    by its length only when the next record starts right after it (or the data ends there).
+    """
+    buf = memoryview(bytes(data))
+    n = len(buf)
+    stats = ParseStats()
+    rows: dict = {}
+    p = 0              # start of the current candidate record (its timestamp)
+    last_good = 0      # end of the last accepted record
+    raw = bytes(buf)
+
+    def next_candidate(q):
+        # the next record start >= q whose byte at +8 is a magic byte
+        while True:
+            i1 = raw.find(b"\xfe", q + 8)
+            i2 = raw.find(b"\xfd", q + 8)
+            cands = [i for i in (i1, i2) if i >= 0]
+            if not cands:
+                return -1
+            return min(cands) - 8
+
+    while p + 9 <= n:
+        m = p + 8
+        if buf[m] not in (0xFE, 0xFD):
+            q = next_candidate(p + 1)
+            if q < 0:
+                break
+            p = q
+            continue
+        status, end, msgid, ver, hdr, payload = _try_frame(buf, m, n)
+        if status == "short":
+            q = next_candidate(p + 1)
+            if q < 0:
+                break
+            p = q
+            continue
+        if status == "unknown":
+            nxt = end + 8
+            if end == n or (nxt < n and buf[nxt] in (0xFE, 0xFD)):
+                stats.garbage_bytes += p - last_good
+                stats.unknown[msgid] = stats.unknown.get(msgid, 0) + 1
+                p = last_good = end
+                continue
+            p += 1
+            continue
+        if status != "ok":
+            # a frame that names a known message but does not check: count it when it is framed like
+            # one (the next record starts right after it, or the data ends there; a magic byte met in
+            # garbage is only garbage), then resync byte by byte (its length may be corrupt)
+            if end == n or (end + 8 < n and buf[end + 8] in (0xFE, 0xFD)):
+                if status == "crc":
+                    stats.crc_errors += 1
+                elif status == "length":
+                    stats.bad_length += 1
+                else:
+                    stats.unsupported_flags += 1
+            p += 1
+            continue
+        stats.garbage_bytes += p - last_good
+        msg = MESSAGES[msgid]
+        vals = msg.decode(payload)
+        ts = int.from_bytes(buf[p:p + 8], "big")
+        if ver == 2 and buf[m + 2] & 0x01:
+            stats.signed += 1
+        tab = rows.setdefault(msg.name, [])
+        tab.append((ts, hdr[2], hdr[3], ver, vals))
+        stats.frames[msg.name] = stats.frames.get(msg.name, 0) + 1
+        p = last_good = end
+    tail = n - last_good
+    if tail:
+        # bytes after the last good record: an incomplete record if a magic byte sits where one would
+        # start, else garbage
+        if tail >= 9 and buf[last_good + 8] in (0xFE, 0xFD) and _try_frame(buf, last_good + 8, n)[0] == "short":
+            stats.truncated_end = tail
+        else:
+            stats.garbage_bytes += tail
+    messages = {}
+    for name, tab in rows.items():
+        cols = {"log_time_us": np.array([r[0] for r in tab], np.uint64),
+                "sysid": np.array([r[1] for r in tab], np.uint8), "compid": np.array([r[2] for r in tab], np.uint8),
+                "version": np.array([r[3] for r in tab], np.uint8)}
+        msg = next(m for m in MESSAGES.values() if m.name == name)
+        for t, fname in msg.wire_fields:
+            dtype = {"Q": np.uint64, "q": np.int64, "d": np.float64, "I": np.uint32, "i": np.int32, "f": np.float32,
+                     "H": np.uint16, "h": np.int16, "B": np.uint8, "b": np.int8}.get(_TYPES[t][0], object)
+            cols[fname] = np.array([r[4][fname] for r in tab], dtype)
+        messages[name] = cols
+    return MavlinkLog(messages, stats)
+
+
+def read_tlog(path) -> MavlinkLog:
+    """Read and parse a ``.tlog`` file (see :func:`parse_tlog`)."""
+    src = str(path)
+    try:
+        data = Path(path).read_bytes()
+    except FileNotFoundError:
+        raise FileFormatError("file not found", source=src) from None
+    except IsADirectoryError:
+        raise FileFormatError("is a directory, expected a .tlog file", source=src) from None
+    except OSError as exc:
+        raise FileFormatError(f"cannot read ({exc.strerror or exc})", source=src) from None
+    return parse_tlog(data)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# conversion to the rig's flow log
+
+
+def parse_sensor_map(text: str, names) -> dict:
+    """``"0:s60,1:s120"`` -> ``{0: index of s60 in names, 1: ...}`` (names: the array's sensor names)."""
+    names = list(names)
+    out: dict = {}
+    for item in (s.strip() for s in str(text).split(",")):
+        if not item:
+            continue
+        sid, sep, nm = item.partition(":")
+        try:
+            k = int(sid)
+        except ValueError:
+            k = -1
+        if not sep or not 0 <= k <= 255 or not nm.strip():
+            raise InputError(f"--sensor-map takes SENSOR_ID:NAME pairs (sensor_id 0..255), e.g. 0:s60,1:s120; got '{item}'")
+        nm = nm.strip()
+        if nm not in names:
+            raise InputError(f"--sensor-map: '{nm}' is not a sensor of the array ({', '.join(names)})")
+        if k in out:
+            raise InputError(f"--sensor-map: sensor_id {k} is mapped twice")
+        if names.index(nm) in out.values():
+            raise InputError(f"--sensor-map: sensor '{nm}' is mapped twice")
+        out[k] = names.index(nm)
+    if not out:
+        raise InputError("--sensor-map is empty; give SENSOR_ID:NAME pairs, e.g. 0:s60,1:s120,2:s270")
+    return out
+
+
+@dataclass
+class ConvertedFlow:
+    """Flow records on a common time grid, as :func:`write_flow_log` writes them."""
+
+    t: np.ndarray          # (K+1,) s, relative to t0
+    flow: np.ndarray       # (n, K, 2) px, kernel convention, not gyro-compensated
+    gyro: np.ndarray       # (n, K, 3) rad/s, mean over the interval
+    height: np.ndarray     # (n, K) m
+    quality: np.ndarray    # (n, K)
+    present: np.ndarray    # (n, K) bool: the interval is covered by the sensor's records
+    t0_us: int             # clock value of t = 0, us
+    records: dict          # sensor index -> number of OPTICAL_FLOW_RAD records used
+    notes: list
+
+
+def flow_records(log: MavlinkLog, sensor_map: dict, n_sensors: int, focal_px: float, *, clock: str = "log",
+                 rate: float | None = None, sysid: int | None = None, source: str = "tlog") -> ConvertedFlow:
+    """OPTICAL_FLOW_RAD records of the mapped sensors on one time grid, in the rig's units.
+
+    Each record covers ``[t_end - integration_time_us, t_end]`` (``t_end``: the tlog timestamp,
+    ``clock="log"``, or the message's ``time_usec``, ``clock="message"`` — only when every sensor
+    stamps on one clock). A record's start is moved back to the previous record's end when the
+    gap between them is under a quarter of the integration time (clock jitter), or forward when
+    they overlap. Inside a record the rates are taken as constant, so the integrated flow, gyro
+    and distance are redistributed exactly (linear in time) onto the grid: by default the first
+    mapped sensor's record ends (identical to the records for sensors sampled together), or a
+    uniform grid at ``rate`` Hz. A grid interval not covered (to 1 %) by a sensor's records is
+    left out for that sensor (a missing record); one that touches a record with quality 0 or
+    an unknown (negative) distance gets quality 0; otherwise its quality is the lowest of the
+    records it touches.
+    """
+    if clock not in ("log", "message"):
+        raise InputError(f"clock must be 'log' or 'message', got {clock!r}")
+    tab = log.table("OPTICAL_FLOW_RAD")
+    if not tab:
+        raise FileFormatError(f"no OPTICAL_FLOW_RAD (id 106) messages ({log.stats.summary()})", source=source)
+    keep = np.ones(len(tab["sensor_id"]), bool)
+    if sysid is not None:
+        keep &= tab["sysid"] == sysid
+    tt = (tab["log_time_us"] if clock == "log" else tab["time_usec"]).astype(np.int64)
+    origin = int(tt[keep].min()) if keep.any() else 0
+    tt = tt - origin                       # float64 keeps microseconds exactly from here on
+    found = sorted(set(int(s) for s in tab["sensor_id"][keep]))
+    missing = [k for k in sensor_map if k not in found]
+    if missing:
+        raise InputError(f"--sensor-map: no OPTICAL_FLOW_RAD records of sensor_id {', '.join(map(str, missing))} in the "
+                         f"log (it has sensor_id {', '.join(map(str, found)) or 'none'})")
+    notes = []
+    unmapped = [k for k in found if k not in sensor_map]
+    if unmapped:
+        notes.append(f"records of sensor_id {', '.join(map(str, unmapped))} are not in --sensor-map: left out")
+    segs = {}
+    for sid, i in sensor_map.items():
+        sel = keep & (tab["sensor_id"] == sid)
+        order = np.argsort(tt[sel], kind="stable")
+        end = tt[sel][order].astype(float)
+        it = tab["integration_time_us"][sel][order].astype(float)
+        q = np.stack([tab[k][sel][order].astype(float) for k in ("integrated_x", "integrated_y", "integrated_xgyro",
+                                                                 "integrated_ygyro", "integrated_zgyro")], 1)
+        d = tab["distance"][sel][order].astype(float)
+        qual = tab["quality"][sel][order].astype(float)
+        dup = np.flatnonzero(np.diff(end) <= 0)
+        if dup.size:
+            # records stamped at the same time (a recorder that stamps a whole read at once): each is
+            # moved to end one integration time after the previous one; the overlap is clipped below
+            for k in dup + 1:
+                if end[k] <= end[k - 1]:
+                    end[k] = end[k - 1] + max(it[k], 1.0)
+            notes.append(f"sensor_id {sid}: {dup.size} record(s) stamped at the same {clock} time as the one before: "
+                         "moved one integration time later")
+        start = end - it
+        prev_end = np.concatenate([[-np.inf], end[:-1]])
+        tol = 0.25 * np.maximum(it, 1.0)
+        start = np.where(start < prev_end, prev_end, start)                              # overlap: clip
+        start = np.where((start - prev_end <= tol) & np.isfinite(prev_end), prev_end, start)  # jitter: close
+        ok = end > start
+        if (~ok).any():
+            notes.append(f"sensor {sid}: {int((~ok).sum())} record(s) with integration time 0 left out")
+        segs[i] = (start[ok], end[ok], q[ok], d[ok], qual[ok])
+    first = segs[next(iter(sensor_map.values()))]
+    if rate is None:
+        grid = np.concatenate([[first[0][0]], first[1]])
+        # where the reference sensor itself has a gap, the grid keeps its own intervals: an interval
+        # from a gap's start is dropped, so the gap becomes a missing stretch
+        grid = np.unique(np.concatenate([grid, first[0]]))
+    else:
+        if not rate > 0:
+            raise InputError(f"--rate must be > 0 Hz, got {rate}")
+        lo = max(s[0][0] for s in segs.values())
+        hi = min(s[1][-1] for s in segs.values())
+        step = 1e6 / rate
+        if hi - lo < step:
+            raise InputError(f"the sensors' records overlap for {(hi - lo) / 1e6:.6f} s only: less than one "
+                             f"interval at --rate {rate:g} Hz")
+        grid = lo + step * np.arange(int(np.floor((hi - lo) / step + 1e-9)) + 1)
+    K = grid.size - 1
+    flow = np.zeros((n_sensors, K, 2))
+    gyro = np.zeros((n_sensors, K, 3))
+    height = np.ones((n_sensors, K))
+    quality = np.zeros((n_sensors, K))
+    present = np.zeros((n_sensors, K), bool)
+    dtg = np.diff(grid)
+    records = {}
+    for i, (s, e, q, d, qual) in segs.items():
+        records[i] = int(s.size)
+        ln = e - s
+        # cumulative functions of time, piecewise linear over the records, flat in gaps:
+        # knots at every start and end
+        knots = np.empty(2 * s.size)
+        knots[0::2], knots[1::2] = s, e
+        def cum(v):
+            c = np.concatenate([np.zeros((1,) + v.shape[1:]), np.cumsum(v, axis=0)])
+            vals = np.empty((2 * s.size,) + v.shape[1:])
+            vals[0::2], vals[1::2] = c[:-1], c[1:]
+            return vals
+
+        def over(v):
+            vals = cum(v)
+            if vals.ndim == 1:
+                return np.diff(np.interp(grid, knots, vals))
+            return np.stack([np.diff(np.interp(grid, knots, vals[:, a])) for a in range(vals.shape[1])], 1)
+
+        cover = over(ln)
+        integ = over(q)
+        dist = over(d * ln)
+        bad_t = over(ln * ((qual <= 0) | (d < 0)))
+        # lowest quality of the records each grid interval touches
+        k0 = np.searchsorted(e, grid[:-1], side="right")
+        k1 = np.searchsorted(s, grid[1:], side="left")
+        has = (k1 > k0) & (cover > 0)
+        qmin = np.zeros(K)
+        if has.any():
+            idx = np.flatnonzero(has)
+            # reduceat over [k0, k1) per interval: interleave starts/ends
+            ext = np.append(qual, np.inf)
+            qmin[idx] = np.minimum.reduceat(ext, np.stack([k0[idx], k1[idx]], 1).ravel())[0::2]
+        pres = cover >= 0.99 * dtg
+        present[i] = pres
+        with np.errstate(invalid="ignore", divide="ignore"):
+            h = np.where(cover > 0, dist / np.where(cover > 0, cover, 1.0), np.nan)
+        good_h = pres & (bad_t <= 0) & (h > 0)
+        # flow in px (kernel convention), gyro as the interval's mean rate
+        flow[i, :, 0] = -focal_px * integ[:, 1]
+        flow[i, :, 1] = focal_px * integ[:, 0]
+        gyro[i] = integ[:, 2:5] / (dtg[:, None] * 1e-6)
+        quality[i] = np.where(good_h, qmin, 0.0)
+        # a placeholder height where unknown (quality 0 there: the row's flow is not used)
+        fill = np.nanmedian(h[good_h]) if good_h.any() else 1.0
+        height[i] = np.where(good_h, h, fill)
+        n_bad = int((pres & ~good_h).sum())
+        if n_bad:
+            notes.append(f"sensor {i}: {n_bad} interval(s) touch a record with quality 0 or unknown distance: quality 0")
+    # the run starts when every sensor has started and ends when the first one stops
+    full = np.flatnonzero(present.all(axis=0))
+    if full.size == 0:
+        raise InputError("the mapped sensors' records never cover one interval together (see --clock and --rate)")
+    a, b = int(full[0]), int(full[-1]) + 1
+    if a > 0 or b < K:
+        notes.append(f"{a + K - b} interval(s) at the ends, where not every sensor has records, left out")
+        grid = grid[a:b + 1]
+        flow, gyro, height, quality, present = (x[:, a:b] for x in (flow, gyro, height, quality, present))
+    for i in range(n_sensors):
+        n_miss = int((~present[i]).sum())
+        if n_miss:
+            notes.append(f"sensor {i}: {n_miss} of {present.shape[1]} interval(s) not covered by its records: "
+                         "left out (missing)")
+    t0 = grid[0]
+    return ConvertedFlow((grid - t0) * 1e-6, flow, gyro, height, quality, present, origin + int(round(t0)), records, notes)
+
+
+def write_flow_log(path, conv: ConvertedFlow, *, comment: str = "") -> Path:
+    """Write :class:`ConvertedFlow` as a flow log (``flow.csv``, log.py's format); missing rows are left out."""
+    from robocal.io import atomic_write_text
+    from robocal.rigs.flow.log import FLOW_COLUMNS
+
+    n, K = conv.quality.shape
+    lines = [f"# {ln}" for ln in comment.splitlines()] if comment else []
+    lines.append(",".join(FLOW_COLUMNS))
+    t, dt = conv.t, np.diff(conv.t)
+    for k in range(K):
+        for i in range(n):
+            if not conv.present[i, k]:
+                continue
+            fu, fv = conv.flow[i, k]
+            g = conv.gyro[i, k]
+            lines.append(f"{t[k + 1]:.6f},{dt[k]:.6f},{i},{fu:.6f},{fv:.6f},{g[0]:.8f},{g[1]:.8f},{g[2]:.8f},"
+                         f"{conv.height[i, k]:.6f},{conv.quality[i, k]:.0f}")
+    return atomic_write_text(Path(path), "\n".join(lines) + "\n")
