@@ -53,7 +53,7 @@ def test_analytic_jacobian_matches_finite_differences():
     rng = np.random.default_rng(5)
     cam, scene = default_setup(3, rng)
     obs = simulate_observations(cam, scene, rng)
-    prob, _ = _problem(cam, scene.rectangle, _layout(obs, scene.body_points_r, scene.rectangle), scene.T_r_c,
+    prob, _, _ = _problem(cam, scene.rectangle, _layout(obs, scene.body_points_r, scene.rectangle), scene.T_r_c,
                        scene.T_c_m, 0.5)
     params = {"rot_rc": np.array([0.1, -0.2, 0.05]), "t_rc": scene.T_r_c[:3, 3] + 0.01,
               "rot_cm": rng.normal(scale=0.1, size=(3, 3)), "t_cm": scene.T_c_m[:, :3, 3]}

@@ -769,6 +769,8 @@ def _labels(K):
 
 
 def _problem(camera, rectangle, layout, T_r_c0, T_c_m0, sigma_px):
+    """``(problem, poses, whitened)``; ``whitened`` (the ArUco path's noise model, for
+    :func:`_two_component_covariance`) is None without per-tag covariances."""
     markers, body, mjac, bjac, poses = residual_model(camera, rectangle, layout, T_r_c0[:3, :3], T_c_m0[:, :3, :3])
     lab = _labels(layout.K)
     prob = Problem()
@@ -797,14 +799,13 @@ def _problem(camera, rectangle, layout, T_r_c0, T_c_m0, sigma_px):
         # body tag's corner on noise-free renders), else marker_sigma_scale^2
         v_m = np.concatenate([np.full(8, 0.0 if layout.marker_cov[k] is not None else layout.marker_scale[k] ** 2)
                               for k in range(layout.K)])
-        prob.mirror_whitened = (markers, body, (Wm * v_m) @ Wm.T, Wb @ Wb.T)
-        return prob, poses
+        return prob, poses, (markers, body, (Wm * v_m) @ Wm.T, Wb @ Wb.T)
     if np.any(layout.marker_scale != 1.0):  # relative weights (absolute only with sigma_px)
         sig = 1.0 if sig is None else sig
         msig = sig * np.repeat(layout.marker_scale, 4)[:, None]
     prob.add_residuals(markers, name="markers", jacobian=mjac, residual_dim=2, sigma=msig)
     prob.add_residuals(body, name="body", jacobian=bjac, residual_dim=2, sigma=sig)
-    return prob, poses
+    return prob, poses, None
 
 
 def _layout(obs_list, body_points_r, rectangle):
@@ -829,7 +830,7 @@ def _checked_body_cov(obs, n_body: int):
     return c
 
 
-def _two_component_covariance(prob, res) -> tuple[np.ndarray, np.ndarray]:
+def _two_component_covariance(prob, whitened, res) -> tuple[np.ndarray, np.ndarray]:
     """Covariance of the whitened fit with the noise split into the modelled part and an iid part.
 
     The body-corner errors of the ArUco path are the edge-fit noise, whose
@@ -856,7 +857,7 @@ def _two_component_covariance(prob, res) -> tuple[np.ndarray, np.ndarray]:
     variance the single-component (whitened-only) covariance is used, which
     is conservative (RMS 0.6 when the independent part dominates).
     """
-    markers, body, V2_m, V2_b = prob.mirror_whitened
+    markers, body, V2_m, V2_b = whitened
     J = np.asarray(prob.jacobian_at(res.params, jac="analytic"))
     r = np.concatenate([np.ravel(markers(res.params)), np.ravel(body(res.params))])
     m = len(r)
@@ -893,7 +894,7 @@ def predicted_covariance(camera: CameraModel, rectangle: MarkerRectangle, body_p
     T_r_c = np.asarray(T_r_c, dtype=float)
     T_c_m = np.asarray(T_c_m, dtype=float).reshape(-1, 4, 4)
     layout = _layout(obs_list, body_points_r, rectangle)
-    prob, _ = _problem(camera, rectangle, layout, T_r_c, T_c_m, sigma_px)
+    prob, _, _ = _problem(camera, rectangle, layout, T_r_c, T_c_m, sigma_px)
     J = np.asarray(prob.jacobian_at(None, jac="analytic"))
     cov = np.linalg.inv(J.T @ J)  # residuals are already divided by sigma_px
     return cov if full else cov[:6, :6]
@@ -1112,7 +1113,7 @@ def calibrate(camera: CameraModel, rectangle: MarkerRectangle, body_points_r, ob
             cov += predicted_covariance(camera, rectangle, P_all, s.T_r_c, s.T_c_m, [o], sig)
         cov /= len(singles) ** 2
         return MirrorCalibration(T_r_c0, T_c_m0, cov, singles, None, warnings, obs_list, rectangle, P_all, camera)
-    prob, poses = _problem(camera, rectangle, layout, T_r_c0, T_c_m0, sigma_px)
+    prob, poses, whitened = _problem(camera, rectangle, layout, T_r_c0, T_c_m0, sigma_px)
     n_obs = 4 * layout.K + sum(len(i) for i in layout.ids)
     res = solve(prob, method="lm", absolute_sigma=sigma_px is not None, progress=progress,
                 outlier_sigma=outlier_sigma(n_obs))
@@ -1120,7 +1121,7 @@ def calibrate(camera: CameraModel, rectangle: MarkerRectangle, body_points_r, ob
     cov = res.cov[:6, :6]
     components = None
     if layout.correlated and sigma_px is None:
-        full, components = _two_component_covariance(prob, res)
+        full, components = _two_component_covariance(prob, whitened, res)
         cov = full[:6, :6]
     warnings.extend(_name_outliers(w, layout, obs_list) for w in res.warnings)
     if len(singles) > 1:
