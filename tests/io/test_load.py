@@ -435,3 +435,13 @@ def test_an_unquoted_dimensionless_unit_reads_like_the_units_mapping():
     assert doc.array("j", kind="dimensionless") == 3.0
     with pytest.raises(UnitError, match="unknown unit '2'"):
         parse_document("k: {value: 2.5, unit: 2}\n").array("k", kind="dimensionless")
+
+
+def test_require_known_keys_names_the_first_unknown_key_and_the_closest_known_one():
+    doc = parse_document("H: 2.9\ntilt_mim: 10\n", source="p.yaml")
+    with pytest.raises(FileFormatError, match=r"p.yaml: field 'tilt_mim': unknown key \(did you mean 'tilt_min'\?\); "
+                                              r"known keys: H, tilt_min"):
+        doc.require_known_keys(("H", "tilt_min"))
+    with pytest.raises(FileFormatError, match=r"field 'tilt_mim': unknown key; known keys: H$"):
+        doc.require_known_keys(("H",))
+    doc.require_known_keys(("H", "tilt_mim"))

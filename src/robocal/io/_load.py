@@ -86,6 +86,12 @@ _SafeLoader.add_implicit_resolver(
 _QUANTITY_KEYS = ("value", "unit")
 
 
+def _closest(name: str, allowed) -> str | None:
+    """The allowed name closest to a misspelt ``name`` (difflib's default cutoff), or None."""
+    close = difflib.get_close_matches(name, list(allowed), n=1)
+    return close[0] if close else None
+
+
 def _is_text(v) -> bool:
     return isinstance(v, (str, bytes))
 
@@ -193,6 +199,19 @@ class Document:
     def keys(self):
         return self.data.keys()
 
+    def require_known_keys(self, allowed) -> None:
+        """Raise naming the first key not in ``allowed``, with the closest known key when there is one.
+
+        A misspelt optional key (``tilt_mim:``) would otherwise be ignored and
+        its default used without a word.
+        """
+        allowed = tuple(allowed)
+        for key in self.data:
+            if key not in allowed:
+                close = _closest(str(key), allowed)
+                hint = f" (did you mean {close!r}?)" if close else ""
+                raise self.error(str(key), f"unknown key{hint}; known keys: {', '.join(allowed)}")
+
     def raw(self, key: str, default=_MISSING):
         """The raw value of ``key``; a missing key without default is an error."""
         if key in self.data:
@@ -223,8 +242,8 @@ class Document:
             extra = [k for k in value if k not in _QUANTITY_KEYS]
             if extra:
                 names = ", ".join(repr(k) for k in extra)
-                hints = [h for k in extra if isinstance(k, str) for h in difflib.get_close_matches(k, _QUANTITY_KEYS, n=1)]
-                hint = f"; did you mean {hints[0]!r}?" if len(extra) == 1 and hints else ""
+                close = _closest(extra[0], _QUANTITY_KEYS) if len(extra) == 1 and isinstance(extra[0], str) else None
+                hint = f"; did you mean {close!r}?" if close else ""
                 raise self.error(
                     key, f"unknown key{'s' if len(extra) > 1 else ''} {names} in a quantity mapping "
                     f"(allowed: {', '.join(_QUANTITY_KEYS)}){hint}"

@@ -62,21 +62,9 @@ PATH_INPUT_KEYS = ("units", "projectors", "walls", "path")
 PATH_KEYS = ("units", "waypoints", "speed", "dt", "file")
 
 
-def _require_known(doc: Document, allowed) -> None:
-    """Raise naming the first key of ``doc`` not in ``allowed`` (a typo such as ``tilt_mim`` would otherwise
-    be ignored silently and its default used), with the closest known key when there is one."""
-    import difflib
-
-    for key in doc.keys():
-        if key not in allowed:
-            close = difflib.get_close_matches(str(key), allowed, n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
-            raise doc.error(str(key), f"unknown key{hint}; known keys: {', '.join(allowed)}")
-
-
 def projector_from_doc(doc: Document, *, extrinsics: bool = False) -> ProjectorModel:
     """A :class:`ProjectorModel` from a ``projector:`` mapping (units from the document)."""
-    _require_known(doc, PROJECTOR_KEYS + (EXTRINSIC_KEYS if extrinsics else ()))
+    doc.require_known_keys(PROJECTOR_KEYS + (EXTRINSIC_KEYS if extrinsics else ()))
     kw = dict(H=doc.float("H", kind="length", positive=True))
     kw["d1"] = doc.float("d1", kind="length", default=0.0)
     kw["d2"] = doc.float("d2", kind="length", default=0.0)
@@ -248,13 +236,13 @@ def load_path_input(path) -> PathInput:
     from robocal.rigs.projector.path import sample_polyline
 
     doc = load_document(path)
-    _require_known(doc, PATH_INPUT_KEYS)
+    doc.require_known_keys(PATH_INPUT_KEYS)
     projs = [projector_from_doc(d, extrinsics=True) for d in doc.items_list("projectors")]
     if not projs:
         raise doc.error("projectors", "must list at least one projector")
     walls = doc.array("walls", kind="length", shape=("W", 4), default=np.zeros((0, 4)))
     pth = doc.sub("path")
-    _require_known(pth, PATH_KEYS)
+    pth.require_known_keys(PATH_KEYS)
     files = [path]
     if "file" in pth:
         f = pth.path("file")
