@@ -578,7 +578,7 @@ class HumanoidCalibration:
         """Corners removed by ``reject_outliers`` (the present corners of whole views included)."""
         if self.keep is None:
             return 0
-        return int((np.all(np.isfinite(self.data.corners), axis=2) & ~self.keep).sum())
+        return int((_present(self.data) & ~self.keep).sum())
 
     def rank_text(self) -> str:
         """'Jacobian rank r of n free parameters ...', with the undetermined ones and the gauge."""
@@ -622,7 +622,7 @@ def check_views_consistent(model: HumanoidModel, data: HumanoidDataset, x0=None,
     d = np.linalg.norm(pred - data.corners, axis=-1)
     # corners missing from the data (NaN) do not count; a view without any, or a board behind the
     # camera (NaN prediction), is as far as can be
-    present = np.isfinite(data.corners).all(axis=-1)
+    present = _present(data)
     d = np.where(present, np.where(np.isfinite(d), d, np.inf), np.nan)
     dist = np.full(len(d), np.inf)
     dist[present.any(axis=1)] = np.nanmedian(d[present.any(axis=1)], axis=1)

@@ -22,7 +22,7 @@ import yaml
 
 from robocal.io import CalibrationResult, atomic_write_text
 from robocal.report import Report, new_figure
-from robocal.rigs.humanoid.calibrate import HumanoidCalibration
+from robocal.rigs.humanoid.calibrate import HumanoidCalibration, _by_view_text
 
 __all__ = [
     "overlay_image",
@@ -252,11 +252,8 @@ def report_from_result(result: CalibrationResult, *, title: str = "NAO leg and c
          "value": len(d["rejected_corners"]) if d.get("rejected_corners") or d.get("rejected_views") else "—"},
     ])
     if d.get("rejected_corners") or d.get("rejected_views"):
-        by_view: dict = {}
-        for v, c in d.get("rejected_corners") or []:
-            by_view.setdefault(v, []).append(c)
         s.text("Outliers rejected and the calibration re-solved once without them: "
-               + "; ".join(f"{v} corners {cs}" for v, cs in by_view.items())
+               + _by_view_text(d.get("rejected_corners") or [], sep=" ")
                + (f"; whole views {d['rejected_views']}" if d.get("rejected_views") else "")
                + " (view name, corner index in the board's object-point order, row by row).", cls="warn")
     s.diagnostics(result.warnings)
