@@ -51,6 +51,7 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -119,20 +120,22 @@ class MessageDef:
     fields: tuple          # base fields, XML order
     extensions: tuple = ()  # extension fields, XML order (MAVLink 2 only; not in CRC_EXTRA)
 
-    @property
+    # cached: decode() runs once per frame (a tlog holds thousands); a frozen dataclass without
+    # slots keeps them in the instance __dict__
+    @cached_property
     def wire_fields(self) -> tuple:
         """Fields in wire order: base fields sorted by type size (largest first, stable), then extensions."""
         return tuple(sorted(self.fields, key=lambda f: -_TYPES[f[0]][1])) + tuple(self.extensions)
 
-    @property
+    @cached_property
     def min_length(self) -> int:
         return sum(_TYPES[t][1] for t, _ in self.fields)
 
-    @property
+    @cached_property
     def max_length(self) -> int:
         return self.min_length + sum(_TYPES[t][1] for t, _ in self.extensions)
 
-    @property
+    @cached_property
     def struct(self) -> struct.Struct:
         return struct.Struct("<" + "".join(_TYPES[t][0] for t, _ in self.wire_fields))
 
@@ -163,7 +166,7 @@ def crc_extra(msg: MessageDef) -> int:
     messages here have none), folded to one byte: ``(crc & 0xFF) ^ (crc >> 8)``.
     """
     crc = crc16_mcrf4xx((msg.name + " ").encode("ascii"))
-    for t, nm in sorted(msg.fields, key=lambda f: -_TYPES[f[0]][1]):
+    for t, nm in msg.wire_fields[:len(msg.fields)]:
         crc = crc16_mcrf4xx((t + " ").encode("ascii"), crc)
         crc = crc16_mcrf4xx((nm + " ").encode("ascii"), crc)
     return (crc & 0xFF) ^ (crc >> 8)
@@ -321,23 +324,18 @@ def parse_tlog(data: bytes) -> MavlinkLog:
     bytes of timestamp before it. A frame of an unknown message cannot be checked: it is skipped
     by its length only when the next record starts right after it (or the data ends there).
     """
-    buf = memoryview(bytes(data))
+    raw = bytes(data)
+    buf = memoryview(raw)
     n = len(buf)
     stats = ParseStats()
     rows: dict = {}
     p = 0              # start of the current candidate record (its timestamp)
     last_good = 0      # end of the last accepted record
-    raw = bytes(buf)
 
     def next_candidate(q):
         # the next record start >= q whose byte at +8 is a magic byte
-        while True:
-            i1 = raw.find(b"\xfe", q + 8)
-            i2 = raw.find(b"\xfd", q + 8)
-            cands = [i for i in (i1, i2) if i >= 0]
-            if not cands:
-                return -1
-            return min(cands) - 8
+        cands = [i for i in (raw.find(b"\xfe", q + 8), raw.find(b"\xfd", q + 8)) if i >= 0]
+        return min(cands) - 8 if cands else -1
 
     while p + 9 <= n:
         m = p + 8
