@@ -83,6 +83,12 @@ class KernelTrace:
                            else (reference_bias_table(self.config), "model"))
         return self._table
 
+    def debias(self, disp: np.ndarray) -> np.ndarray:
+        """``disp`` (n, T, 2) [m] minus this run's predicted kernel bias; marks the trace debiased."""
+        out = disp - displacement_bias(self, self.bias_table()[0])
+        self.debiased = True
+        return out
+
 
 def sample_frames(frames, n_frames: int = N_FRAMES) -> np.ndarray:
     """``n_frames`` frames spread evenly over all sensors and times of ``(n, T, W, W)`` (no randomness)."""

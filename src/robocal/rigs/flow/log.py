@@ -45,7 +45,7 @@ from robocal.diagnostics import Diagnostic
 from robocal.errors import FileFormatError, InputError, ShapeError
 from robocal.io import atomic_write_text, load_csv, load_document
 from robocal.rigs.flow.kernel import FlowConfig, compensate_rotation, compute_flow_sequence, metric_displacement
-from robocal.rigs.flow.kernel_bias import KernelTrace, displacement_bias, sample_frames
+from robocal.rigs.flow.kernel_bias import KernelTrace, sample_frames
 from robocal.rigs.flow.model import SensorArray
 from robocal.rigs.flow.odometry import SensorSteps, flow_sigma
 
@@ -237,8 +237,7 @@ def steps_from_records(rec: FlowRecords, focal_px: float, config: FlowConfig = F
         trace = KernelTrace(flow_px=np.where(valid[..., None], rec.flow, np.nan),
                             px_to_m=np.nan_to_num(rec.height, nan=1.0) / float(focal_px), frames=None, config=config)
         if config.debias:
-            disp = disp - displacement_bias(trace, trace.bias_table()[0])
-            trace.debiased = True
+            disp = trace.debias(disp)
     elif config.debias:
         raise InputError(f"camera: sigma_px = {sigma_px:g} px says the log comes from another flow kernel than this one "
                          f"({config.sigma_px:g} px): its sub-pixel bias is unknown, so it cannot be removed (drop debias)")
@@ -312,8 +311,7 @@ def steps_from_frames(frames, t, gyro, height, focal_px: float, config: FlowConf
     trace = KernelTrace(flow_px=np.stack([ff.flow_px for ff in flows]), px_to_m=height / float(focal_px),
                         frames=sample_frames(frames), config=config)
     if config.debias:
-        disp = disp - displacement_bias(trace, trace.bias_table()[0])
-        trace.debiased = True
+        disp = trace.debias(disp)
     return SensorSteps(t, disp, valid, sigma, quality, reasons=reasons, kernel=trace), flows
 
 
