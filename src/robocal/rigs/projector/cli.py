@@ -305,7 +305,7 @@ def _cmd_path(args) -> int:
                       (cmd["theta"][:, 0], "%.9f"), (cmd["theta"][:, 1], "%.9f"), (cmd["theta_dot"][:, 0], "%.9f"),
                       (cmd["theta_dot"][:, 1], "%.9f"), (cmd["status"], None)])
     print(f"wrote {atomic_write_text(out / 'commands.csv', text)}")
-    streams, _ = plan.projector_commands()
+    streams, preaim = plan.projector_commands()  # once: plan.json and the report reuse preaim
     for st in streams:  # one stream per head: the idle ones pre-aim at their next hand-over pose
         text = _csv_text(["t [s]", "theta1 [rad]", "theta2 [rad]", "theta1_dot [rad/s]", "theta2_dot [rad/s]",
                           "laser_on", "mode"],
@@ -316,9 +316,10 @@ def _cmd_path(args) -> int:
         print(f"wrote {atomic_write_text(out / fname, text)}")
     options = {"nadir_margin [deg]": args.nadir_margin, "limit_margin [deg]": args.limit_margin,
                "nadir_snap [mm]": args.nadir_snap, "retime": bool(args.retime)}
-    doc = dict(plan.to_dict(), options=options)
+    doc = dict(plan.to_dict(preaim=preaim), options=options)
     print(f"wrote {atomic_write_text(out / 'plan.json', json.dumps(_jsonable(doc), indent=2) + chr(10))}")
-    write_run(out, None, path_report(plan, inp.projectors, inp.walls, title=f"projector path: {args.input.name}"))
+    write_run(out, None, path_report(plan, inp.projectors, inp.walls, title=f"projector path: {args.input.name}",
+                                     preaim=preaim))
     print(f"{len(plan.t)} samples, {len(plan.handovers)} hand-over(s), "
           + ("all feasible" if plan.ok else f"{len(plan.infeasible)} infeasible stretch(es)"))
     for bad in plan.infeasible[:10]:

@@ -730,9 +730,11 @@ class MultiPlan:
                                 mode=mode.tolist()))
         return streams, preaim
 
-    def to_dict(self) -> dict:
+    def to_dict(self, *, preaim: list | None = None) -> dict:
+        """The plan for plan.json; ``preaim``: :meth:`projector_commands`' second value if already computed."""
+        preaim = self.projector_commands()[1] if preaim is None else preaim
         return dict(names=self.names, ok=self.ok, n_samples=len(self.t), handovers=self.handovers,
-                    segments=self.segments, infeasible=self.infeasible, preaim=self.projector_commands()[1],
+                    segments=self.segments, infeasible=self.infeasible, preaim=preaim,
                     branches={tr.name: tr.branches for tr in self.trajectories})
 
 

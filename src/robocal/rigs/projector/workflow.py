@@ -123,7 +123,7 @@ def scenario_document(sc, *, estimate=("h", "tilt_offset"), comment: str = "") -
     }
 
 
-def path_report(plan, projectors, walls, *, title="projector spot path") -> Report:
+def path_report(plan, projectors, walls, *, title="projector spot path", preaim: list | None = None) -> Report:
     rep = Report(title, subtitle="world path -> timed joint commands (seed eqs. 1, 2, 8, 9)")
     s = rep.section("Assignment and hand-overs")
     s.status(plan.ok, "every sample is served" if plan.ok else f"{len(plan.infeasible)} infeasible stretch(es)")
@@ -132,7 +132,8 @@ def path_report(plan, projectors, walls, *, title="projector spot path") -> Repo
     if plan.handovers:
         s.table([{"t [s]": h["t"], "x [m]": h["point"][0], "y [m]": h["point"][1], "from": h["from"], "to": h["to"]}
                  for h in plan.handovers], caption="hand-over points")
-    _, preaim = plan.projector_commands()
+    if preaim is None:
+        _, preaim = plan.projector_commands()
     if preaim:
         s.table([{"projector": a["projector"], "slew from [s]": a["t_start"], "ready at [s]": a["t_ready"],
                   "takes over at [s]": a["t_handover"], "ready in time": a["ok"]} for a in preaim],
