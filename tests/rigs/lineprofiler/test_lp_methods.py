@@ -338,3 +338,9 @@ def test_seed_comparison_contrast():
     assert c.err_true_rot["FPDP+refine"].mean() < c.err_true_rot["FPDP"].mean()
     assert set(c.X) == {"FPDP", "refine, q exact", "FPDP+refine", "MCT"}
     assert c.extra["std"]["FPDP+refine"].shape == (3, 6)
+
+
+def test_comparison_takes_one_joint_sigma_for_every_joint():
+    # a scalar sigma_q is broadcast to every joint (it raised IndexError for the MCT run's P3 reading)
+    c = run_comparison(RIG, np.random.default_rng(0), n_runs=2, n_poses=8, sigma_q=0.0)
+    assert set(c.X) == {"FPDP", "refine, q exact", "FPDP+refine", "MCT"}

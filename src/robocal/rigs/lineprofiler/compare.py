@@ -98,11 +98,11 @@ def run_comparison(rig: LineProfilerRig, rng: np.random.Generator, *, n_runs: in
         f = fpdp_calibrate(d.q, d.profiles, rig.chain, d.sphere_radius)
         und = f.undetermined
         hold = [k for k in f.undetermined if k.startswith("X.")]
-        g0 = refine_sphere(d.q[f.used], [d.profiles[i] for i in f.used], rig.chain, d.sphere_radius, f.X, f.Q,
-                           hold=hold)
-        g = refine_sphere(d.q[f.used], [d.profiles[i] for i in f.used], rig.chain, d.sphere_radius, g0.X, g0.Q,
+        q_used, prof_used = d.q[f.used], [d.profiles[i] for i in f.used]
+        g0 = refine_sphere(q_used, prof_used, rig.chain, d.sphere_radius, f.X, f.Q, hold=hold)
+        g = refine_sphere(q_used, prof_used, rig.chain, d.sphere_radius, g0.X, g0.Q,
                           hold=hold, joint_sigma=sq if np.any(sq > 0) else None)
-        m, _ = simulate_mct(rig, rng, true_chain=true_chain, sigma_q3=float(np.asarray(sigma_q, float)[-1]))
+        m, _ = simulate_mct(rig, rng, true_chain=true_chain, sigma_q3=float(sq[-1]))
         mr = mct_calibrate(m, rig.chain, covariance=False)  # repeatability study: spread, not std
         X["FPDP"].append(f.X)
         X["refine, q exact"].append(g0.X)
