@@ -43,7 +43,7 @@ import yaml
 
 from robocal.errors import FileFormatError, RobocalError, UnitError
 from robocal.io._units import UNITS, to_si, unit_kind
-from robocal.validation import _first_leaf, check_array, format_shape
+from robocal.validation import _first_leaf, _is_text, check_array, format_shape
 
 __all__ = ["Document", "load_document", "parse_document", "CsvTable", "load_csv"]
 
@@ -90,10 +90,6 @@ def _closest(name: str, allowed) -> str | None:
     """The allowed name closest to a misspelt ``name`` (difflib's default cutoff), or None."""
     close = difflib.get_close_matches(name, list(allowed), n=1)
     return close[0] if close else None
-
-
-def _is_text(v) -> bool:
-    return isinstance(v, (str, bytes))
 
 
 def _describe_text(v) -> str:
@@ -432,7 +428,7 @@ class CsvTable:
         if unit is None:
             if kind in ("dimensionless", "pixel"):
                 return values
-            example = next((u for u, (k, _) in UNITS.items() if k == kind), "unit")
+            example = _KIND_UNITS.get(kind, ["unit"])[0]
             raise UnitError(f"column '{name}' needs a unit of {kind} in its header, e.g. '{name} [{example}]'",
                             source=self.source)
         try:
