@@ -396,13 +396,12 @@ class CameraModel:
         """
         p = check_array(p_obj, "p_obj", shape=(3,))
         T = check_transform(T_cam_obj, "T_cam_obj")
-        try:
-            lead = np.broadcast_shapes(T.shape[:-2], p.shape[:-1])
+        try:  # only to name the shapes: einsum below broadcasts the same way
+            np.broadcast_shapes(T.shape[:-2], p.shape[:-1])
         except ValueError:
             raise ShapeError(f"T_cam_obj {T.shape} does not broadcast against p_obj {p.shape}; for V views of "
                              "the same N points pass T_cam_obj[:, None] (V, 1, 4, 4)") from None
         p_cam = np.einsum("...ij,...j->...i", T[..., :3, :3], p) + T[..., :3, 3]
-        p_cam = np.broadcast_to(p_cam, lead + (3,))
         try:
             return self.project(p_cam, check=check)
         except DegenerateGeometryError as exc:
