@@ -816,14 +816,14 @@ def _layout(obs_list, body_points_r, rectangle):
         P=[c[3] for c in checked],
         marker_uv=np.stack([c[0] for c in checked]),
         body_uv=[c[1] for c in checked],
-        marker_scale=np.array([float(getattr(o, "marker_sigma_scale", 1.0)) for o in obs_list]),
-        marker_cov=[getattr(o, "marker_cov", None) for o in obs_list],
+        marker_scale=np.array([float(o.marker_sigma_scale) for o in obs_list]),
+        marker_cov=[o.marker_cov for o in obs_list],
         body_cov=[_checked_body_cov(o, len(c[2])) for o, c in zip(obs_list, checked)],
     )
 
 
 def _checked_body_cov(obs, n_body: int):
-    c = getattr(obs, "body_cov", None)
+    c = obs.body_cov
     if c is not None and 4 * len(c) != n_body:
         raise InputError(f"{obs.name}: body_cov has {len(c)} tag blocks (8 x 8, four body points each) but there "
                          f"are {n_body} body points; expected {n_body / 4:g}")

@@ -364,11 +364,11 @@ def write_input(path, camera: CameraModel, rectangle: MarkerRectangle, body_poin
                  "body_uv": np.round(o.body_uv, 4).tolist()}
         if o.body_ids is not None:
             entry["body_ids"] = [int(i) for i in o.body_ids]
-        if getattr(o, "marker_sigma_scale", 1.0) != 1.0:
+        if o.marker_sigma_scale != 1.0:
             entry["marker_sigma_scale"] = float(o.marker_sigma_scale)
-        for fld in ("body_cov", "marker_cov"):
-            if getattr(o, fld, None) is not None:
-                entry[fld] = np.round(np.asarray(getattr(o, fld), dtype=float), 8).tolist()
+        for fld, cov in (("body_cov", o.body_cov), ("marker_cov", o.marker_cov)):
+            if cov is not None:
+                entry[fld] = np.round(np.asarray(cov, dtype=float), 8).tolist()
         imgs.append(entry)
     doc["images"] = imgs
     text = (f"# {comment}\n" if comment else "") + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)

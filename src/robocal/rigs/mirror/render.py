@@ -81,9 +81,6 @@ def aruco_dictionary(name: str = ARUCO_DICT):
     return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name))
 
 
-def _dictionary(name: str = ARUCO_DICT):
-    return aruco_dictionary(name)
-
 
 @functools.lru_cache(maxsize=None)
 def mirror_symmetric_ids(name: str = ARUCO_DICT) -> frozenset:
@@ -132,7 +129,7 @@ def tag_rotation(normal, x_axis=None) -> np.ndarray:
 
 
 def _tag_bitmap(tag_id: int, cells: int = 6, px_per_cell: int = 10, dictionary: str = ARUCO_DICT) -> np.ndarray:
-    img = cv2.aruco.generateImageMarker(_dictionary(dictionary), int(tag_id), cells * px_per_cell)
+    img = cv2.aruco.generateImageMarker(aruco_dictionary(dictionary), int(tag_id), cells * px_per_cell)
     # a white quiet zone of one cell around the tag so that it reads on any background
     return cv2.copyMakeBorder(img, px_per_cell, px_per_cell, px_per_cell, px_per_cell, cv2.BORDER_CONSTANT,
                               value=255)
@@ -458,7 +455,7 @@ def _detect(gray: np.ndarray, dictionary: str = ARUCO_DICT) -> dict:
     """
     params = cv2.aruco.DetectorParameters()
     params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_NONE
-    det = cv2.aruco.ArucoDetector(_dictionary(dictionary), params)
+    det = cv2.aruco.ArucoDetector(aruco_dictionary(dictionary), params)
     corners, ids, _ = det.detectMarkers(gray)
     out: dict = {}
     if ids is None:
