@@ -240,3 +240,16 @@ def test_property_random_linear_problems_match_textbook(m, n, seed, method):
     cov = res @ res / (m - n) * np.linalg.inv(X.T @ X)
     np.testing.assert_allclose(r.x, beta, rtol=1e-6, atol=1e-8)
     np.testing.assert_allclose(r.cov, cov, rtol=1e-5, atol=1e-12)
+
+
+@pytest.mark.parametrize("loss", ["linear", "soft_l1", "huber", "cauchy", "arctan"])
+def test_loss_derivatives_match_finite_differences_of_the_loss(loss):
+    from robocal.estimation import loss_derivatives
+    from robocal.estimation._solve import _rho
+
+    z = np.array([0.01, 0.5, 0.9, 1.5, 4.0, 30.0])
+    h = 1e-6
+    r1, r2 = loss_derivatives(z, loss)
+    d1 = lambda zz: _rho(zz, loss)[1]  # noqa: E731
+    np.testing.assert_allclose(r1, (_rho(z + h, loss)[0] - _rho(z - h, loss)[0]) / (2 * h), rtol=1e-6)
+    np.testing.assert_allclose(r2, (d1(z + h) - d1(z - h)) / (2 * h), rtol=1e-5, atol=1e-9)

@@ -22,7 +22,7 @@ from robocal.estimation._identifiability import analyze_jacobian
 from robocal.estimation._problem import Problem
 from robocal.estimation._result import STATUS_MESSAGES, LSQResult, outlier_threshold
 
-__all__ = ["solve", "Iteration", "robust_cost", "METHODS", "LOSSES"]
+__all__ = ["solve", "Iteration", "robust_cost", "loss_derivatives", "METHODS", "LOSSES"]
 
 METHODS = ("trf", "dogbox", "lm")
 LOSSES = ("linear", "soft_l1", "huber", "cauchy", "arctan")
@@ -44,6 +44,27 @@ def _rho(z: np.ndarray, loss: str) -> tuple[np.ndarray, np.ndarray]:
     if loss == "arctan":
         return np.arctan(z), 1.0 / (1.0 + z**2)
     raise InputError(f"loss must be one of {', '.join(LOSSES)}, got {loss!r}")
+
+
+def loss_derivatives(z: np.ndarray, loss: str) -> tuple[np.ndarray, np.ndarray]:
+    """``rho'(z)`` and ``rho''(z)`` of SciPy's losses on ``z = (r / f_scale)^2``.
+
+    For a solver of one's own on a robust cost: the gradient is ``J^T rho' f`` and SciPy's
+    trust-region methods use ``J^T (rho' + 2 z rho'') J`` as the Gauss-Newton matrix.
+    """
+    z = np.asarray(z, dtype=float)
+    _, r1 = _rho(z, loss)
+    if loss == "soft_l1":
+        r2 = -0.5 * r1**3
+    elif loss == "huber":
+        r2 = np.where(z > 1.0, -0.5 * r1**3, 0.0)
+    elif loss == "cauchy":
+        r2 = -(r1**2)
+    elif loss == "arctan":
+        r2 = -2.0 * z * r1**2
+    else:  # linear
+        r2 = np.zeros_like(z)
+    return r1, r2
 
 
 def robust_cost(f: np.ndarray, loss: str = "linear", f_scale: float = 1.0) -> float:

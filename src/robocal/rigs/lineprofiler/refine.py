@@ -31,7 +31,7 @@ import scipy.sparse as sps
 
 from robocal.diagnostics import Diagnostic
 from robocal.errors import InputError, NotEnoughDataError, RobocalError
-from robocal.estimation import Problem, robust_cost, solve
+from robocal.estimation import Problem, loss_derivatives, robust_cost, solve
 from robocal.geometry import matrix_from_rotvec, rotvec_from_matrix, transform_from
 from robocal.kinematics import DHChain
 from robocal.validation import check_array
@@ -344,21 +344,9 @@ def _loss_weights(z: np.ndarray, loss: str) -> tuple[np.ndarray, np.ndarray]:
 
     The gradient of the cost is ``J^T rho' f``; ``J^T (rho' + 2 z rho'') J`` is the Gauss-Newton
     matrix SciPy's trust-region method uses for a robust loss (floored at machine epsilon)."""
-    if loss == "soft_l1":
-        r1 = 1.0 / np.sqrt(1.0 + z)
-        r2 = -0.5 * r1**3
-    elif loss == "huber":
-        big = z > 1.0
-        r1 = np.where(big, 1.0 / np.sqrt(np.where(big, z, 1.0)), 1.0)
-        r2 = np.where(big, -0.5 * r1**3, 0.0)
-    elif loss == "cauchy":
-        r1 = 1.0 / (1.0 + z)
-        r2 = -(r1**2)
-    elif loss == "arctan":
-        r1 = 1.0 / (1.0 + z**2)
-        r2 = -2.0 * z * r1**2
-    else:
+    if loss == "linear":
         return np.ones_like(z), np.ones_like(z)
+    r1, r2 = loss_derivatives(z, loss)
     return r1, np.maximum(r1 + 2.0 * z * r2, np.finfo(float).eps)
 
 
