@@ -275,3 +275,20 @@ def test_wrap_angle_range_and_representative():
     np.testing.assert_allclose(np.exp(1j * w), np.exp(1j * a), atol=1e-12)
     ref = np.radians(270.0)
     assert np.isclose(ref + wrap_angle(np.radians(-88.7) - ref), np.radians(271.3))  # near the reference
+
+
+def test_so3_left_jacobian_is_the_derivative_of_exp_under_left_perturbation():
+    from robocal.geometry import matrix_from_rotvec, rotvec_from_matrix, so3_left_jacobian
+
+    rng = np.random.default_rng(11)
+    w = np.vstack([rng.normal(size=(4, 3)), [[1e-8, -2e-8, 3e-9]]])
+    J = so3_left_jacobian(w)
+    assert J.shape == (5, 3, 3)
+    h = 1e-7
+    for k in range(len(w)):
+        for j in range(3):
+            e = np.zeros(3)
+            e[j] = h
+            # exp(w + e) exp(w)^-1 = exp(J e): the rotation vector of the left increment, per unit step
+            d = rotvec_from_matrix(matrix_from_rotvec(w[k] + e) @ matrix_from_rotvec(w[k]).T) / h
+            np.testing.assert_allclose(J[k][:, j], d, atol=1e-6)

@@ -37,6 +37,7 @@ __all__ = [
     "rotation_distance",
     "project_to_rotation",
     "small_rotation_update",
+    "so3_left_jacobian",
     "wrap_angle",
 ]
 
@@ -240,6 +241,23 @@ def small_rotation_update(R, omega, *, left: bool = True) -> np.ndarray:
     """Apply a rotation-vector increment: ``exp([w]x) R`` (left) or ``R exp([w]x)``."""
     dR = matrix_from_rotvec(omega)
     return dR @ R if left else R @ dR
+
+
+def so3_left_jacobian(omega) -> np.ndarray:
+    """SO(3) left Jacobian ``J_l(w)`` (..., 3, 3): ``exp(w + e) = exp(J_l(w) e) exp(w)`` to first order.
+
+    ``J_l = I + (1 - cos t) / t^2 [w]x + (t - sin t) / t^3 [w]x^2``, ``t = |w|``
+    (series below 1e-6 rad); the derivative of a left-perturbed rotation
+    vector parameterisation.
+    """
+    v = np.asarray(omega, dtype=float)
+    th = np.linalg.norm(v, axis=-1)[..., None, None]
+    Kx = skew(v)
+    small = th < 1e-6
+    ths = np.where(small, 1.0, th)
+    a = np.where(small, 0.5 - th**2 / 24.0, (1.0 - np.cos(ths)) / ths**2)
+    b = np.where(small, 1.0 / 6.0 - th**2 / 120.0, (ths - np.sin(ths)) / ths**3)
+    return np.eye(3) + a * Kx + b * (Kx @ Kx)
 
 
 def wrap_angle(a):

@@ -39,6 +39,7 @@ from robocal.geometry import (
     matrix_from_rotvec,
     project_to_rotation,
     rotvec_from_matrix,
+    so3_left_jacobian,
     transform_from,
     wahba_rotation,
 )
@@ -228,16 +229,6 @@ def _segment(cloud: np.ndarray, n_planes: int = 3, tol: float = 0.3e-3, iters: i
     return labels
 
 
-def _so3_left_jacobian(w) -> np.ndarray:
-    """``J_l(w)``: ``exp(w + dw) = exp(J_l(w) dw) exp(w)`` to first order (3, 3)."""
-    w = np.asarray(w, float)
-    th = float(np.linalg.norm(w))
-    K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-    if th < 1e-6:
-        return np.eye(3) + 0.5 * K + K @ K / 6.0
-    return np.eye(3) + (1 - np.cos(th)) / th**2 * K + (th - np.sin(th)) / th**3 * K @ K
-
-
 def _block_scan_residuals(mu, su, lu, u0, b1, b2, R0):
     """Residuals of eq. 11 and their analytic Jacobian over ``x = (a, b, w, t)`` (8,).
 
@@ -262,7 +253,7 @@ def _block_scan_residuals(mu, su, lu, u0, b1, b2, R0):
         n = (matrix_from_rotvec(x[2:5]) @ R0).T[lu]  # (K, 3) face normals in L
         d = mu + su[:, None] * u - x[5:8]
         Jab = su[:, None] * (n @ ((np.eye(3) - np.outer(u, u)) / nv) @ np.column_stack([b1, b2]))
-        return np.column_stack([Jab, np.cross(n, d) @ _so3_left_jacobian(x[2:5]), -n])
+        return np.column_stack([Jab, np.cross(n, d) @ so3_left_jacobian(x[2:5]), -n])
 
     return fun, jac
 

@@ -50,6 +50,7 @@ from robocal.geometry import (
     rotation_angle,
     rotvec_from_matrix,
     skew,
+    so3_left_jacobian,
     transform_from,
 )
 from robocal.rigs.mirror.checks import (
@@ -665,18 +666,6 @@ class _Layout:
         return block_diag(*wm), block_diag(*wb)
 
 
-def _left_jacobian(v: np.ndarray) -> np.ndarray:
-    """SO(3) left Jacobian ``J_l(v)`` (..., 3, 3): ``exp(v + e) = exp(J_l e) exp(v)`` to first order."""
-    v = np.asarray(v, dtype=float)
-    th = np.linalg.norm(v, axis=-1)[..., None, None]
-    Kx = skew(v)
-    small = th < 1e-6
-    ths = np.where(small, 1.0, th)
-    a = np.where(small, 0.5 - th**2 / 24.0, (1.0 - np.cos(ths)) / ths**2)
-    b = np.where(small, 1.0 / 6.0 - th**2 / 120.0, (ths - np.sin(ths)) / ths**3)
-    return np.eye(3) + a * Kx + b * (Kx @ Kx)
-
-
 def residual_model(camera: CameraModel, rectangle: MarkerRectangle, layout: _Layout, R_rc_ref, R_cm_ref):
     """Residual functions of the joint problem and their analytic Jacobians.
 
@@ -710,7 +699,7 @@ def residual_model(camera: CameraModel, rectangle: MarkerRectangle, layout: _Lay
         if not want_jac:
             return (camera.project(pc, check=False) - layout.marker_uv).reshape(-1, 2)
         _, Jp = camera.project_jacobian(pc, check=False)  # (K, 4, 2, 3)
-        Jl = _left_jacobian(p["rot_cm"])  # (K, 3, 3)
+        Jl = so3_left_jacobian(p["rot_cm"])  # (K, 3, 3)
         dR = -skew(Ra) @ Jl[:, None]  # (K, 4, 3, 3)
         Jrot = np.zeros((K, 4, 2, K, 3))
         Jt = np.zeros((K, 4, 2, K, 3))
@@ -725,8 +714,8 @@ def residual_model(camera: CameraModel, rectangle: MarkerRectangle, layout: _Lay
         R_rc, t_rc = T_r_c[:3, :3], T_r_c[:3, 3]
         n, d = mirror_plane(T_c_m)
         out, jac = [], {"rot_rc": [], "t_rc": [], "rot_cm": [], "t_cm": []}
-        Jl_rc = _left_jacobian(p["rot_rc"])
-        Jl_cm = _left_jacobian(p["rot_cm"])
+        Jl_rc = so3_left_jacobian(p["rot_rc"])
+        Jl_cm = so3_left_jacobian(p["rot_cm"])
         for k in range(K):
             q = layout.P[k] - t_rc
             pc = q @ R_rc  # R_rc^T q
