@@ -114,6 +114,12 @@ def window_observations(steps: SensorSteps, poses, window: float):
     return M, dP, th[k0 + m] - th[k0]
 
 
+def array_estimate(array: SensorArray) -> dict:
+    """``{"<sensor>.R": m, ".psi": rad, ".phi": rad, ".scale": 1}`` of an array, sensor by sensor."""
+    return {f"{nm}.{p}": float(getattr(array, p)[i]) for i, nm in enumerate(array.names)
+            for p in ("R", "psi", "phi", "scale")}
+
+
 @dataclass
 class ArrayCalibration:
     """Result of :func:`calibrate_array`.
@@ -187,13 +193,7 @@ class ArrayCalibration:
         return {k: (None if v is None else float(np.hypot(v, self.systematic.get(k, 0.0)))) for k, v in self.std.items()}
 
     def estimate_dict(self) -> dict:
-        out = {}
-        for i, nm in enumerate(self.array.names):
-            out[f"{nm}.R"] = float(self.array.R[i])
-            out[f"{nm}.psi"] = float(self.array.psi[i])
-            out[f"{nm}.phi"] = float(self.array.phi[i])
-            out[f"{nm}.scale"] = float(self.array.scale[i])
-        return out
+        return array_estimate(self.array)
 
     def units(self) -> dict:
         return {k: {"R": "m", "psi": "rad", "phi": "rad", "scale": "1"}[k.split(".")[-1]] for k in self.estimate_dict()}

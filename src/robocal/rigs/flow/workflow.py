@@ -14,7 +14,7 @@ import yaml
 from robocal.diagnostics import Diagnostic
 from robocal.io import CalibrationResult, atomic_write_text, hash_inputs
 from robocal.report import Report, new_figure
-from robocal.rigs.flow.calibrate import calibrate_array, interpolate_poses
+from robocal.rigs.flow.calibrate import array_estimate, calibrate_array, interpolate_poses
 from robocal.rigs.flow.evaluate import evaluate_trajectory, plot_trajectories
 from robocal.rigs.flow.kernel import FlowConfig, compute_flow_sequence, speed_limit
 from robocal.rigs.flow.log import RunSpec, load_steps, read_poses_csv, write_flow_csv, write_poses_csv
@@ -187,10 +187,6 @@ def calibration_run(spec: RunSpec, *, config: FlowConfig | None = None, window: 
     return cal, steps
 
 
-def _estimate(array: SensorArray) -> dict:
-    return {f"{nm}.{p}": float(getattr(array, p)[i]) for i, nm in enumerate(array.names) for p in ("R", "psi", "phi", "scale")}
-
-
 def calibration_result(cal, spec: RunSpec | None = None, *, method: str = "windowed-lsq") -> CalibrationResult:
     """The shared result schema: ``std`` is the statistical std (segment jackknife, see
     :func:`~robocal.rigs.flow.calibrate.calibrate_array`); the kernel systematic, their
@@ -204,7 +200,7 @@ def calibration_result(cal, spec: RunSpec | None = None, *, method: str = "windo
         diagnostics={"undetermined_kept_nominal": list(cal.undetermined),
                      "std_systematic_kernel": {k: cal.systematic.get(k) for k in keys},
                      "std_systematic_kernel_source": cal.systematic_source,
-                     "estimate_kernel_debiased": (None if cal.array_debiased is None else _estimate(cal.array_debiased)),
+                     "estimate_kernel_debiased": (None if cal.array_debiased is None else array_estimate(cal.array_debiased)),
                      "std_total": cal.total_std(),
                      "std_model_white_noise": {k: cal.std_model.get(k) for k in keys},
                      "std_jackknife": {k: cal.std_jackknife.get(k) for k in keys},
