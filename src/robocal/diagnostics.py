@@ -23,6 +23,8 @@ CODES = {
     "near_singularity": "configuration close to a kinematic singularity",
     "low_quality": "measurements of low quality (indices in `indices`): excluded, or kept at a lower accuracy as the message says",
     "dropped": "inputs were dropped (indices in `indices`)",
+    "implausible_input": "the answer is physically implausible and was kept only because of --accept-implausible "
+                         "(the likely slip, when one explained it, in `params`)",
 }
 
 

@@ -21,6 +21,8 @@ __all__ = [
     "InconsistentDataError",
     "DetectionError",
     "ConvergenceError",
+    "ImplausibleInputError",
+    "ResourceError",
 ]
 
 
@@ -91,3 +93,28 @@ class DetectionError(RobocalError):
 
 class ConvergenceError(RobocalError, RuntimeError):
     """An iterative solver did not reach a usable solution."""
+
+
+class ImplausibleInputError(InputError):
+    """The input reads without error but the fit it gives is physically implausible.
+
+    Raised by :func:`robocal.plausibility.check_slips` when a likely slip (a
+    unit off by 1000, degrees read as radians, a transposed board, swapped
+    columns, an inverted pose, ...) explains the data far better, or when no
+    slip does but the answer is still outside physical bounds. ``slip`` names
+    the slip that explained it (``None`` when none did). The CLI's
+    ``--accept-implausible`` turns it into an ``implausible_input`` warning.
+    """
+
+    def __init__(self, message: str, *, source: str | None = None, slip: str | None = None):
+        super().__init__(message, source=source)
+        self.slip = slip
+
+    def with_source(self, source: str) -> "ImplausibleInputError":
+        err = super().with_source(source)
+        err.slip = self.slip
+        return err
+
+
+class ResourceError(RobocalError, MemoryError):
+    """The work asked for needs more memory (or another resource) than the machine has."""

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from robocal.errors import InputError
 from robocal.io import CalibrationResult, write_result
+from robocal.progress import progress  # noqa: F401 - re-exported for the rigs' CLI modules
 from robocal.report import Report
 
 __all__ = [
@@ -21,10 +22,10 @@ __all__ = [
     "add_seed_argument",
     "prepare_out_dir",
     "write_run",
-    "progress",
     "examples_epilog",
     "RawHelp",
     "OneLineErrorParser",
+    "add_accept_implausible_argument",
 ]
 
 
@@ -109,10 +110,9 @@ def write_run(out_dir: Path, result: CalibrationResult | None, report: Report | 
     return paths
 
 
-def progress(iterable: Iterable, *, desc: str = "", total: int | None = None, enabled: bool = True):
-    """A tqdm progress bar on stderr (a plain iterator when disabled or not a terminal)."""
-    if not enabled or not sys.stderr.isatty():
-        return iterable
-    from tqdm import tqdm
-
-    return tqdm(iterable, desc=desc, total=total, leave=False, file=sys.stderr)
+def add_accept_implausible_argument(parser: argparse.ArgumentParser) -> None:
+    """``--accept-implausible``: go on when the answer is implausible (see :mod:`robocal.plausibility`)."""
+    parser.add_argument(
+        "--accept-implausible", action="store_true",
+        help="when the answer is physically implausible (a likely unit slip, a transposed board, ...), "
+             "write it with an implausible_input warning instead of stopping with exit status 2")

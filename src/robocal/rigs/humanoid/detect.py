@@ -89,7 +89,7 @@ def detect_views(model: HumanoidModel, data, *, x=None, progress: bool = False, 
     corners = np.full((n_views, N, 2), np.nan)
     iterator = range(n_views)
     if progress:
-        from robocal.cli import progress as _progress
+        from robocal.progress import progress as _progress
 
         iterator = _progress(iterator, desc="detecting corners", total=n_views)
     notes = data.messages if messages is None else messages

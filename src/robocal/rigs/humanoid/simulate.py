@@ -289,7 +289,7 @@ def simulate_dataset(model: HumanoidModel, rng: np.random.Generator, *, n_per_fo
     images = []
     iterator = range(len(q))
     if progress:
-        from robocal.cli import progress as _progress
+        from robocal.progress import progress as _progress
 
         iterator = _progress(iterator, desc="rendering", total=len(q))
     for v in iterator:
