@@ -34,6 +34,7 @@ __all__ = [
     "OPENCV_DIST_TERMS",
     "BROWN_CONRADY_MODELS",
     "PRINCIPAL_POINT_OFF_CENTRE",
+    "FOCAL_MAX_PX",
 ]
 
 #: OpenCV distortion vector lengths and what their terms beyond (k1, k2, p1, p2, k3) are (the cv2 flag).
@@ -48,6 +49,8 @@ OPENCV_DIST_TERMS = {
 BROWN_CONRADY_MODELS = ("plumb_bob", "rational_polynomial", "radtan", "pinhole-brown-conrady")
 #: A principal point farther than this fraction of the image size from the centre is warned about.
 PRINCIPAL_POINT_OFF_CENTRE = 0.2
+#: Focal lengths [px] at or above this are refused (see CameraModel): 1e6 px is a 0.06 deg field of view.
+FOCAL_MAX_PX = 1e6
 #: Keys of the distortion vector, in the order :func:`camera_from_document` looks for them.
 _DIST_KEYS = ("dist", "dist_coeffs", "distortion_coefficients", "D")
 
@@ -173,6 +176,12 @@ class CameraModel:
         for name in ("fx", "fy"):
             if not getattr(self, name) > 0:
                 raise InputError(f"CameraModel.{name} must be > 0 [px], got {getattr(self, name)!r}")
+            # 1e6 px is a 0.06 deg field of view over 1000 px (a 5 m lens on 5 um pixels): beyond it the
+            # number is a unit slip or garbage, and K's condition number (~f^2) defeats the solvers.
+            if not getattr(self, name) < FOCAL_MAX_PX:
+                raise InputError(f"CameraModel.{name} must be < {FOCAL_MAX_PX:.0e} px (a field of view of "
+                                 f"{np.degrees(1000 / FOCAL_MAX_PX):.2g} deg over 1000 px), got "
+                                 f"{getattr(self, name):.6g}: a focal length in other units, or not a focal length")
         dist = check_array(self.dist, "CameraModel.dist")
         if dist.ndim != 1 or dist.shape[0] not in (4, 5):
             raise InputError(

@@ -275,8 +275,31 @@ def solve_pnp_planar(camera: CameraModel, p_obj, uv, *, refine: bool = True) -> 
             continue
     if not sols:
         raise ConvergenceError("planar PnP: every IPPE pose puts points behind the camera")
-    sols.sort(key=lambda sol: sol.rms_px)
-    return PnPCandidates(sols)
+    return PnPCandidates(_order_candidates(sols))
+
+
+#: Two planar-PnP candidates whose RMS differ by less than this fraction (plus _TIE_ABS_PX) are a tie:
+#: both refinements stop at ~1e-9 relative parameter precision, which moves an RMS by ~1e-12
+#: relative, so a real difference is orders of magnitude above it and no pixel noise can tell
+#: the two apart below it.
+_TIE_RTOL = 1e-6
+_TIE_ABS_PX = 1e-9
+
+
+def _order_candidates(sols: list) -> list:
+    """Best RMS first; a near-tie is broken by robocal, not by the order OpenCV returns the poses in.
+
+    OpenCV 4 and 5 return IPPE's two poses in different orders, and when both fit
+    equally (noise-free data, a frontal target) a plain sort by RMS kept that
+    order or flipped on the last bits. Ties are ordered by the rotation angle of
+    ``R_cam_obj`` (smaller first: the less tilted pose), then by ``t_cam_obj``.
+    """
+    sols = sorted(sols, key=lambda sol: sol.rms_px)
+    if len(sols) == 2:
+        a, b = sols
+        if b.rms_px - a.rms_px <= _TIE_RTOL * b.rms_px + _TIE_ABS_PX:
+            sols.sort(key=lambda sol: (round(float(np.linalg.norm(sol.rvec)), 9), *np.round(sol.tvec, 12)))
+    return sols
 
 
 def pnp_jacobian(camera: CameraModel, p_obj, T_cam_obj) -> tuple[np.ndarray, np.ndarray]:

@@ -60,7 +60,7 @@ def test_camera_from_opencv_filestorage_yaml_xml_and_json(tmp_path, setup):
         fs.write("camera_matrix", np.array(K))
         fs.write("distortion_coefficients", np.array([D]))
         fs.release()
-    assert (tmp_path / "cam.yaml").read_text().startswith("%YAML:1.0")  # what yaml.safe_load refuses
+    assert (tmp_path / "cam.yaml").read_text().startswith(("%YAML:1.0", "%YAML 1.2"))  # OpenCV 4 / 5 header
     (tmp_path / "cam.json").write_text(json.dumps({"camera_matrix": K, "dist_coeffs": [D], "image_size": [768, 576]}))
     (tmp_path / "nosize.json").write_text(json.dumps({"camera_matrix": K, "dist_coeffs": [D]}))
     flat = [v for row in K for v in row]
@@ -217,9 +217,14 @@ def test_a_shifted_body_model_moves_the_answer_by_the_shift_in_every_direction(s
     ref = calibrate_single(cam, scene.rectangle, scene.body_points_r, obs[0], sigma_px=0.5)
     for delta in np.eye(3) * 0.1:
         s = calibrate_single(cam, scene.rectangle, scene.body_points_r + delta, obs[0], sigma_px=0.5)
-        assert np.allclose(s.T_r_c[:3, 3] - ref.T_r_c[:3, 3], delta, atol=1e-8)
-        assert np.allclose(s.T_r_c[:3, :3], ref.T_r_c[:3, :3], atol=1e-9)
-        assert np.allclose(s.body_residuals, ref.body_residuals, atol=1e-8)
+        # two separate iterative solves (SQPnP + LM) of problems that differ by the shift: they agree to
+        # the LM's convergence (~2e-9 rad / 1e-9 m measured), not to the last bit, and that depends on the
+        # CPU; 1e-7 (rad, m) is far below any real change (~1e-3 for a model off by 1 mm). A pose that
+        # close moves a residual by at most fx * 1e-7 rad + fx * 1e-7 m / z (z ~ 0.6 m) ~ 2e-4 px.
+        pose_tol = 1e-7
+        assert np.allclose(s.T_r_c[:3, 3] - ref.T_r_c[:3, 3], delta, rtol=0, atol=pose_tol)
+        assert np.allclose(s.T_r_c[:3, :3], ref.T_r_c[:3, :3], rtol=0, atol=pose_tol)
+        assert np.allclose(s.body_residuals, ref.body_residuals, rtol=0, atol=3 * cam.fx * pose_tol)
         assert [w.message for w in s.warnings] == [w.message for w in ref.warnings]
     # ... and every result says so
     from robocal.rigs.mirror.report import result_from_calibration

@@ -66,14 +66,13 @@ image file (ArUco path) and bounds the image points.
 from __future__ import annotations
 
 import os
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import yaml
 
-from robocal.camera import CameraModel, MarkerRectangle, camera_from_document
+from robocal.camera import CameraModel, MarkerRectangle, camera_from_document, read_camera_file
 from robocal.errors import FileFormatError, RobocalError
 from robocal.geometry import transform_from
 from robocal.io import Document, atomic_write_text, load_document
@@ -113,59 +112,6 @@ def _uv(doc, key, n=None):
     if n is not None and a.shape[0] != n:
         raise doc.error(key, f"must have {n} rows, got {a.shape[0]}")
     return a
-
-
-def _mapping_from_filestorage(path: Path) -> dict:
-    """Top-level scalars and matrices of an OpenCV FileStorage file (XML or YAML) as plain Python."""
-    import cv2
-
-    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    try:
-        if not fs.isOpened():
-            raise FileFormatError("cv2.FileStorage cannot read this file", source=str(path))
-        out = {}
-        for key in fs.root().keys():
-            node = fs.getNode(key)
-            if node.isInt():
-                out[key] = int(node.real())
-            elif node.isReal():
-                out[key] = float(node.real())
-            elif node.isString():
-                out[key] = node.string()
-            else:
-                m = node.mat()
-                if m is not None:
-                    out[key] = np.asarray(m, dtype=float).tolist()
-                elif node.isSeq():
-                    out[key] = [node.at(i).real() for i in range(node.size())]
-        return out
-    finally:
-        fs.release()
-
-
-def read_camera_file(path) -> dict:
-    """The raw mapping of a camera calibration file (YAML, OpenCV FileStorage YAML/XML, or JSON).
-
-    OpenCV's ``%YAML:1.0`` header and ``!!opencv-matrix`` tags, which a plain
-    YAML reader rejects, are accepted: the matrices come back as
-    ``{rows, cols, dt, data}`` mappings (read by :func:`load_camera`).
-    """
-    path = Path(path)
-    if not path.exists():
-        raise FileFormatError("camera file not found", source=str(path))
-    if path.suffix.lower() == ".xml":
-        return _mapping_from_filestorage(path)
-    if path.suffix.lower() not in (".yaml", ".yml", ".json"):
-        raise FileFormatError(f"camera file: expected .yaml, .yml, .json or .xml (cv2.FileStorage), got "
-                              f"{path.suffix or 'no suffix'!r}", source=str(path))
-    text = path.read_text(encoding="utf-8-sig")
-    if path.suffix.lower() != ".json":
-        # cv2.FileStorage writes a "%YAML:1.0" directive and "!!opencv-matrix" tags
-        text = re.sub(r"^%YAML[: ]1\.[0-9]+[ \t]*$", "", text, count=1, flags=re.M)
-        text = re.sub(r"!!opencv-(?:nd-)?matrix", "", text)
-    from robocal.io import parse_document
-
-    return parse_document(text, suffix=path.suffix.lower(), source=str(path)).data
 
 
 def load_camera(doc: Document, *, base_dir=None) -> CameraModel:
@@ -208,7 +154,7 @@ def load_input(path) -> MirrorInput:
         head = ""  # load_document says what is wrong
     hint = ("this looks like a camera calibration file (OpenCV), not a mirror input: reference it from the input "
             "file as 'camera: {file: <this file>}' (docs/rigs/mirror.md, 'Your own camera')")
-    if head.startswith("%YAML:1."):
+    if head.startswith("%YAML:1.") or (head.startswith("%YAML 1.") and "!!opencv-matrix" in head):  # OpenCV 4 / 5
         raise FileFormatError(hint, source=src)
     doc = load_document(path)
     if "camera" not in doc and ("camera_matrix" in doc or "K" in doc):

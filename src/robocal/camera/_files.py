@@ -1,0 +1,110 @@
+"""Camera calibration files of other tools (OpenCV FileStorage YAML/XML, ROS, JSON) as a raw mapping.
+
+The reader is shared by every rig that takes ``camera: {file: ...}``; the
+layouts inside the mapping are read and checked by
+:func:`robocal.camera.camera_from_document`.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from robocal.errors import FileFormatError
+
+__all__ = ["read_camera_file"]
+
+# cv2.FileStorage writes "%YAML:1.0" (OpenCV 4) or "%YAML 1.2" + "---" (OpenCV 5) as
+# its first line; PyYAML refuses the first form, and neither carries information.
+_YAML_DIRECTIVE = re.compile(r"^%YAML[: ]1\.[0-9]+[ \t]*$", re.M)
+# "!!opencv-matrix" is an unknown tag to a safe YAML loader; without it the
+# matrix is a plain {rows, cols, dt, data} mapping, which camera_from_document reads.
+_OPENCV_TAG = re.compile(r"!!opencv-(?:nd-)?matrix")
+
+
+def _mapping_from_filestorage(path: Path) -> dict:
+    """Top-level scalars and matrices of an OpenCV FileStorage XML file as plain Python."""
+    import cv2
+
+    try:
+        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    except (cv2.error, SystemError) as exc:  # the Python bindings wrap cv2.error in a SystemError
+        err = exc.__cause__ or exc
+        m = re.search(r"error: \(-?\d+:[^)]*\) (.*)", str(err))
+        detail = m.group(1).strip() if m else type(err).__name__
+        raise FileFormatError(f"cv2.FileStorage cannot parse this XML file ({detail})", source=str(path)) from None
+    try:
+        if not fs.isOpened():
+            raise FileFormatError("cv2.FileStorage cannot read this file", source=str(path))
+        out = {}
+        for key in fs.root().keys():
+            node = fs.getNode(key)
+            if node.isInt():
+                out[key] = int(node.real())
+            elif node.isReal():
+                out[key] = float(node.real())
+            elif node.isString():
+                out[key] = node.string()
+            else:
+                m = node.mat()
+                if m is not None:
+                    out[key] = np.asarray(m, dtype=float).tolist()
+                elif node.isSeq():
+                    out[key] = [node.at(i).real() for i in range(node.size())]
+        return out
+    finally:
+        fs.release()
+
+
+def read_camera_file(path) -> dict:
+    """The raw mapping of a camera calibration file (YAML, OpenCV FileStorage YAML/XML, or JSON).
+
+    OpenCV's ``%YAML:1.0`` (OpenCV 4) and ``%YAML 1.2`` (OpenCV 5) headers and
+    its ``!!opencv-matrix`` tags, which a plain YAML reader rejects, are
+    accepted: the matrices come back as ``{rows, cols, dt, data}`` mappings
+    (read by :func:`robocal.camera.camera_from_document`).
+
+    Raises
+    ------
+    FileFormatError
+        One line naming the file: missing, unreadable (a folder, no
+        permission), not UTF-8 text (a binary file), not parseable, or not a
+        mapping at the top level. The values themselves (a focal length of
+        1e300, say) are checked by :func:`camera_from_document`.
+    """
+    path = Path(path)
+    src = str(path)
+    if not path.exists():
+        raise FileFormatError("camera file not found", source=src)
+    suffix = path.suffix.lower()
+    if suffix not in (".yaml", ".yml", ".json", ".xml"):
+        raise FileFormatError(f"camera file: expected .yaml, .yml, .json or .xml (cv2.FileStorage), got "
+                              f"{path.suffix or 'no suffix'!r}", source=src)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise FileFormatError(f"camera file cannot be read ({exc.strerror or exc})", source=src) from None
+    if not raw.strip():
+        raise FileFormatError("camera file is empty", source=src)
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise FileFormatError(f"camera file is not UTF-8 text (byte 0x{raw[exc.start]:02x} at offset {exc.start}; "
+                              "a binary file?): expected YAML, JSON or cv2.FileStorage XML", source=src) from None
+    if "\x00" in text:
+        raise FileFormatError("camera file holds NUL bytes (a binary file?): expected YAML, JSON or "
+                              "cv2.FileStorage XML", source=src)
+    if suffix == ".xml":
+        return _mapping_from_filestorage(path)
+    if suffix != ".json":
+        text = _YAML_DIRECTIVE.sub("", text, count=1)
+        text = _OPENCV_TAG.sub("", text)
+    from robocal.io import parse_document
+
+    data = parse_document(text, suffix=suffix, source=src).data
+    if not isinstance(data, dict):
+        raise FileFormatError(f"camera file must hold a mapping (camera_matrix, dist_coeffs, ... or fx, fy, ...) at "
+                              f"the top level, got a {type(data).__name__}", source=src)
+    return data
