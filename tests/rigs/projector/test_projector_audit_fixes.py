@@ -67,13 +67,18 @@ def test_stated_noise_gives_std_that_covers_the_truth_with_few_points(n):
     nominal = default_nominal(truth)
     design = sample_floor_points(truth, n, np.random.default_rng(3))
     rng = np.random.default_rng(7)
-    z = []
+    z, held = [], 0
     for _ in range(80):
         sc = simulate_calibration(rng, truth=truth, nominal=nominal, points_W=design, sigma=SIGMA)
         b = _calibrate(sc).best
+        if "held" in b.extra:  # h above H or the tilt offset beyond 5 deg: held at nominal (issue 19)
+            held += 1
+            continue
         z.append([(b.yaw - yaw_of(truth.R_0_W)) / b.std["yaw"], (b.extra["h"] - truth.h) / b.std["h"],
                   (b.extra["offsets"][1] - truth.offsets[1]) / b.std["tilt_offset"],
                   (b.t_0_W[0] - truth.t_0_W[0]) / b.std["t_x"]])
+    # N = 3 leaves one dof: std(h) ~ 0.1 m against H - h = 0.12 m, so ~ 1 in 5 fits goes above H (held)
+    assert held <= 24, held
     z = np.abs(np.array(z))
     # residual-scaled std with 1 (n = 3) or 3 (n = 4) dof gave Student-t tails (n = 3: ~20 % beyond 3 sigma)
     assert np.all(np.mean(z > 3, axis=0) <= 0.05), np.mean(z > 3, axis=0)

@@ -13,12 +13,14 @@ from robocal.errors import (
     NotEnoughDataError,
     ShapeError,
     UnitError,
+    ImplausibleInputError,
 )
 from robocal.estimation import fisher_bound, monte_carlo
 from robocal.geometry import matrix_from_rotvec, rigid_fit_rotation_crb
 from robocal.rigs.projector.calibrate import (
     calibrate,
     closed_form,
+    check_correspondences,
     distance_consistency,
     floor_pose_jacobian,
     nonlinear,
@@ -211,8 +213,11 @@ def test_bad_inputs_raise_named_errors():
         calibrate(pw[:, :1], points_0=p0)
     with pytest.raises(ShapeError, match="same number"):
         calibrate(pw[:3], points_0=p0)
-    with pytest.raises(UnitError, match="same length unit"):
+    with pytest.raises(ImplausibleInputError, match="looks like cm declared as m") as info:
         calibrate(pw * 100, points_0=np.column_stack([p0[:, :2], p0[:, 2]]))  # cm vs m
+    assert info.value.slip == "world_cm_as_m"
+    with pytest.raises(UnitError, match="same length unit"):  # the bare check still names the unit mix-up
+        check_correspondences(pw * 100, p0)
     with pytest.raises(InputError, match="z must equal"):
         calibrate(pw, points_0=p0 * [1, 1, 0] + [0, 0, -2.9] + np.array([[0, 0, 0.1], [0, 0, 0], [0, 0, 0], [0, 0, 0]]))
     with pytest.raises(InputError, match="methods"):

@@ -74,6 +74,10 @@ __all__ = [
     "floor_prediction_columns",
     "rotation_error",
     "beyond_tilt_limit",
+    "floor_covariance",
+    "deleted_residual_outliers",
+    "spread_ratio",
+    "TILT_OFFSET_LIMIT",
 ]
 
 METHODS = ("seed", "closed_form", "nonlinear")
@@ -95,8 +99,12 @@ def _as_floor_points(p, name: str, *, z=None) -> np.ndarray:
     return p
 
 
-def check_correspondences(points_W, points_0, *, min_points: int = 3, rel_tol: float = 1e-6):
+def check_correspondences(points_W, points_0, *, min_points: int = 3, rel_tol: float = 1e-6,
+                          unit_check: bool = True):
     """Validate paired floor points; returns ``(points_W, points_0)`` as (N, 3) float arrays (m).
+
+    Every test is O(N log N) in time and O(N) in memory (a k-d tree for duplicates,
+    distances to the centroid for the unit check), so 10^6 points are checked in seconds.
 
     Parameters
     ----------
@@ -104,6 +112,9 @@ def check_correspondences(points_W, points_0, *, min_points: int = 3, rel_tol: f
         World floor points (z = 0 when 2 columns are given).
     points_0 : array_like, shape (N, 3)
         The same spots in ``{0}`` (all at ``z_0 = -H``).
+    unit_check : bool
+        Raise :class:`UnitError` when the two sets differ in scale by more than 2x
+        (:func:`calibrate` does this check itself, naming the likely slip).
 
     Raises
     ------
@@ -116,6 +127,8 @@ def check_correspondences(points_W, points_0, *, min_points: int = 3, rel_tol: f
     UnitError
         Distances in the two frames differ by a factor typical of mixed units.
     """
+    from scipy.spatial import cKDTree
+
     pw = _as_floor_points(points_W, "points_W")
     p0 = check_array(points_0, "points_0")
     if p0.ndim != 2 or p0.shape[1] != 3:
@@ -129,25 +142,45 @@ def check_correspondences(points_W, points_0, *, min_points: int = 3, rel_tol: f
                                  f"got {n}")
     scale = max(np.ptp(pw, axis=0).max(), np.ptp(p0, axis=0).max(), 1e-300)
     for name, p in (("points_W", pw), ("points_0", p0)):
-        D = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1)
-        iu = np.triu_indices(n, 1)
-        dup = D[iu] <= rel_tol * scale
-        if np.any(dup):
-            k = int(np.flatnonzero(dup)[0])
-            raise DegenerateGeometryError(f"{name}: points {iu[0][k]} and {iu[1][k]} coincide (duplicated point)")
+        dist, idx = cKDTree(p).query(p, k=2)  # the nearest other point of each
+        dup = np.flatnonzero(dist[:, 1] <= rel_tol * scale)
+        if dup.size:
+            i = int(dup[0])
+            j = int(idx[i, 1]) if int(idx[i, 1]) != i else int(idx[i, 0])
+            raise DegenerateGeometryError(f"{name}: points {min(i, j)} and {max(i, j)} coincide (duplicated point)")
         c = p - p.mean(axis=0)
         sv = np.linalg.svd(c, compute_uv=False)
         if sv[1] <= 1e-6 * sv[0]:
             raise DegenerateGeometryError(f"{name}: all {n} points lie on one line (second singular value "
                                           f"{sv[1] / sv[0]:.2g} of the first): the rotation about it is undetermined")
-    iu = np.triu_indices(n, 1)
-    dW = np.linalg.norm(pw[iu[0]] - pw[iu[1]], axis=1)
-    d0 = np.linalg.norm(p0[iu[0]] - p0[iu[1]], axis=1)
-    ratio = float(np.median(d0 / dW))
-    if not 0.5 < ratio < 2.0:
-        raise UnitError(f"pairwise distances in {{0}} are {ratio:.3g} times those in {{W}}: are the two point sets "
-                        f"in the same length unit (m, cm, mm)?")
+    if unit_check:
+        ratio = spread_ratio(pw, p0)
+        if not 0.5 < ratio < 2.0:
+            raise UnitError(f"distances in {{0}} are {ratio:.3g} times those in {{W}}: are the two point sets "
+                            f"in the same length unit (m, cm, mm)?")
     return pw, p0
+
+
+def spread_ratio(points_W, points_0) -> float:
+    """Median over the points of ``|^0P_i - c_0| / |^WP_i - c_W|`` (c: centroids), O(N).
+
+    1 for a rigid correspondence; 1000 when one set is in mm and the other in m.
+    The median keeps one gross outlier from moving it.
+    """
+    pw = np.asarray(points_W, dtype=float)[:, :2]
+    p0 = np.asarray(points_0, dtype=float)[:, :2]
+    dw = np.linalg.norm(pw - pw.mean(axis=0), axis=1)
+    d0 = np.linalg.norm(p0 - p0.mean(axis=0), axis=1)
+    ok = dw > 1e-3 * max(float(dw.max()), 1e-300)
+    return float(np.median(d0[ok] / dw[ok]))
+
+
+#: Above this many points the pairwise check uses anchor points (O(N) pairs) instead of all N (N - 1) / 2 pairs.
+ALL_PAIRS_MAX = 100
+#: Number of anchor points of the O(N) pairwise check.
+N_ANCHORS = 64
+#: Family-wise false-alarm rate of the pairwise check when the noise is stated (Bonferroni over the pairs).
+CONSISTENCY_ALPHA = 0.01
 
 
 @dataclass
@@ -156,8 +189,10 @@ class ConsistencyReport:
 
     A rigid transform preserves distances, so ``|^W P_i - ^W P_j|`` must equal
     ``|^0 P_i - ^0 P_j|`` up to noise. ``pairs`` lists ``(i, j, d_W, d_0,
-    d_0 - d_W, relative)`` (m); ``bad_pairs`` those beyond tolerance;
-    ``suspects`` the points whose removal explains the bad pairs.
+    d_0 - d_W, relative)`` (m) of every pair checked when there are at most
+    :data:`ALL_PAIRS_MAX` points (else only the bad ones); ``bad_pairs`` those
+    beyond tolerance; ``suspects`` the points whose removal explains the bad
+    pairs, the most implicated first; ``n_pairs`` the number of pairs checked.
     """
 
     pairs: list
@@ -166,23 +201,67 @@ class ConsistencyReport:
     threshold: str
     warnings: list = field(default_factory=list)
     scale: float | None = None  # relative distance error shared by all pairs, when it explains the bad pairs
+    n_pairs: int = 0
 
     @property
     def consistent(self) -> bool:
         return not self.bad_pairs
 
-    def rows(self) -> list[dict]:
-        return [dict(i=i, j=j, d_W=dw, d_0=d0, diff=df, rel=rel, ok=(i, j) not in {(b[0], b[1]) for b in self.bad_pairs})
-                for i, j, dw, d0, df, rel in self.pairs]
+    def rows(self, limit: int = 5000) -> list[dict]:
+        bad = {(b[0], b[1]) for b in self.bad_pairs}
+        return [dict(i=i, j=j, d_W=dw, d_0=d0, diff=df, rel=rel, ok=(i, j) not in bad)
+                for i, j, dw, d0, df, rel in self.pairs[:limit]]
 
 
-def distance_consistency(points_W, points_0, *, sigma: float | None = None, n_sigma: float = 4.0,
-                         rel_tol: float = 0.02, scale_hint: str = "the model's scale is wrong") -> ConsistencyReport:
+def _pair_index(n: int):
+    """Yields ``(i, j)`` index arrays of the pairs to check, in chunks of O(N).
+
+    Up to :data:`ALL_PAIRS_MAX` points: all pairs ``i < j``. Above: each of
+    :data:`N_ANCHORS` anchor points (evenly spread over the index) with every
+    other point, each pair once. A bad point then meets 64 anchors (so it is
+    still in the most bad pairs), and a bad anchor meets every point.
+    """
+    if n <= ALL_PAIRS_MAX:
+        iu, ju = np.triu_indices(n, 1)
+        yield iu, ju
+        return
+    anchors = np.unique(np.linspace(0, n - 1, N_ANCHORS).round().astype(int))
+    is_anchor = np.zeros(n, bool)
+    for k, a in enumerate(anchors):
+        is_anchor[a] = True
+        j = np.flatnonzero(~is_anchor)  # earlier anchors already met this one
+        yield np.full(j.size, a), j
+
+
+def _pair_sigma(pw, p0, cov0, i, j, sigma):
+    """Std (m) of ``d_0 - d_W`` for pairs ``(i, j)``: world noise on both points, plus the joint-noise
+    covariance ``cov0`` (N, 2, 2) of the {0} spots projected on the pair's direction."""
+    var = np.full(i.size, 2.0 * sigma * sigma)
+    if cov0 is not None:
+        u = p0[j, :2] - p0[i, :2]
+        u /= np.maximum(np.linalg.norm(u, axis=1), 1e-300)[:, None]
+        C = cov0[i] + cov0[j]
+        var += np.einsum("ni,nij,nj->n", u, C, u)
+    return np.sqrt(var)
+
+
+def distance_consistency(points_W, points_0, *, sigma: float | None = None, n_sigma: float | None = None,
+                         rel_tol: float = 0.02, scale_hint: str = "the model's scale is wrong",
+                         cov_0=None, alpha: float = CONSISTENCY_ALPHA) -> ConsistencyReport:
     """Compare pairwise distances in ``{W}`` and ``{0}`` and name inconsistent points.
 
-    Threshold per pair: ``n_sigma * sqrt(2) * sigma`` when the world noise
-    ``sigma`` (m) is known, else ``rel_tol`` of the distance. Suspects are found
-    greedily: the point in most bad pairs is removed until no bad pair is left.
+    Threshold per pair: ``n_sigma`` times the std of ``d_0 - d_W`` when the world
+    noise ``sigma`` (m) is known (``sqrt(2) sigma``, plus the joint noise's
+    covariance ``cov_0`` (N, 2, 2, m^2, in ``{0}``) of both spots along the
+    pair), else ``rel_tol`` of the distance. Default ``n_sigma``: the two-sided
+    Gaussian quantile of ``alpha / n_pairs`` (Bonferroni), so that a consistent
+    set raises a false alarm with probability <= ``alpha`` whatever N (4.0 sigma
+    for 190 pairs, 5.6 for 640 000). Suspects are found greedily: the point in
+    most bad pairs (ties: the larger summed excess) is removed until no bad pair
+    is left, so the worst point is named first.
+
+    Memory and time are O(N): above :data:`ALL_PAIRS_MAX` points only the pairs
+    with :data:`N_ANCHORS` anchor points are checked (see :func:`_pair_index`).
 
     A model error (``H - d1`` or the tilt offset wrong) scales every ``{0}``
     distance alike, which would make most points "suspects". So with N >= 4,
@@ -190,49 +269,91 @@ def distance_consistency(points_W, points_0, *, sigma: float | None = None, n_si
     at most a third of the bad pairs, the warning reports the scale ``s`` and
     ``scale_hint`` instead, and names only the points still inconsistent after it.
     """
-    pw, p0 = check_correspondences(points_W, points_0)
+    from scipy import special
+
+    from robocal.progress import progress
+
+    pw, p0 = check_correspondences(points_W, points_0, unit_check=False)
     n = pw.shape[0]
-    iu, ju = np.triu_indices(n, 1)
-    dW = np.linalg.norm(pw[iu] - pw[ju], axis=1)
-    d0 = np.linalg.norm(p0[iu] - p0[ju], axis=1)
+    n_pairs = n * (n - 1) // 2 if n <= ALL_PAIRS_MAX else sum(len(i) for i, _ in _pair_index(n))
+    if sigma and n_sigma is None:
+        n_sigma = max(3.0, float(math.sqrt(2.0) * special.erfcinv(alpha / max(n_pairs, 1))))
+    elif n_sigma is None:
+        n_sigma = 4.0
+    cov0 = None if cov_0 is None else np.asarray(cov_0, dtype=float)
+
+    def chunks():
+        for i, j in _pair_index(n):
+            dW = np.linalg.norm(pw[i, :2] - pw[j, :2], axis=1)
+            d0 = np.linalg.norm(p0[i, :2] - p0[j, :2], axis=1)
+            lim = n_sigma * _pair_sigma(pw, p0, cov0, i, j, sigma) if sigma else rel_tol * dW
+            yield i, j, dW, d0, lim
+
+    keep_all = n <= ALL_PAIRS_MAX
+    stream = chunks() if n <= 20 * ALL_PAIRS_MAX else progress(chunks(), desc="pairwise distances",
+                                                               total=N_ANCHORS)
+    parts, ratios = [], []
+    for i, j, dW, d0, lim in stream:
+        diff = d0 - dW
+        if len(ratios) < 8:  # enough pairs for a median scale, O(N) memory
+            ratios.append(diff / dW)
+        if keep_all:
+            parts.append((i, j, dW, d0, lim))
+        else:
+            # keep the pairs bad as they are or after any uniform scale within 10 % (the scale test below)
+            b = np.abs(diff) > lim - 0.1 * dW
+            parts.append((i[b], j[b], dW[b], d0[b], lim[b]))
+    cat = [np.concatenate(x) for x in zip(*parts)]
+    ii, jj, dW, d0, lim = cat
     diff = d0 - dW
-    limit = n_sigma * math.sqrt(2.0) * sigma if sigma else rel_tol * dW
-    pairs = [(int(i), int(j), float(a), float(b), float(c), float(c / a)) for i, j, a, b, c in zip(iu, ju, dW, d0, diff)]
-    bad = [pr for pr, b in zip(pairs, np.abs(diff) > limit) if b]
-    threshold = (f"{n_sigma:g} sqrt(2) sigma = {n_sigma * math.sqrt(2) * sigma * 1e3:.3g} mm" if sigma
+    is_bad = np.abs(diff) > lim
+    threshold = (f"{n_sigma:.3g} sigma of d_0 - d_W (sqrt(2) x {sigma * 1e3:.3g} mm world noise"
+                 + (", plus the joint noise along each pair" if cov0 is not None else "")
+                 + f"; {n_pairs} pairs, false-alarm rate <= {100 * alpha:g} %)" if sigma
                  else f"{100 * rel_tol:g} % of the distance")
     scale = None
-    blamed = bad
-    if n >= 4 and len(bad) >= 3:
-        sc = float(np.median(diff / dW))  # the median: one bad point must not drag the scale
-        after = [pr for pr, b in zip(pairs, np.abs(diff - sc * dW) > limit) if b]
-        if len(after) <= len(bad) / 3:
+    blamed = is_bad
+    n_bad = int(is_bad.sum())
+    if n >= 4 and n_bad >= 3:
+        sc = float(np.median(np.concatenate(ratios)))  # the median: one bad point must not drag the scale
+        after = np.abs(diff - sc * dW) > lim
+        if after.sum() <= n_bad / 3:
             scale, blamed = sc, after
     suspects: list[int] = []
-    left = [(b[0], b[1]) for b in blamed]
-    while left:
-        counts = np.bincount(np.array(left).reshape(-1), minlength=n)
-        k = int(np.argmax(counts))
+    left_i, left_j = ii[blamed], jj[blamed]
+    excess = (np.abs(diff) / lim)[blamed]
+    while left_i.size and len(suspects) < 200:
+        both = np.concatenate([left_i, left_j])
+        counts = np.bincount(both, minlength=n).astype(float)
+        ex = np.bincount(both, weights=np.concatenate([excess, excess]), minlength=n)
+        k = int(np.argmax(counts + 0.5 * ex / (ex.max() + 1.0)))  # count first; the excess breaks ties
         suspects.append(k)
-        left = [p for p in left if k not in p]
+        keep = (left_i != k) & (left_j != k)
+        left_i, left_j, excess = left_i[keep], left_j[keep], excess[keep]
+    rows = list(zip(ii.tolist(), jj.tolist(), dW.tolist(), d0.tolist(), diff.tolist(), (diff / dW).tolist()))
+    rows = [(int(a), int(b), float(c), float(d), float(e), float(f)) for a, b, c, d, e, f in rows]
+    bad = [r for r, b in zip(rows, is_bad) if b]
+    pairs = rows if keep_all else bad
     warns = []
     if scale is not None:
         warns.append(Diagnostic(
             "inconsistent_data",
-            f"pairwise distances in {{0}} are uniformly {100 * scale:+.2f} % of those in {{W}} ({len(bad)} of "
-            f"{len(pairs)} pairs beyond {threshold}): a scale error of the model, not of single points: {scale_hint}"
+            f"pairwise distances in {{0}} are uniformly {100 * scale:+.2f} % of those in {{W}} ({n_bad} of "
+            f"{n_pairs} pairs beyond {threshold}): a scale error of the model, not of single points: {scale_hint}"
             + (f"; after removing the scale, suspect point(s) {suspects}" if suspects else
                "; after removing the scale every pair agrees"),
             indices=tuple(suspects)))
     elif bad:
         worst = max(bad, key=lambda b: abs(b[5]))
-        desc = "; ".join(f"{b[0]}-{b[1]}: {100 * b[5]:+.1f} % ({b[4] * 1e3:+.1f} mm)" for b in bad[:6])
+        desc = "; ".join(f"{b[0]}-{b[1]}: {100 * b[5]:+.1f} % ({b[4] * 1e3:+.1f} mm)"
+                         for b in sorted(bad, key=lambda b: -abs(b[4]))[:6])
         warns.append(Diagnostic(
             "inconsistent_data",
             f"pairwise distances in {{W}} and {{0}} disagree beyond {threshold} ({desc}); a rigid transform cannot "
-            f"fit them: suspect point(s) {suspects} (worst pair {worst[0]}-{worst[1]}, {100 * worst[5]:+.1f} %)",
+            f"fit them: suspect point(s) {suspects[:20]}{' ...' if len(suspects) > 20 else ''} (the first most "
+            f"implicated; worst pair {worst[0]}-{worst[1]}, {100 * worst[5]:+.1f} %)",
             indices=tuple(suspects)))
-    return ConsistencyReport(pairs, bad, suspects, threshold, warns, scale)
+    return ConsistencyReport(pairs, bad, suspects, threshold, warns, scale, n_pairs)
 
 
 def _spots(model: ProjectorModel, th: np.ndarray) -> np.ndarray:
@@ -486,16 +607,19 @@ def _pose_information(p0, yaw, t) -> np.ndarray:
     return J.T @ J
 
 
-def closed_form(points_W, points_0, *, sigma: float | None = None) -> ExtrinsicEstimate:
+def closed_form(points_W, points_0, *, sigma: float | None = None, cov=None) -> ExtrinsicEstimate:
     """Maximum-likelihood rigid fit (Umeyama/Kabsch) of ``^WP = R_W_0 ^0P + t_W_0``, N >= 3.
 
     The noise sits on ``^WP`` (the measured world points), so the fit maps
     the exact model points ``^0P`` onto them (``robocal.geometry.rigid_fit``)
-    and is inverted. Standard deviations from
-    :func:`robocal.geometry.rigid_fit_covariance` with ``sigma`` (or the
-    residual estimate when ``sigma`` is None and N > 3).
+    and is inverted. Standard deviations from the floor-pose Fisher information
+    with ``sigma`` (or the residual estimate when ``sigma`` is None and N > 3).
+    With per-point floor covariances ``cov`` (N, 2, 2, m^2: world noise plus the
+    joint noise mapped to the floor, :func:`floor_covariance`) the unweighted fit
+    is no longer the ML estimate, and its covariance is the sandwich
+    ``(J^T J)^-1 J^T Sigma J (J^T J)^-1``.
     """
-    pw, p0 = check_correspondences(points_W, points_0)
+    pw, p0 = check_correspondences(points_W, points_0, unit_check=False)
     fit = rigid_fit(p0, pw)
     R = fit.R.T
     t = -R @ fit.t
@@ -504,12 +628,45 @@ def closed_form(points_W, points_0, *, sigma: float | None = None) -> ExtrinsicE
     # floor residuals have 2 components per point and 3 pose dof
     s = sigma if sigma else (math.sqrt(float(np.sum(res * res)) / (2 * n - 3)) if n > 2 else None)
     std = {"yaw": None, "t_x": None, "t_y": None}
-    cov = None
+    cov_p = None
     if s:
-        cov = s * s * np.linalg.inv(_pose_information(p0, float(yaw_of(R)), t))
-        std = {"yaw": math.sqrt(cov[0, 0]), "t_x": math.sqrt(cov[1, 1]), "t_y": math.sqrt(cov[2, 2])}
+        J = floor_pose_jacobian(p0, float(yaw_of(R)), t)
+        Ninv = np.linalg.inv(J.T @ J)
+        if cov is not None and sigma:
+            Jb = J.reshape(n, 2, 3)
+            meat = np.einsum("nai,nab,nbj->ij", Jb, cov, Jb)
+            cov_p = Ninv @ meat @ Ninv
+        else:
+            cov_p = s * s * Ninv
+        std = {"yaw": math.sqrt(cov_p[0, 0]), "t_x": math.sqrt(cov_p[1, 1]), "t_y": math.sqrt(cov_p[2, 2])}
     return ExtrinsicEstimate("closed_form", R, t, std, res, _rms(res), np.array([float(np.sum(res * res)) / 2]), 0, [],
-                             {"sigma_used": s}, cov, ["yaw", "t_x", "t_y"])
+                             {"sigma_used": s}, cov_p, ["yaw", "t_x", "t_y"])
+
+
+def floor_covariance(model: ProjectorModel, theta, yaw: float = 0.0, *, sigma: float = 0.0,
+                     joint_noise=(0.0, 0.0)) -> np.ndarray:
+    """Covariance (N, 2, 2, m^2) of each floor residual ``^WP_i - Rz(-yaw) f_xy(theta_i)``.
+
+    ``sigma^2 I + J_theta diag(joint_noise^2) J_theta^T`` (issue 19): isotropic
+    world noise ``sigma`` (m) plus the encoder noise ``joint_noise`` (pan, tilt,
+    rad) mapped to the floor by the spot model's joint Jacobian (seed eqs. 6, 9,
+    rotated into ``{W}``). The tilt part, ``h / cos^2(tilt)`` along the radius,
+    grows fast with the tilt; the pan part, ``h tan(tilt)`` across it. With
+    ``yaw = 0`` the covariance is that of ``f_xy`` in ``{0}``.
+    """
+    th = np.asarray(theta, dtype=float)
+    jn = np.asarray(joint_noise, dtype=float)
+    cols = floor_prediction_columns(yaw, np.zeros(2), theta=th, h=model.h, offsets=model.offsets)
+    a, b = cols["pan_offset"], cols["tilt_offset"]  # d pred / d theta1, d theta2 (the offsets add to theta)
+    C = (jn[0] ** 2) * a[:, :, None] * a[:, None, :] + (jn[1] ** 2) * b[:, :, None] * b[:, None, :]
+    C[:, 0, 0] += sigma * sigma
+    C[:, 1, 1] += sigma * sigma
+    return C
+
+
+def _whitener(C: np.ndarray) -> np.ndarray:
+    """``L^-1`` (N, 2, 2) with ``C = L L^T``: ``L^-1 r`` has unit covariance."""
+    return np.linalg.inv(np.linalg.cholesky(C))
 
 
 # ---------------------------------------------------------- (c) nonlinear LS
@@ -551,7 +708,7 @@ def floor_prediction_columns(yaw: float, t_xy, *, spots_xy=None, theta=None, h: 
 
 def nonlinear(points_W, *, theta=None, points_0=None, model: ProjectorModel | None = None, estimate=(),
               sigma: float | None = None, x0: ExtrinsicEstimate | None = None, absolute_sigma: bool = False,
-              loss: str = "linear") -> ExtrinsicEstimate:
+              loss: str = "linear", joint_noise=None, hold=()) -> ExtrinsicEstimate:
     """Nonlinear least squares on the floor spot error (robocal.estimation).
 
     Residual per point: ``^WP_i - [R_0_W^T (f(theta_i) - t_0_W)]_xy`` (m), with
@@ -564,6 +721,21 @@ def nonlinear(points_W, *, theta=None, points_0=None, model: ProjectorModel | No
     pan by ``o1`` rotates every spot about the nadir, which a change of yaw and
     ``t`` reproduces exactly. Asking for it yields a ``rank_deficient`` warning
     and ``std = None``.
+
+    Noise model (issue 19): each point's residual has the covariance
+    :func:`floor_covariance` (world noise ``sigma`` plus the encoder noise
+    ``joint_noise`` mapped to the floor); the residuals are whitened with it,
+    so weights, covariance and the outlier test all use it. The covariance
+    depends on ``h`` and the offsets: it is taken at the start, and the fit is
+    repeated once with it taken at the first solution.
+
+    Outliers (with a stated ``sigma``): each point's studentized deleted
+    residual ``t_i^2 = e_i^T (I - H_ii)^-1 e_i`` (whitened residual ``e_i``,
+    2x2 hat-matrix block ``H_ii``; chi-square with 2 dof) is compared with the
+    chi-square quantile of ``0.01 / N`` (Bonferroni: <= 1 % false alarms per
+    data set); the worst point is named first, dropped, and the test repeated
+    on the rest (backward elimination, linearised), so one gross point does not
+    drag its neighbours over the threshold.
 
     Parameters
     ----------
@@ -580,6 +752,10 @@ def nonlinear(points_W, *, theta=None, points_0=None, model: ProjectorModel | No
         World measurement noise (m); with ``absolute_sigma`` taken as known.
     x0 : ExtrinsicEstimate, optional
         Start (default: the closed form).
+    joint_noise : (float, float), optional
+        Encoder noise (pan, tilt) std (rad); needs ``sigma`` and joint angles.
+    hold : sequence of str
+        Parameters of ``estimate`` held at the model's value (physical bounds, see :func:`calibrate`).
     """
     estimate = tuple(estimate)
     unknown = [e for e in estimate if e not in EXTRA_PARAMS]
@@ -590,7 +766,7 @@ def nonlinear(points_W, *, theta=None, points_0=None, model: ProjectorModel | No
             raise InputError("nonlinear: give joint angles theta (with model) or points_0")
         if estimate:
             raise InputError(f"nonlinear: estimating {list(estimate)} needs joint angles, only points_0 were given")
-        pw, p0 = check_correspondences(points_W, points_0)
+        pw, p0 = check_correspondences(points_W, points_0, unit_check=False)
         th = None
         H = float(-np.mean(p0[:, 2]))
         model = ProjectorModel(H=H) if model is None else model
@@ -601,67 +777,174 @@ def nonlinear(points_W, *, theta=None, points_0=None, model: ProjectorModel | No
         if th.ndim != 2:
             raise ShapeError(f"theta must have shape (N, 2), got {tuple(th.shape)}")
         p0 = _spots(model, th)
-        pw, p0 = check_correspondences(points_W, p0)
+        pw, p0 = check_correspondences(points_W, p0, unit_check=False)
+    jn = None
+    if joint_noise is not None and np.any(np.asarray(joint_noise, dtype=float) > 0):
+        if not sigma:
+            raise InputError("joint_noise needs the world noise (noise:) too: the two make each point's covariance")
+        jn = np.asarray(joint_noise, dtype=float)
     H = model.H
+    free = tuple(e for e in estimate if e not in hold)
     start = x0 or closed_form(pw, p0, sigma=sigma)
     n = pw.shape[0]
-    prob = Problem()
-    prob.add_block("R", [0.0, 0.0, start.yaw], fixed=[True, True, False], labels=["rx", "ry", "yaw"], unit="rad")
-    prob.add_block("t", [start.t_0_W[0], start.t_0_W[1], -H], fixed=[False, False, True],
-                   labels=["t_x", "t_y", "t_z"], unit="m")
-    if th is not None:
-        prob.add_block("h", [model.h], fixed=["h" not in estimate], labels=["h"], unit="m")
-        prob.add_block("offsets", list(model.offsets), fixed=["pan_offset" not in estimate,
-                                                               "tilt_offset" not in estimate],
-                       labels=["pan_offset", "tilt_offset"], unit="rad")
     target = pw[:, :2]
+    # {0} points given directly come from encoder readings too: their angles by IK (seed eq. 8)
+    th_cov = th if th is not None else (model.ik(p0, check_reach=False, on_nadir="ignore") if jn is not None
+                                        else None)
 
-    def residuals(q):
-        c, s = math.cos(q["R"][2]), math.sin(q["R"][2])
-        if th is None:
-            sp = p0[:, :2]
-        else:
-            a1 = th[:, 0] + q["offsets"][0]
-            a2 = th[:, 1] + q["offsets"][1]
-            rho = q["h"][0] * np.tan(a2)
-            sp = np.column_stack([rho * np.sin(a1), rho * np.cos(a1)])
-        d = sp - q["t"][:2]
-        # R_0_W = Rz(yaw) => ^WP_xy = Rz(-yaw) (f - t)_xy
-        pred = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
-        return target - pred
-
-    def jacobian(q):  # residual = target - pred
-        if th is None:
-            cols = floor_prediction_columns(q["R"][2], q["t"], spots_xy=p0[:, :2])
-        else:
-            cols = floor_prediction_columns(q["R"][2], q["t"], theta=th, h=q["h"][0], offsets=q["offsets"])
-        out = {"R": np.zeros((2 * n, 3)), "t": np.zeros((2 * n, 3))}
-        out["R"][:, 2] = -cols["yaw"].reshape(-1)
-        out["t"][:, 0], out["t"][:, 1] = -cols["t_x"].reshape(-1), -cols["t_y"].reshape(-1)
+    def build(x_start, params_start, Winv):
+        prob = Problem()
+        prob.add_block("R", [0.0, 0.0, x_start[0]], fixed=[True, True, False], labels=["rx", "ry", "yaw"],
+                       unit="rad")
+        prob.add_block("t", [x_start[1], x_start[2], -H], fixed=[False, False, True],
+                       labels=["t_x", "t_y", "t_z"], unit="m")
         if th is not None:
-            out["h"] = -cols["h"].reshape(-1, 1)
-            out["offsets"] = -np.stack([cols["pan_offset"], cols["tilt_offset"]], axis=-1).reshape(-1, 2)
-        return out
+            prob.add_block("h", [params_start[0]], fixed=["h" not in free], labels=["h"], unit="m")
+            prob.add_block("offsets", list(params_start[1:]), fixed=["pan_offset" not in free,
+                                                                      "tilt_offset" not in free],
+                           labels=["pan_offset", "tilt_offset"], unit="rad")
 
-    prob.add_residuals(residuals, name="floor", jacobian=jacobian, residual_dim=2,
-                       sigma=sigma if sigma else None)
-    # trf, not lm: MINPACK keeps iterating on an exact (zero-residual) fit until max_nfev
-    res = solve(prob, method="trf", loss=loss, absolute_sigma=absolute_sigma and bool(sigma))
-    if not np.all(np.isfinite(res.x)):
-        raise ConvergenceError("nonlinear: the solver returned a non-finite estimate")
+        def raw(q):
+            c, s = math.cos(q["R"][2]), math.sin(q["R"][2])
+            if th is None:
+                sp = p0[:, :2]
+            else:
+                a1 = th[:, 0] + q["offsets"][0]
+                a2 = th[:, 1] + q["offsets"][1]
+                rho = q["h"][0] * np.tan(a2)
+                sp = np.column_stack([rho * np.sin(a1), rho * np.cos(a1)])
+            d = sp - q["t"][:2]
+            # R_0_W = Rz(yaw) => ^WP_xy = Rz(-yaw) (f - t)_xy
+            pred = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
+            return target - pred
+
+        def residuals(q):
+            r = raw(q)
+            return r if Winv is None else np.einsum("nij,nj->ni", Winv, r)
+
+        def jacobian(q):  # residual = target - pred
+            if th is None:
+                cols = floor_prediction_columns(q["R"][2], q["t"], spots_xy=p0[:, :2])
+            else:
+                cols = floor_prediction_columns(q["R"][2], q["t"], theta=th, h=q["h"][0], offsets=q["offsets"])
+            if Winv is not None:
+                cols = {k: np.einsum("nij,nj->ni", Winv, v) for k, v in cols.items()}
+            out = {"R": np.zeros((2 * n, 3)), "t": np.zeros((2 * n, 3))}
+            out["R"][:, 2] = -cols["yaw"].reshape(-1)
+            out["t"][:, 0], out["t"][:, 1] = -cols["t_x"].reshape(-1), -cols["t_y"].reshape(-1)
+            if th is not None:
+                out["h"] = -cols["h"].reshape(-1, 1)
+                out["offsets"] = -np.stack([cols["pan_offset"], cols["tilt_offset"]], axis=-1).reshape(-1, 2)
+            return out
+
+        # whitened residuals have unit covariance: sigma 1 (in units of each point's own covariance)
+        prob.add_residuals(residuals, name="floor", jacobian=jacobian, residual_dim=2,
+                           sigma=1.0 if Winv is not None else (sigma if sigma else None))
+        return prob, raw
+
+    x_start = [start.yaw, start.t_0_W[0], start.t_0_W[1]]
+    p_start = [model.h, *model.offsets]
+    Winv = None
+    passes = 1
+    if jn is not None:
+        Winv = _whitener(floor_covariance(model, th_cov, start.yaw, sigma=sigma, joint_noise=jn))
+        passes = 2
+    res = raw = None
+    for k in range(passes):
+        prob, raw = build(x_start, p_start, Winv)
+        # trf, not lm: MINPACK keeps iterating on an exact (zero-residual) fit until max_nfev
+        res = solve(prob, method="trf", loss=loss, absolute_sigma=absolute_sigma and bool(sigma))
+        if not np.all(np.isfinite(res.x)):
+            raise ConvergenceError("nonlinear: the solver returned a non-finite estimate")
+        x_start = [float(res.params["R"][2]), float(res.params["t"][0]), float(res.params["t"][1])]
+        if th is not None:
+            p_start = [float(res.params["h"][0]), *map(float, res.params["offsets"])]
+        if k + 1 < passes:  # the covariance at the first solution's h and offsets
+            m_k = model.with_(d1=H - p_start[0], offsets=tuple(p_start[1:])) if th is not None else model
+            Winv = _whitener(floor_covariance(m_k, th_cov, x_start[0], sigma=sigma, joint_noise=jn))
     yaw = float(res.params["R"][2])
     R = rotz(yaw)
     t = np.array(res.params["t"], dtype=float)
-    resid = res.residuals.reshape(-1, 2)
+    resid = raw(res.params)
     std = {"yaw": res.std.get("yaw"), "t_x": res.std.get("t_x"), "t_y": res.std.get("t_y")}
     extra = {}
     if th is not None:
         extra["h"] = float(res.params["h"][0])
         extra["offsets"] = [float(v) for v in res.params["offsets"]]
         for lab in estimate:
-            std[lab] = res.std.get(lab)
+            std[lab] = res.std.get(lab) if lab in free else None
+    warns = list(res.warnings)
+    if sigma and absolute_sigma and loss == "linear":
+        # the solver's per-observation test sees residuals pulled towards a gross point by the fit itself
+        warns = [w for w in warns if w.code != "outliers"]
+        order, scores, thr = deleted_residual_outliers(res.weighted_residuals.reshape(n, 2),
+                                                       res.jac.toarray() if hasattr(res.jac, "toarray") else res.jac)
+        extra["outlier_scores"] = scores
+        if order:
+            shown = ", ".join(f"{i} ({math.sqrt(scores[i]):.1f} sigma)" for i in order[:10])
+            warns.append(Diagnostic(
+                "outliers",
+                f"{len(order)} of {n} point(s) inconsistent with the fit of the others: [{shown}"
+                f"{', ...' if len(order) > 10 else ''}] (studentized deleted residual beyond "
+                f"{math.sqrt(thr):.2f} sigma, the chi-square(2) quantile of 1 %/N; worst first)",
+                indices=tuple(order)))
+    extra["whitened"] = Winv is not None
     return ExtrinsicEstimate("nonlinear", R, t, std, resid, _rms(resid), np.asarray(res.cost_history),
-                             res.iterations, list(res.warnings), dict(extra, lsq=res), res.cov, list(res.free_labels))
+                             res.iterations, warns, dict(extra, lsq=res), res.cov, list(res.free_labels))
+
+
+def deleted_residual_outliers(e, J, *, alpha: float = 0.01, max_removed: int = 20):
+    """Points whose studentized deleted residual exceeds the Bonferroni chi-square(2) bound, worst first.
+
+    Parameters
+    ----------
+    e : ndarray, shape (N, 2)
+        Whitened residuals (unit covariance under the model).
+    J : ndarray, shape (2N, p)
+        Jacobian of the whitened residuals w.r.t. the free parameters.
+
+    Returns
+    -------
+    order : list of int
+        The flagged points, the worst first. After each flagged point the fit
+        is updated without it (one Gauss-Newton step: exact for the linearised
+        model) and the rest re-tested, at most ``max_removed`` times; points
+        still beyond the bound after that follow by score.
+    scores : ndarray, shape (N,)
+        ``t_i^2 = e_i^T (I - H_ii)^-1 e_i`` of the full fit (chi-square, 2 dof).
+    threshold : float
+        The chi-square(2) quantile of ``alpha / N``: ``-2 ln(alpha / N)``.
+    """
+    n = e.shape[0]
+    thr = -2.0 * math.log(alpha / n)  # chi-square(2) survival function is exp(-x/2)
+    Jb = np.asarray(J, dtype=float).reshape(n, 2, -1)
+    active = np.ones(n, bool)
+    e_cur = np.array(e, dtype=float)
+    order: list[int] = []
+    scores0 = None
+    exhausted = True
+    for _ in range(max_removed + 1):
+        Ja = Jb[active].reshape(-1, Jb.shape[2])
+        Ninv = np.linalg.pinv(Ja.T @ Ja)
+        Hii = np.einsum("nai,ij,nbj->nab", Jb, Ninv, Jb)
+        M = np.eye(2)[None] - Hii  # residual covariance of a point in the fit
+        sc = np.where(active, np.einsum("na,nab,nb->n", e_cur, np.linalg.inv(np.where(active[:, None, None], M,
+                                                                                        np.eye(2)[None])), e_cur),
+                      -np.inf)
+        if scores0 is None:
+            scores0 = sc.copy()
+        k = int(np.argmax(sc))
+        if not sc[k] > thr or active.sum() - 1 <= Jb.shape[2] // 2 + 1:
+            exhausted = False
+            break
+        order.append(k)
+        active[k] = False
+        # one Gauss-Newton step of the fit without the dropped points (the whitened model is nearly linear)
+        Ja = Jb[active].reshape(-1, Jb.shape[2])
+        dx = -np.linalg.lstsq(Ja, e_cur[active].reshape(-1), rcond=None)[0]
+        e_cur = e_cur + (Jb @ dx)
+    rest = ([int(i) for i in np.argsort(-scores0) if active[i] and scores0[i] > thr] if exhausted else [])
+    return order + rest, scores0, thr
 
 
 # --------------------------------------------------------------- the driver
@@ -679,6 +962,7 @@ class CalibrationRun:
     primary: str
     consistency_prefit: ConsistencyReport | None = None
     input_warnings: list = field(default_factory=list)
+    joint_noise: tuple | None = None  # encoder noise std (pan, tilt), rad
 
     @property
     def best(self) -> ExtrinsicEstimate:
@@ -697,9 +981,115 @@ class CalibrationRun:
         return m
 
 
+#: Default bound on the estimated tilt zero offset (rad); ``tilt_offset_limit`` in the input changes it.
+TILT_OFFSET_LIMIT = math.radians(5.0)
+
+
+def _tilt_span(model: ProjectorModel, th, p0) -> tuple[float, float]:
+    """Smallest and largest actual tilt (rad) of the calibration spots."""
+    if th is not None:
+        a2 = np.abs(th[:, 1] + model.offsets[1])
+    else:
+        a2 = np.arctan2(np.hypot(p0[:, 0], p0[:, 1]), model.h)
+    return float(a2.min()), float(a2.max())
+
+
+def _bound_violations(est: ExtrinsicEstimate, model: ProjectorModel, free, tilt_offset_limit: float) -> dict:
+    """Estimated parameters outside their physical bounds: ``{name: text}``.
+
+    ``h = H - d1 <= H`` (d1 >= 0: the tilt axis is not above the ceiling
+    reference of ``{0}``), ``h > 0``, ``|tilt_offset| <= tilt_offset_limit``.
+    """
+    out = {}
+    if "h" in free:
+        h = est.extra["h"]
+        if h > model.H:
+            out["h"] = f"h = {h:.4g} m above H = {model.H:.4g} m (d1 = {model.H - h:+.4g} m < 0)"
+        elif h <= 0:
+            out["h"] = f"h = {h:.4g} m <= 0 (the tilt axis below the floor)"
+    if "tilt_offset" in free:
+        o = est.extra["offsets"][1]
+        if abs(o) > tilt_offset_limit:
+            out["tilt_offset"] = (f"tilt offset {math.degrees(o):+.3g} deg beyond +-{math.degrees(tilt_offset_limit):g} "
+                                  f"deg (tilt_offset_limit)")
+    return out
+
+
+def _slip_checks(pw, th, p0_given, model: ProjectorModel, sigma, *, accept: bool, source: str | None):
+    """Judge the input's physical scales; name the likely slip (robocal.plausibility).
+
+    Figure of merit: the median floor residual (mm) of the closed-form rigid fit
+    with the nominal model. A rigid transform preserves distances and
+    handedness, so a unit slip on one side (world points, H, the {0} points, the
+    joint angles) or swapped world columns (a mirror image) leaves it far above
+    the noise. Plausible: the scale ratio of the two sets within (0.5, 2) and the
+    median residual at most ``max(10 sigma, 5 % of the points' spread)`` (the 5 %
+    leaves room for the nominal model's own error: a tilt offset or ``h`` off).
+    Each slip is undone on its own and the fit redone.
+    """
+    from robocal.plausibility import Slip, check_slips
+
+    def spots(m, t):
+        return _spots(m, t) if t is not None else p0_given
+
+    def merit(w, m=model, t=th, p0=None):
+        p = spots(m, t) if p0 is None else p0
+        fit = rigid_fit(p, w)
+        r = (p @ fit.R.T + fit.t - w)[:, :2]
+        return 1e3 * float(np.median(np.linalg.norm(r, axis=1)))
+
+    p0 = spots(model, th)
+    spread = float(np.sqrt(np.mean(np.sum((pw[:, :2] - pw[:, :2].mean(0)) ** 2, axis=1))))
+    ratio = spread_ratio(pw, p0)
+    base = merit(pw)
+    limit = max(10e3 * sigma if sigma else 0.0, 0.05e3 * spread)
+    if 0.5 < ratio < 2.0 and base <= limit:
+        return None
+    slips = []
+    for f, unit_big, unit_small in ((1e3, "mm", "m"), (1e2, "cm", "m"), (1e1, "mm", "cm")):
+        slips.append(Slip(f"world_{unit_big}_as_{unit_small}",
+                          f"`points.world` looks like {unit_big} declared as {unit_small} ({f:g}x too large)",
+                          f"with /{f:g}", lambda f=f: merit(pw / f)))
+        slips.append(Slip(f"world_{unit_small}_as_{unit_big}",
+                          f"`points.world` looks like {unit_small} declared as {unit_big} ({f:g}x too small)",
+                          f"with x{f:g}", lambda f=f: merit(pw * f)))
+        if th is not None:
+            slips.append(Slip(f"H_{unit_big}_as_{unit_small}",
+                              f"`projector.H` (and d1) look like {unit_big} declared as {unit_small} ({f:g}x too large)",
+                              f"with /{f:g}", lambda f=f: merit(pw, m=model.with_(H=model.H / f, d1=model.d1 / f,
+                                                                                    d2=model.d2 / f))))
+            slips.append(Slip(f"H_{unit_small}_as_{unit_big}",
+                              f"`projector.H` (and d1) look like {unit_small} declared as {unit_big} ({f:g}x too small)",
+                              f"with x{f:g}", lambda f=f: merit(pw, m=model.with_(H=model.H * f, d1=model.d1 * f,
+                                                                                    d2=model.d2 * f))))
+    slips.append(Slip("world_xy_swapped", "`points.world` x and y look swapped (a mirror image: no rotation fits)",
+                      "with x and y swapped back", lambda: merit(pw[:, [1, 0, 2]])))
+    if th is not None:
+        d = math.degrees(1.0)
+        slips.append(Slip("angles_rad_as_deg", "`points.joint_angles` look like rad declared as deg",
+                          "read as rad", lambda: merit(pw, t=th * d)))
+        slips.append(Slip("angles_deg_as_rad", "`points.joint_angles` look like deg declared as rad",
+                          "read as deg", lambda: merit(pw, t=th / d)))
+        slips.append(Slip("angles_swapped", "`points.joint_angles` columns look swapped (tilt, pan instead of pan, tilt)",
+                          "with the columns swapped back", lambda: merit(pw, t=th[:, ::-1])))
+    if 0.5 < ratio < 2.0:
+        from robocal.plausibility import try_slips
+
+        # the scales agree: a poor fit is the consistency check's and outlier test's to report, unless a slip
+        # (swapped columns, a mirror image, a small unit factor) explains it
+        if try_slips(slips, base, threshold=limit).best is None:
+            return None
+    reason = (f"the floor points do not fit a rigid motion of the projector's spots: distances in {{0}} are "
+              f"{ratio:.3g} times those in {{W}}, median residual {base:.3g} mm (plausible: <= {limit:.3g} mm)")
+    return check_slips(what="median residual", residual=base, unit="mm", plausible=False, reason=reason,
+                       slips=slips, accept=accept, source=source, threshold=limit)
+
+
 def calibrate(points_W, *, theta=None, points_0=None, model: ProjectorModel | None = None,
               methods=METHODS, estimate=(), sigma: float | None = None, strict: bool = False,
-              seed_alpha: float = 0.5, seed_order=None) -> CalibrationRun:
+              seed_alpha: float = 0.5, seed_order=None, joint_noise=None,
+              tilt_offset_limit: float = TILT_OFFSET_LIMIT, accept_implausible: bool = False,
+              source: str | None = None) -> CalibrationRun:
     """Run the consistency check and the chosen solvers on one data set.
 
     Parameters
@@ -717,13 +1107,34 @@ def calibrate(points_W, *, theta=None, points_0=None, model: ProjectorModel | No
         World measurement noise (m). When given, every standard deviation uses
         it as known (absolute sigma); without it the covariances are scaled by
         the residual variance (needs N > number of parameters / 2).
+    joint_noise : (float, float), optional
+        Encoder noise std (pan, tilt) in rad; needs ``sigma``. Each point's floor
+        covariance is then :func:`floor_covariance`, used by the consistency
+        check, the closed form's std and the nonlinear fit's weights, std and
+        outlier test.
+    tilt_offset_limit : float
+        Physical bound (rad) on an estimated tilt zero offset.
     seed_alpha, seed_order
         Step factor and point order of :func:`seed_method`.
     strict : bool
         Raise :class:`~robocal.errors.InconsistentDataError` when the distance
-        check fails, and :class:`~robocal.rigs.projector.model.UnreachablePointError`
-        for spots beyond the tilt limit, instead of warning (``inconsistent_data``,
-        ``near_singularity``).
+        check fails or an estimate leaves its physical bounds, and
+        :class:`~robocal.rigs.projector.model.UnreachablePointError` for spots
+        beyond the tilt limit, instead of warning (``inconsistent_data``,
+        ``parameter_held``, ``near_singularity``).
+    accept_implausible : bool
+        Go on when the input's scales are implausible (a likely unit slip or
+        swapped columns, :func:`robocal.plausibility.check_slips`) with an
+        ``implausible_input`` warning, instead of raising
+        :class:`~robocal.errors.ImplausibleInputError`.
+    source : str, optional
+        Input file, named in errors.
+
+    Physical bounds: an estimated ``h`` above ``H`` (d1 < 0) or at/below 0, or
+    a tilt offset beyond ``tilt_offset_limit``, is not returned: the parameter is
+    held at its nominal value, the fit redone, and a ``parameter_held`` warning
+    says why, with the tilt span of the points (``h`` and the tilt offset are
+    told apart only by points at different tilts).
 
     Returns
     -------
@@ -753,20 +1164,28 @@ def calibrate(points_W, *, theta=None, points_0=None, model: ProjectorModel | No
             model = ProjectorModel(H=H)
         if np.abs(p0[:, 2] + model.H).max() > 1e-6 * max(1.0, model.H):
             raise InputError(f"points_0: every z must equal -H = {-model.H:g} m (the floor in {{0}}), got "
-                             f"{p0[:, 2].tolist()}")
+                             f"{p0[:, 2].tolist()[:10]}")
     else:
         raise InputError("calibrate: give joint angles (theta) or projector-frame points (points_0)")
-    try:
-        pw, p0 = check_correspondences(points_W, p0)
-    except UnitError as exc:
-        if th is None:
-            raise
-        # the {0} points come from the joint angles: a wrong angle unit scales the distances too
-        raise UnitError(exc.message.rstrip("?") + ", and are the joint angles in their declared angle unit (deg, rad)?",
-                        source=exc.source) from None
+    jn = None
+    if joint_noise is not None:
+        jn = check_array(joint_noise, "joint_noise", shape=(2,))
+        if np.any(jn < 0):
+            raise InputError(f"joint_noise must be >= 0 (rad), got {jn.tolist()}")
+        if not np.any(jn > 0):
+            jn = None
+        elif not sigma:
+            raise InputError("joint_noise needs noise (the world measurement sigma) too: together they make each "
+                             "point's floor covariance")
+    if not 0 < tilt_offset_limit < math.pi / 2:
+        raise InputError(f"tilt_offset_limit must be in (0, 90) deg, got {math.degrees(tilt_offset_limit):g} deg")
+    pw, p0 = check_correspondences(points_W, p0, unit_check=False)
     if np.abs(pw[:, 2]).max() > 1e-9:
         raise InputError("points_W: world points must lie on the floor (z_W = 0)")
     input_warnings = []
+    slip = _slip_checks(pw, th, p0 if th is None else None, model, sigma, accept=accept_implausible, source=source)
+    if slip is not None:
+        input_warnings.append(slip)
     reach = beyond_tilt_limit(model, p0, "joint_angles" if th is not None else "points_0")
     if reach is not None:
         if strict:
@@ -778,7 +1197,14 @@ def calibrate(points_W, *, theta=None, points_0=None, model: ProjectorModel | No
                          f"methods {list(methods)}: add it or drop estimate")
     hint = ("H - d1 or the tilt offset is probably wrong (estimate: [h, tilt_offset] with the nonlinear method)"
             if th is not None else "H or the units of the {0} points are probably wrong")
-    cons = distance_consistency(pw, p0, sigma=sigma, scale_hint=hint)
+    th_cov = None
+    if jn is not None:
+        th_cov = th if th is not None else model.ik(p0, check_reach=False, on_nadir="ignore")
+
+    def cov0(m):  # joint-noise covariance of the spots in {0} (no world part: the check adds it per pair)
+        return None if jn is None else floor_covariance(m, th_cov, 0.0, joint_noise=jn)
+
+    cons = distance_consistency(pw, p0, sigma=sigma, scale_hint=hint, cov_0=cov0(model))
     refine_model = th is not None and any(e in ("h", "tilt_offset") for e in estimate) and "nonlinear" in methods
     # With h or the tilt offset unknown, the nominal f(theta) carries a model error that the
     # distances show too; the check is then repeated with the refined model before judging.
@@ -788,27 +1214,64 @@ def calibrate(points_W, *, theta=None, points_0=None, model: ProjectorModel | No
     if "seed" in methods:
         ests["seed"] = seed_method(pw, p0, alpha=seed_alpha, order=seed_order)
     if "closed_form" in methods or "nonlinear" in methods:
-        ests["closed_form"] = closed_form(pw, p0, sigma=sigma)
+        cf = closed_form(pw, p0, sigma=sigma)
+        if jn is not None:  # the sandwich covariance under the per-point noise
+            cf = closed_form(pw, p0, sigma=sigma, cov=floor_covariance(model, th_cov, cf.yaw, sigma=sigma,
+                                                                       joint_noise=jn))
+        ests["closed_form"] = cf
+    held = {}
     if "nonlinear" in methods:
         # A stated noise is the measurement sigma: with few points (N = 3, h and the tilt offset free
         # leaves 1 dof) the residual-scaled covariance is far too small, so the stated sigma is used as is.
-        ests["nonlinear"] = nonlinear(pw, theta=th, points_0=None if th is not None else p0, model=model,
-                                      estimate=estimate, sigma=sigma, x0=ests["closed_form"],
-                                      absolute_sigma=sigma is not None)
+        kw = dict(theta=th, points_0=None if th is not None else p0, model=model, estimate=estimate, sigma=sigma,
+                  x0=ests["closed_form"], absolute_sigma=sigma is not None, joint_noise=jn)
+        nl = nonlinear(pw, **kw)
+        for _ in range(2):  # hold what leaves its bounds, refit, check what is still free
+            out = _bound_violations(nl, model, [e for e in estimate if e not in held], tilt_offset_limit)
+            if not out:
+                break
+            held.update(out)
+            nl = nonlinear(pw, hold=tuple(held), **kw)
+        if held:
+            lo, hi = _tilt_span(model, th, p0)
+            corr = _h_tilt_correlation(nonlinear(pw, **kw))
+            why = (f"the points span {math.degrees(lo):.1f}-{math.degrees(hi):.1f} deg of tilt "
+                   f"({math.degrees(hi - lo):.1f} deg" + (f", correlation of h and the tilt offset {corr:+.3f}"
+                                                          if corr is not None else "")
+                   + "): h and the tilt offset cannot be told apart; add points nearer and farther from the nadir")
+            msg = (f"{'; '.join(held.values())}: {why}; held at nominal "
+                   + ", ".join(f"h = {model.h:.4g} m" if k == "h" else f"tilt offset {math.degrees(model.offsets[1]):g} deg"
+                               for k in held)
+                   + " and the rest refitted")
+            if strict:
+                raise InconsistentDataError(msg, source=source)
+            nl.warnings.insert(0, Diagnostic("parameter_held", msg, params=tuple(held)))
+            nl.extra["held"] = dict(held)
+        ests["nonlinear"] = nl
     if "closed_form" not in methods:
         ests.pop("closed_form", None)
     prefit = cons
     if refine_model and not cons.consistent:
         nl = ests["nonlinear"]
         refined = model.with_(d1=model.H - nl.extra["h"], offsets=tuple(nl.extra["offsets"]))
-        cons = distance_consistency(pw, _spots(refined, th), sigma=sigma, scale_hint=hint)
+        cons = distance_consistency(pw, _spots(refined, th), sigma=sigma, scale_hint=hint, cov_0=cov0(refined))
         if strict and not cons.consistent:
             raise InconsistentDataError(cons.warnings[0].message)
     primary = "nonlinear" if "nonlinear" in ests else ("closed_form" if "closed_form" in ests else "seed")
     run = CalibrationRun(pw, p0, th, model, cons, ests, sigma, primary)
     run.consistency_prefit = prefit
     run.input_warnings = input_warnings
+    run.joint_noise = None if jn is None else (float(jn[0]), float(jn[1]))
     return run
+
+
+def _h_tilt_correlation(est: ExtrinsicEstimate) -> float | None:
+    lsq = est.extra.get("lsq")
+    if lsq is None or lsq.corr is None or "h" not in lsq.free_labels or "tilt_offset" not in lsq.free_labels:
+        return None
+    i, j = lsq.free_labels.index("h"), lsq.free_labels.index("tilt_offset")
+    c = float(np.asarray(lsq.corr)[i, j])
+    return c if math.isfinite(c) else None
 
 
 def rotation_error(R_est, R_true) -> np.ndarray:

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from robocal.cli import DemoContext, DemoOutcome, Rig
-from robocal.cli._common import RawHelp, add_out_argument, add_seed_argument, examples_epilog, prepare_out_dir, write_run
+from robocal.cli._common import RawHelp, add_accept_implausible_argument, add_out_argument, add_seed_argument, examples_epilog, prepare_out_dir, write_run
 from robocal.errors import FileFormatError, InputError, RobocalError
 from robocal.io import atomic_write_text, load_result
 from robocal.report import Section
@@ -60,8 +60,9 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
                                               f"robocal projector calibrate {EXAMPLES}/room_A.yaml --out out",
                                               f"robocal projector calibrate {EXAMPLES}/room_A_csv.yaml --strict --out out"))
     p.add_argument("input", type=Path, help="calibration input (YAML/JSON)")
-    p.add_argument("--strict", action="store_true", help="inconsistent pairwise distances and spots beyond the tilt "
-                   "limit are errors (exit 2) instead of warnings")
+    p.add_argument("--strict", action="store_true", help="inconsistent pairwise distances, spots beyond the tilt "
+                   "limit and estimates outside their physical bounds are errors (exit 2) instead of warnings")
+    add_accept_implausible_argument(p)
     add_out_argument(p)
     p.set_defaults(func=_cmd_calibrate)
 
@@ -78,6 +79,7 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--spacing", type=float, default=2.0, metavar="M", help="Table 2 grid spacing [m]")
     p.add_argument("--center", type=float, nargs=2, default=(0.0, 0.0), metavar=("X", "Y"),
                    help="Table 2 grid centre in {W} [m]")
+    add_accept_implausible_argument(p)
     add_out_argument(p)
     p.set_defaults(func=_cmd_evaluate)
 
@@ -128,7 +130,8 @@ def _cmd_simulate(args) -> int:
                               theta_sigma=math.radians(args.theta_noise))
     out = prepare_out_dir(args.out, "projector-simulate")
     doc = scenario_document(sc)
-    text = (f"# robocal projector simulate --points {args.points} --noise {args.noise} --seed {args.seed}\n"
+    text = (f"# robocal projector simulate --points {args.points} --noise {args.noise} --theta-noise "
+            f"{args.theta_noise} --seed {args.seed}\n"
             "# Calibration input; 'truth' holds the simulated projector (used by `evaluate`).\n"
             + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120))
     path = atomic_write_text(out / "projector.yaml", text)
@@ -143,7 +146,7 @@ def _cmd_calibrate(args) -> int:
     inp = load_calibration_input(args.input)
     if args.strict:
         inp.strict = True
-    run = run_calibration(inp)
+    run = run_calibration(inp, accept_implausible=args.accept_implausible)
     result = calibration_result(run, inputs=inp.files, truth=inp.truth)
     report = calibration_report(run, title=f"projector calibration: {args.input.name}", truth=inp.truth)
     out = prepare_out_dir(args.out, "projector-calibrate")
@@ -185,7 +188,7 @@ def _cmd_evaluate(args) -> int:
     if args.result is not None:
         calibrated = _model_from_result(args.result, inp.model)
     else:
-        run = run_calibration(inp)
+        run = run_calibration(inp, accept_implausible=args.accept_implausible)
         calibrated = run.calibrated_model()
     ev = run_evaluation(inp.truth, calibrated, center=tuple(args.center), spacing=args.spacing)
     e = ev.evaluation

@@ -19,6 +19,8 @@ Calibration input (``robocal projector calibrate INPUT``)::
       joint_angles: [[t1, t2], ...]          # theta_i (N, 2) -- or:
       file: points.csv                       # columns x, y [length], theta1, theta2 [angle]
     noise: {value: 5, unit: mm}              # optional: world measurement sigma
+    joint_noise: {value: [0.05, 0.05], unit: deg}   # optional: encoder sigma (pan, tilt); needs noise
+    tilt_offset_limit: {value: 5, unit: deg} # optional: bound on an estimated tilt offset (default 5 deg)
     methods: [seed, closed_form, nonlinear]  # optional
     estimate: [h, tilt_offset]               # optional extra unknowns (needs joint angles)
     seed: {alpha: 0.5, order: [2, 1, 0]}     # optional: eq. (29) step, eq. (12) roles
@@ -147,6 +149,8 @@ class CalibrationInput:
     strict: bool
     truth: ProjectorModel | None
     files: list
+    joint_noise: tuple | None = None
+    tilt_offset_limit: float | None = None
 
 
 def load_calibration_input(path) -> CalibrationInput:
@@ -186,6 +190,20 @@ def load_calibration_input(path) -> CalibrationInput:
     sigma = doc.float("noise", kind="length", default=None)
     if sigma is not None and not sigma > 0:
         raise doc.error("noise", f"must be > 0, got {sigma:g}")
+    joint_noise = None
+    if "joint_noise" in doc:
+        jn = doc.array("joint_noise", kind="angle", shape=(2,))
+        if np.any(jn < 0):
+            raise doc.error("joint_noise", f"must be >= 0 (pan, tilt), got {np.degrees(jn).tolist()} deg")
+        if np.any(jn > 0) and sigma is None:
+            raise doc.error("joint_noise", "needs 'noise' (the world measurement sigma) beside it: the two make "
+                                           "each point's floor covariance")
+        joint_noise = (float(jn[0]), float(jn[1]))
+    tilt_offset_limit = None
+    if "tilt_offset_limit" in doc:
+        tilt_offset_limit = doc.float("tilt_offset_limit", kind="angle", positive=True)
+        if not tilt_offset_limit < math.pi / 2:
+            raise doc.error("tilt_offset_limit", f"must be below 90 deg, got {math.degrees(tilt_offset_limit):g} deg")
     methods = doc.raw("methods", ["seed", "closed_form", "nonlinear"])
     estimate = doc.raw("estimate", [])
     for key, val in (("methods", methods), ("estimate", estimate)):
@@ -198,7 +216,7 @@ def load_calibration_input(path) -> CalibrationInput:
         raise seed.error("order", f"must be a list of point indices, got {order!r}")
     truth = projector_from_doc(doc.sub("truth"), extrinsics=True) if "truth" in doc else None
     return CalibrationInput(str(path), model, pw, p0, th, sigma, tuple(methods), tuple(estimate), alpha, order,
-                            doc.bool("strict", default=False), truth, files)
+                            doc.bool("strict", default=False), truth, files, joint_noise, tilt_offset_limit)
 
 
 def _check_joint_angles(th: np.ndarray, model: ProjectorModel, field_error, csv_path) -> None:

@@ -160,6 +160,22 @@ def calibration_sections(run, *, truth=None) -> list[Section]:
             est[k] = val
             std[k] = best.std[k]
     s.parameters(est, std)
+    if truth is not None:
+        from robocal.rigs.projector.workflow import truth_errors
+
+        err = truth_errors(best, truth)
+        trows = []
+        for k, unit, f in (("yaw", "mrad", 1e3), ("t_x", "mm", 1e3), ("t_y", "mm", 1e3), ("h", "mm", 1e3),
+                           ("tilt_offset", "mrad", 1e3), ("pan_offset", "mrad", 1e3)):
+            v = err.get(k)
+            if v is None or (k in ("h", "tilt_offset", "pan_offset") and k not in best.std):
+                continue
+            sd = best.std.get(k)
+            trows.append({"parameter": k, f"error [{unit}]": f * v, "error": f"{f * v:.4g} {unit}",
+                          "std": None if sd is None else f"{f * sd:.4g} {unit}",
+                          "error / std": None if not sd else v / sd})
+        s.table([{k: v for k, v in r.items() if "[" not in k} for r in trows], digits=4,
+                caption="primary estimate minus the truth (a held or unidentifiable parameter has no std)")
     s.diagnostics(run.warnings)
     secs.append(s)
     s = Section("Cost curves and residuals")

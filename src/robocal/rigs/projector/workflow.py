@@ -18,15 +18,28 @@ from robocal.rigs.projector.model import ProjectorModel
 from robocal.rigs.projector.plots import calibration_sections, evaluation_sections, plot_path
 from robocal.report import new_figure
 
-__all__ = ["run_calibration", "calibration_result", "calibration_report", "run_evaluation", "scenario_document",
+__all__ = ["run_calibration", "truth_errors", "calibration_result", "calibration_report", "run_evaluation", "scenario_document",
            "path_report", "EvaluationRun"]
 
 
-def run_calibration(inp: CalibrationInput) -> CalibrationRun:
+def run_calibration(inp: CalibrationInput, *, accept_implausible: bool = False) -> CalibrationRun:
     """Calibrate from a loaded input file."""
+    kw = {} if inp.tilt_offset_limit is None else {"tilt_offset_limit": inp.tilt_offset_limit}
     return calibrate(inp.points_W, theta=inp.theta, points_0=inp.points_0, model=inp.model, methods=inp.methods,
                      estimate=inp.estimate, sigma=inp.sigma, strict=inp.strict, seed_alpha=inp.seed_alpha,
-                     seed_order=inp.seed_order)
+                     seed_order=inp.seed_order, joint_noise=inp.joint_noise, accept_implausible=accept_implausible,
+                     source=inp.source, **kw)
+
+
+def truth_errors(est, truth: ProjectorModel) -> dict:
+    """Estimate minus truth for every estimated parameter (SI: rad, m): yaw, t (3,), and h, offsets when estimated."""
+    dt = np.asarray(est.t_0_W - truth.t_0_W, dtype=float)
+    out = {"yaw": float(est.yaw - yaw_of(truth.R_0_W)), "t_x": float(dt[0]), "t_y": float(dt[1]), "t_0_W": dt}
+    if "h" in est.extra:
+        out["h"] = float(est.extra["h"] - truth.h)
+        out["pan_offset"] = float(est.extra["offsets"][0] - truth.offsets[0])
+        out["tilt_offset"] = float(est.extra["offsets"][1] - truth.offsets[1])
+    return out
 
 
 def calibration_result(run: CalibrationRun, *, inputs=(), truth: ProjectorModel | None = None) -> CalibrationResult:
@@ -60,7 +73,8 @@ def calibration_result(run: CalibrationRun, *, inputs=(), truth: ProjectorModel 
         per_method[name] = d
     diag = {"methods": per_method, "consistency": run.consistency.rows(),
             "consistency_threshold": run.consistency.threshold, "suspect_points": run.consistency.suspects,
-            "n_points": int(len(run.points_W)), "sigma": run.sigma,
+            "n_points": int(len(run.points_W)), "sigma": run.sigma, "joint_noise": run.joint_noise,
+            "n_pairs_checked": run.consistency.n_pairs,
             "std_basis": ("absolute: the input's noise sigma taken as known" if run.sigma else
                           "residual-scaled: no noise given, sigma estimated from the residuals"),
             "frames": "p_0 = R_0_W p_W + t_0_W (seed eq. 1); quaternion scalar-last"}
@@ -68,7 +82,11 @@ def calibration_result(run: CalibrationRun, *, inputs=(), truth: ProjectorModel 
         diag["truth"] = {"yaw": float(yaw_of(truth.R_0_W)), "t_0_W": truth.t_0_W, "h": truth.h,
                          "offsets": list(truth.offsets),
                          "yaw_error": best.yaw - float(yaw_of(truth.R_0_W)),
-                         "t_error": best.t_0_W - truth.t_0_W}
+                         "t_error": best.t_0_W - truth.t_0_W,
+                         "errors": truth_errors(best, truth),
+                         "errors_over_std": {k: (None if not isinstance(v, float) or not best.std.get(k) else
+                                                 v / best.std[k]) for k, v in truth_errors(best, truth).items()},
+                         "errors_by_method": {name: truth_errors(e, truth) for name, e in run.estimates.items()}}
     return CalibrationResult(rig="projector", method=run.primary, estimate=est, std=std, units=units,
                              residual_rms=best.rms, residual_unit="m", warnings=run.warnings,
                              inputs=hash_inputs(inputs), diagnostics=diag)
@@ -117,6 +135,8 @@ def scenario_document(sc, *, estimate=("h", "tilt_offset"), comment: str = "") -
         "points": {"world": np.round(sc.points_W[:, :2] * 1e3, 3).tolist(),
                    "joint_angles": np.round(np.degrees(sc.theta), 9).tolist()},
         "noise": {"value": round(sc.sigma * 1e3, 6), "unit": "mm"},
+        **({"joint_noise": {"value": [float(np.degrees(sc.theta_sigma))] * 2, "unit": "deg"}}
+           if sc.theta_sigma else {}),
         "methods": ["seed", "closed_form", "nonlinear"],
         "estimate": list(estimate),
         "truth": projector_to_yaml(sc.truth, extrinsics=True),
