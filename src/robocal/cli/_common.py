@@ -12,8 +12,7 @@ import sys
 from collections.abc import Iterable
 from pathlib import Path
 
-from robocal.errors import InputError
-from robocal.io import CalibrationResult, write_result
+from robocal.io import CalibrationResult, claim_folder, write_result
 from robocal.progress import progress  # noqa: F401 - re-exported for the rigs' CLI modules
 from robocal.report import Report
 
@@ -62,21 +61,46 @@ def examples_epilog(*lines: str) -> str:
     return "examples:\n" + "\n".join(f"  {ln}" for ln in lines)
 
 
+FORCE_HELP = ("replace the files of another command's run in the --out folder (files robocal did not write "
+              "and this command's inputs are never removed)")
+
+
 def add_out_argument(parser: argparse.ArgumentParser, *, help: str | None = None) -> None:
+    """``--out DIR`` and ``--force`` (see ``docs/results.md``, "Output folders")."""
     parser.add_argument(
         "--out",
         type=Path,
         default=None,
         help=help or "output directory (default: a fresh robocal-out-<command>-<time> folder)",
     )
+    parser.add_argument("--force", action="store_true", help=FORCE_HELP)
+
+
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
+    if value < 0:  # numpy's SeedSequence takes non-negative entropy only
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {value}")
+    return value
 
 
 def add_seed_argument(parser: argparse.ArgumentParser, default: int = 0) -> None:
-    parser.add_argument("--seed", type=int, default=default, help="seed of the random generator")
+    parser.add_argument("--seed", type=_seed, default=default, help="seed of the random generator (>= 0)")
 
 
-def prepare_out_dir(out: Path | None, label: str) -> Path:
-    """Create ``out`` (or a fresh time-stamped folder named after ``label``)."""
+def prepare_out_dir(out: Path | None, label: str, *, force: bool | None = None) -> Path:
+    """Create ``out`` (or a fresh time-stamped folder named after ``label``) as this run's output folder.
+
+    ``label`` names the command (``"flow-simulate"``). Inside a command run
+    (:class:`robocal.io.CommandRun`, which ``robocal``'s ``main`` opens) the
+    folder is checked and marked: an earlier run of the same command is
+    removed first, another command's run or unknown files are refused unless
+    ``force`` (default: the run's ``--force``), and ``INCOMPLETE`` stays until
+    the command finishes (see ``docs/results.md``, "Output folders"). From
+    the Python API without a run it only makes the folder.
+    """
     if out is None:
         stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
         out = Path(f"robocal-out-{label}-{stamp}")
@@ -84,14 +108,7 @@ def prepare_out_dir(out: Path | None, label: str) -> Path:
         while out.exists():
             n += 1
             out = Path(f"robocal-out-{label}-{stamp}-{n}")
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"{out} is a file, expected a directory (new or existing)", source="--out")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"cannot create the directory {out} ({exc.strerror or exc})", source="--out") from None
-    return out
+    return claim_folder(Path(out), label, force=force)
 
 
 def write_run(out_dir: Path, result: CalibrationResult | None, report: Report | None, *, quiet: bool = False):

@@ -1,24 +1,32 @@
 """``robocal`` command-line entry point.
 
-Errors a user can cause (:class:`~robocal.errors.RobocalError`) print one
-line on stderr and exit with status 2; anything else is a bug and keeps its
-traceback.
+Errors a user can cause (:class:`~robocal.errors.RobocalError`, and the
+failures user data provokes in NumPy and the runtime: memory, singular
+matrices, undecodable text, overflowing numbers) print one line on stderr and
+exit with status 2; anything else is a bug and keeps its traceback.
+
+Every command runs inside a :class:`robocal.io.CommandRun`: its ``--out``
+folder is checked and marked ``INCOMPLETE`` at the start, and the mark is
+removed only when the command finishes (see ``docs/results.md``).
 """
 
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 import time
+import warnings
+import zlib
 from pathlib import Path
 
 import numpy as np
 
 import robocal
-from robocal.cli._common import OneLineErrorParser, RawHelp, examples_epilog, prepare_out_dir
+from robocal.cli._common import FORCE_HELP, OneLineErrorParser, RawHelp, _seed, examples_epilog, prepare_out_dir
 from robocal.cli._rig import DemoContext, discover_rigs, registered_rig_names
 from robocal.errors import InputError, RobocalError
-from robocal.io import set_command_line, write_result
+from robocal.io import CommandRun, set_command_line, write_result
 from robocal.report import Report
 
 __all__ = ["main", "build_parser", "run_demo"]
@@ -39,7 +47,7 @@ def build_parser(rigs=None) -> argparse.ArgumentParser:
             "robocal demo                      # every rig on embedded data, HTML report",
             "robocal demo --out demo-out --seed 3",
             "robocal projector --help          # one rig's commands",
-            "robocal projector calibrate examples/projector/seed_projector_A.yaml --out out",
+            "robocal projector calibrate examples/projector/seed_projector_A.yaml --out projector-cal",
         ),
     )
     parser.add_argument("--version", action="version", version=f"robocal {robocal.__version__}")
@@ -60,7 +68,10 @@ def build_parser(rigs=None) -> argparse.ArgumentParser:
     )
     demo.add_argument("--out", type=Path, default=None, metavar="DIR",
                       help="report directory (default: a fresh robocal-out-demo-<time> folder)")
-    demo.add_argument("--seed", type=int, default=2026, help="seed of the random generator")
+    demo.add_argument("--force", action="store_true", help=FORCE_HELP)
+    demo.add_argument("--seed", type=_seed, default=2026,
+                      help="seed of the random generator; each rig draws from its own stream keyed by its name, "
+                           "so a rig's figures do not depend on which other rigs run")
     demo.add_argument("--rigs", default=None, metavar="NAMES",
                       help=f"comma-separated subset of rigs to run, of: {', '.join(with_demo) or 'none installed'} "
                            "(default: all)")
@@ -99,11 +110,11 @@ def run_demo(args, rigs) -> int:
     overview = report.section("Summary")
     rows = []
     failed = 0
-    seeds = np.random.SeedSequence(args.seed).spawn(max(len(chosen), 1))
-    for rig, ss in zip(chosen, seeds):
+    for rig in chosen:
         print(f"[{rig.name}] running ...", flush=True)
         t0 = time.perf_counter()
-        ctx = DemoContext(out_dir=out / rig.name, rng=np.random.default_rng(ss), progress=not args.no_progress)
+        ctx = DemoContext(out_dir=out / rig.name, rng=np.random.default_rng(demo_seed(args.seed, rig.name)),
+                          progress=not args.no_progress)
         ctx.out_dir.mkdir(parents=True, exist_ok=True)
         try:
             outcome = rig.demo(ctx)
@@ -128,6 +139,18 @@ def run_demo(args, rigs) -> int:
     return 0 if failed == 0 else 1
 
 
+def demo_seed(seed: int, rig: str) -> np.random.SeedSequence:
+    """The seed sequence of ``rig``'s demo: keyed by the rig's name, not by its place in the run.
+
+    ``SeedSequence(seed).spawn(n)`` hands out streams by position, so adding
+    or leaving out a rig shifted every later rig's data (issue 18: the
+    mirror's "1 image error" read 254, 206 or 120 mm for three ``--rigs``
+    choices). CRC-32 of the name is stable across runs and platforms (unlike
+    ``hash``), and ``SeedSequence`` mixes the pair into independent streams.
+    """
+    return np.random.SeedSequence([int(seed), zlib.crc32(rig.encode("utf-8"))])
+
+
 def _print_table(rows) -> None:
     if not rows:
         print("no rigs ran")
@@ -149,6 +172,46 @@ def _invoked_rig(argv) -> list[str] | None:
     return [command] if command in registered_rig_names() else None
 
 
+def _command_words(argv) -> list[str]:
+    """``["flow", "simulate"]``: the words naming the command (up to two, before any option)."""
+    words = []
+    for a in argv:
+        if a.startswith("-") or len(words) == 2 or Path(a).exists():
+            break
+        words.append(a)
+    return words
+
+
+def _input_files(args) -> list[Path]:
+    """The existing files named by the parsed arguments: the command's inputs, first the positional one."""
+    found = []
+    values = [getattr(args, "input", None), *vars(args).values()]
+    for v in values:
+        for item in (v if isinstance(v, (list, tuple)) else [v]):
+            if isinstance(item, (str, Path)) and str(item) and not str(item).startswith("-"):
+                try:
+                    if Path(item).is_file() and Path(item) not in found:
+                        found.append(Path(item))
+                except (OSError, ValueError):  # a name too long or with a NUL byte is no input file
+                    pass
+    return found
+
+
+def _data_error(exc: BaseException, args) -> str:
+    """One line for a failure user data provoked outside robocal's own checks, naming the input file."""
+    inputs = _input_files(args) if args is not None else []
+    where = f"{inputs[0]}: " if inputs else ""
+    if isinstance(exc, MemoryError):
+        what = str(exc).strip() or "the input needs more memory than this machine has"
+        return f"{where}out of memory: {what}"
+    if isinstance(exc, np.linalg.LinAlgError):
+        return f"{where}the data give a singular or ill-conditioned problem ({exc}); check for extreme or repeated values"
+    if isinstance(exc, UnicodeDecodeError):
+        return (f"{where}not UTF-8 text: byte 0x{exc.object[exc.start]:02x} at offset {exc.start} "
+                "(a binary file, or text saved in another encoding)")
+    return f"{where}a computation overflowed or became undefined ({exc}); check for extreme values (e.g. 1e300) or wrong units"
+
+
 def main(argv=None) -> int:
     args = None
     argv = sys.argv[1:] if argv is None else list(argv)
@@ -156,13 +219,29 @@ def main(argv=None) -> int:
         print(f"robocal {robocal.__version__}")
         return 0
     set_command_line(argv)
+    run = None
     try:
         parser = build_parser(discover_rigs(_invoked_rig(argv)))
         args = parser.parse_args(argv)
         if getattr(args, "func", None) is None:
             parser.print_help()
             return 0
-        return int(args.func(args) or 0)
+        words = _command_words(argv)
+        run = CommandRun(command=shlex.join(["robocal", *words]), command_line=shlex.join(["robocal", *argv]),
+                         rig=words[0] if words and words[0] not in ("demo", "rigs") else None,
+                         force=bool(getattr(args, "force", False)), inputs=tuple(_input_files(args)))
+        with run:
+            # Warnings are held back while the command runs: when it then fails (the
+            # numeric warnings before fx: 1e300's LinAlgError), the one error line is
+            # the whole answer; when it succeeds they are shown as usual.
+            with warnings.catch_warnings(record=True) as held:
+                code = int(args.func(args) or 0)
+            for w in held:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
+            # demo's 1 means "a rig's check failed": the run finished and its report is the answer
+            run.finish("complete" if code == 0 or (code == 1 and args.command == "demo") else "failed",
+                       error=None if code == 0 else f"exit status {code}")
+        return code
     except RobocalError as exc:
         msg = str(exc).replace("\n", " ")
         # an error raised deep in a library call may not know the file it came from
@@ -174,6 +253,14 @@ def main(argv=None) -> int:
     except OSError as exc:  # a file that cannot be read or written: the user's to fix, not a bug
         where = f"{exc.filename}: " if exc.filename else ""
         print(f"robocal: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return EXIT_USER_ERROR
+    except (MemoryError, np.linalg.LinAlgError, UnicodeDecodeError, FloatingPointError, RuntimeWarning) as exc:
+        # These come from the user's data, not from a bug: a size beyond the machine's
+        # memory, a singular system from repeated or extreme values, a binary file where
+        # text was expected, numbers that overflow. The rigs' own checks catch the
+        # common cases with a precise message; what slips past them still deserves one
+        # line naming the input, not a traceback a user cannot act on.
+        print(f"robocal: error: {_data_error(exc, args)}".replace("\n", " "), file=sys.stderr)
         return EXIT_USER_ERROR
     except KeyboardInterrupt:
         print("robocal: interrupted", file=sys.stderr)

@@ -8,12 +8,24 @@ never destroys an earlier result.
 
 from __future__ import annotations
 
+import contextvars
 import hashlib
 import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_write_bytes", "atomic_write_text", "sha256_file", "sha256_bytes"]
+from robocal.errors import InputError
+
+__all__ = ["atomic_write_bytes", "atomic_write_text", "sha256_file", "sha256_bytes", "protected_paths"]
+
+#: resolved path -> why it must not be replaced (a command's inputs, files kept by --force);
+#: set by the running command (:class:`robocal.io.CommandRun`)
+_PROTECTED: contextvars.ContextVar[dict] = contextvars.ContextVar("robocal_protected_paths", default={})
+
+
+def protected_paths() -> dict:
+    """The paths the atomic writer refuses to replace now: ``{resolved path: reason}``."""
+    return dict(_PROTECTED.get())
 
 
 def _umask() -> int:
@@ -25,8 +37,17 @@ def _umask() -> int:
 def atomic_write_bytes(path, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically; creates parent directories."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    protected = _PROTECTED.get()
+    if protected:
+        why = protected.get(str(path.resolve()))
+        if why is not None:
+            raise InputError(f"refusing to write over {path}: it is {why}; choose another --out", source="--out")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:
+        # the error names the folder the user chose, not the writer's temporary file
+        raise OSError(exc.errno, f"cannot write {path.name} there ({exc.strerror or exc})", str(path.parent)) from None
     try:
         # mkstemp creates the file 0600; a result file should get the permissions
         # any other new file gets (0666 minus the umask), or colleagues cannot read it
@@ -37,11 +58,13 @@ def atomic_write_bytes(path, data: bytes) -> Path:
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         try:
             os.unlink(tmp)
         except FileNotFoundError:
             pass
+        if isinstance(exc, OSError) and exc.filename == tmp:
+            raise OSError(exc.errno, f"cannot write {path.name} there ({exc.strerror or exc})", str(path.parent)) from None
         raise
     return path
 

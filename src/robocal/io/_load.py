@@ -76,6 +76,41 @@ class _SafeLoader(yaml.SafeLoader):
     """
 
 
+class _DuplicateKeyError(yaml.YAMLError):
+    """A mapping names a key twice; the message names the key and both lines."""
+
+
+def _duplicate_key_message(key, first: int, second: int) -> str:
+    return f"key {key!r} appears twice (lines {first} and {second}); keep one"
+
+
+def _check_unique_keys(loader: yaml.SafeLoader, node: yaml.MappingNode) -> None:
+    # PyYAML keeps the last of two equal keys without a word: `H:` written twice
+    # silently took the second value (issue 18). Merge keys (`<<`) are left to
+    # PyYAML: overriding a merged key is their purpose.
+    seen: dict = {}
+    for key_node, _ in node.value:
+        if key_node.tag == "tag:yaml.org,2002:merge" or not isinstance(key_node, yaml.ScalarNode):
+            continue
+        key = loader.construct_object(key_node, deep=True)
+        line = key_node.start_mark.line + 1
+        try:
+            first = seen.get(key)
+        except TypeError:  # an unhashable key: PyYAML reports it itself
+            continue
+        if first is not None:
+            raise _DuplicateKeyError(_duplicate_key_message(key, first, line))
+        seen[key] = line
+
+
+def _construct_mapping(loader, node, deep=False):
+    if isinstance(node, yaml.MappingNode):
+        _check_unique_keys(loader, node)
+    return yaml.SafeLoader.construct_mapping(loader, node, deep=deep)
+
+
+_SafeLoader.construct_mapping = _construct_mapping
+
 _SafeLoader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
     re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9][0-9_]*)[eE][-+]?[0-9]+$"),
@@ -108,12 +143,41 @@ def _describe_text(v) -> str:
     return f"a quoted string ({text!r})"
 
 
+def _unique_json_object(pairs):
+    d = {}
+    for k, v in pairs:
+        if k in d:
+            raise _DuplicateKeyError(k)
+        d[k] = v
+    return d
+
+
+def _json_duplicate_lines(text: str, key: str) -> tuple[int, int] | None:
+    """Lines of a duplicated JSON key: JSON is YAML-readable, and the YAML check has the marks."""
+    try:
+        yaml.load(text, Loader=_SafeLoader)  # noqa: S506 - a SafeLoader subclass
+    except _DuplicateKeyError as exc:
+        m = re.search(r"lines (\d+) and (\d+)", str(exc))
+        return (int(m.group(1)), int(m.group(2))) if m else None
+    except yaml.YAMLError:
+        return None
+    return None
+
+
 def _parse_text(text: str, suffix: str, source: str) -> Any:
     text = text.removeprefix("\ufeff")
     try:
         if suffix == ".json":
-            return json.loads(text)
+            try:
+                return json.loads(text, object_pairs_hook=_unique_json_object)
+            except _DuplicateKeyError as exc:
+                key = exc.args[0]
+                lines = _json_duplicate_lines(text, key)
+                msg = (_duplicate_key_message(key, *lines) if lines else f"key {key!r} appears twice in one object; keep one")
+                raise FileFormatError(msg, source=source) from None
         return yaml.load(text, Loader=_SafeLoader)  # noqa: S506 - a SafeLoader subclass
+    except _DuplicateKeyError as exc:
+        raise FileFormatError(str(exc), source=source) from None
     except json.JSONDecodeError as exc:
         raise FileFormatError(f"invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}", source=source) from None
     except yaml.YAMLError as exc:

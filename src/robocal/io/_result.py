@@ -165,9 +165,24 @@ def write_result(path, result: CalibrationResult) -> Path:
     return atomic_write_text(path, text)
 
 
-def load_result(path) -> CalibrationResult:
-    """Load a result file written by :func:`write_result`."""
-    from robocal.io._load import load_document
+def load_result(path, *, allow_incomplete: bool = False) -> CalibrationResult:
+    """Load a result file written by :func:`write_result`.
 
+    A result whose folder holds an ``INCOMPLETE`` marker (the run that wrote
+    the folder was interrupted or failed, see :mod:`robocal.io._runs`) is
+    refused with :class:`~robocal.errors.FileFormatError`: it is stale or
+    half-made, and reading it as new is the error the marker exists to stop.
+    ``allow_incomplete=True`` loads it anyway (to inspect a failed run).
+    """
+    from robocal.io._load import load_document
+    from robocal.io._runs import INCOMPLETE, MANIFEST, read_manifest
+
+    folder = Path(path).parent
+    if not allow_incomplete and (folder / INCOMPLETE).exists():
+        m = read_manifest(folder) or {}
+        how = {"running": "is still running or was interrupted", "failed": "failed"}.get(m.get("state"), "did not finish")
+        who = f"the `{m['command']}` run started {m.get('started')}" if m.get("command") else "the run that wrote it"
+        raise FileFormatError(f"not a finished result: {who} {how} (the folder holds {INCOMPLETE}; see {MANIFEST}); "
+                              "run the command again", source=str(path))
     doc = load_document(path)
     return CalibrationResult.from_dict(doc.data, source=str(path))
