@@ -183,3 +183,57 @@ def test_a_rig_command_loads_only_that_rig(monkeypatch, capsys):
     assert m._invoked_rig(["--help"]) is None and m._invoked_rig(["demo"]) is None
     assert m._invoked_rig(["projektor", "calibrate"]) is None
     assert m._invoked_rig(["-h", "flow"]) == ["flow"]
+
+
+def test_a_rigs_demo_stream_is_keyed_by_its_name_not_its_place(tmp_path):
+    import dataclasses
+
+    def x_of(rigs, out):
+        args = argparse.Namespace(rigs=None, out=tmp_path / out, seed=5, no_progress=True)
+        assert run_demo(args, rigs) == 0
+        return json.loads((tmp_path / out / "toy" / "result.json").read_text())["estimate"]["x"]
+
+    toy = _toy_rig()
+    before = dataclasses.replace(toy, name="aaa")  # sorts and runs before "toy"
+    alone, second = x_of([toy], "alone"), x_of([before, toy], "second")
+    assert alone == second
+    # and the stream is the rig's own: the other rig drew a different number
+    assert json.loads((tmp_path / "second" / "aaa" / "result.json").read_text())["estimate"]["x"] != alone
+
+
+@pytest.mark.parametrize("exc, says", [
+    (MemoryError(), "out of memory"),
+    (np.linalg.LinAlgError("Singular matrix"), "singular or ill-conditioned problem (Singular matrix)"),
+    (UnicodeDecodeError("utf-8", b"\x89PNG", 0, 1, "invalid start byte"), "not UTF-8 text: byte 0x89 at offset 0"),
+    (FloatingPointError("overflow encountered in multiply"), "overflowed or became undefined"),
+    (RuntimeWarning("invalid value encountered in divide"), "overflowed or became undefined"),
+])
+def test_failures_user_data_provokes_are_one_line_naming_the_input(tmp_path, capsys, monkeypatch, exc, says):
+    import warnings
+
+    import robocal.cli.main as m
+
+    inp = tmp_path / "room.yaml"
+    inp.write_text("H: 1\n")
+
+    def add_commands(p):
+        c = p.add_subparsers(dest="sub").add_parser("calibrate")
+        c.add_argument("input")
+
+        def run(args):
+            warnings.warn("overflow encountered in square", RuntimeWarning)  # held back: the error line is the answer
+            raise exc
+
+        c.set_defaults(func=run)
+
+    monkeypatch.setattr(m, "discover_rigs", lambda names=None: [Rig("toy", "t", "t", add_commands, None)])
+    assert main(["toy", "calibrate", str(inp)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"robocal: error: {inp}: ") and says in err, err
+
+
+def test_a_negative_seed_is_a_usage_error(capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["demo", "--seed", "-1", "--rigs", "x"])
+    assert e.value.code == 2
+    assert "expected a whole number >= 0, got -1" in capsys.readouterr().err

@@ -445,3 +445,21 @@ def test_require_known_keys_names_the_first_unknown_key_and_the_closest_known_on
     with pytest.raises(FileFormatError, match=r"field 'tilt_mim': unknown key; known keys: H$"):
         doc.require_known_keys(("H",))
     doc.require_known_keys(("H", "tilt_mim"))
+
+
+@pytest.mark.parametrize("text, suffix, says", [
+    ("H: 2.9\nroom:\n  H: 1\nW: 3\n\nH: 3.1\n", ".yaml", "key 'H' appears twice (lines 1 and 6)"),
+    ("points: {a: 1, a: 2}\n", ".yaml", "key 'a' appears twice (lines 1 and 1)"),
+    ('{"H": 2.9,\n "room": {"H": 1},\n "H": 3.1}\n', ".json", "key 'H' appears twice (lines 1 and 3)"),
+])
+def test_a_duplicate_key_is_an_error_naming_the_key_and_both_lines(tmp_path, text, suffix, says):
+    f = tmp_path / f"room{suffix}"
+    f.write_text(text)
+    with pytest.raises(FileFormatError) as e:
+        load_document(f)
+    assert str(e.value) == f"{f}: {says}; keep one"
+
+
+def test_keys_repeated_in_different_mappings_or_by_a_merge_are_not_duplicates():
+    doc = parse_document("a: {H: 1}\nb: {H: 2}\nbase: &b {x: 1}\nd:\n  <<: *b\n  x: 2\n")
+    assert doc.data["d"] == {"x": 2} and doc.data["a"] == {"H": 1}
