@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 import yaml
 
-from robocal.errors import FileFormatError, InconsistentDataError, InputError, NotEnoughDataError
+from robocal.errors import (FileFormatError, ImplausibleInputError, InconsistentDataError, InputError,
+                            NotEnoughDataError)
 from robocal.rigs.humanoid.calibrate import calibrate
 from robocal.rigs.humanoid.dataset import load_dataset
 
@@ -146,11 +147,14 @@ def test_consistency_thresholds_are_parameters(example, model, corner_data, caps
     assert main(["humanoid", "calibrate", str(example), "--consistency-px", "1", "--consistency-ratio", "1",
                  "--out", out]) == 2
     assert "expected < " in capsys.readouterr().err
-    # the mislabelled foot (250+ px) passes a threshold set beyond it (and is then only a warning)
+    # the mislabelled foot (250+ px) passes a threshold set beyond it; the offsets it pulls to (tens of
+    # deg) are then implausible: an error, or with accept_implausible a warning
     _edit(example, lambda d: d["feet"].__setitem__(4, "left" if d["feet"][4] == "right" else "right"))
     m, data, _ = load_dataset(example)
-    cal = calibrate(m, data, consistency_px=1000.0)
-    assert any(w.code == "inconsistent_data" for w in cal.warnings)
+    with pytest.raises(ImplausibleInputError, match=r"implausible offsets \(> 5 deg\)"):
+        calibrate(m, data, consistency_px=1000.0)
+    cal = calibrate(m, data, consistency_px=1000.0, accept_implausible=True)
+    assert any(w.code == "implausible_input" and "implausible offsets" in w.message for w in cal.warnings)
     # the CLI's defaults are the library's
     import argparse
 

@@ -24,15 +24,17 @@ from pathlib import Path
 import numpy as np
 
 from robocal.diagnostics import Diagnostic
-from robocal.errors import InconsistentDataError, InputError, NotEnoughDataError
+from robocal.errors import (ImplausibleInputError, InconsistentDataError, InputError, NonFiniteError,
+                             NotEnoughDataError)
 from robocal.estimation import LSQResult, Problem, analyze_jacobian, outlier_threshold, solve
 from robocal.io import CalibrationResult
+from robocal.plausibility import check_slips
 from robocal.rigs.humanoid.model import CAMERA_PARAMS, FEET, HumanoidModel
 from robocal.rigs.humanoid.simulate import JOINT_RESOLUTION, HumanoidDataset
 
 __all__ = ["PARAMETER_SETS", "resolve_parameters", "HumanoidCalibration", "calibrate", "check_options",
            "build_problem",
-           "choose_gauge", "check_views_consistent", "plausibility_warnings"]
+           "choose_gauge", "check_views_consistent", "plausibility_warnings", "implausible_offsets"]
 
 #: Named parameter sets (``--params``): see :func:`resolve_parameters`.
 PARAMETER_SETS = {
@@ -647,17 +649,24 @@ def _check_consistency_thresholds(min_px, ratio) -> None:
         raise InputError(f"consistency ratio (--consistency-ratio) must be a finite number >= 1, got {ratio}")
 
 
-def plausibility_warnings(model: HumanoidModel, free, params, view_rms, names,
-                          residual_variance: float) -> list[Diagnostic]:
-    """``inconsistent_data`` warnings after a solve: joint/camera-rotation offsets beyond
-    :data:`PLAUSIBLE_OFFSET`, views whose RMS is 10x the median view's (and > 1 px), and a residual
-    variance 25x the noise model's. Each suggests a wrong joint record, foot label or model."""
-    out = []
+def implausible_offsets(model: HumanoidModel, free, params) -> list[tuple[str, float]]:
+    """``(label, value [deg])`` of the free joint/camera-rotation offsets beyond :data:`PLAUSIBLE_OFFSET`."""
     labels = model.parameter_labels()
     units = model.parameter_units()
-    big = [(lab, float(np.degrees(params[labels.index(lab)]))) for lab in free
-           if units[labels.index(lab)] == "rad" and not lab.startswith("board.")
-           and abs(params[labels.index(lab)]) > PLAUSIBLE_OFFSET]
+    return [(lab, float(np.degrees(params[labels.index(lab)]))) for lab in free
+            if units[labels.index(lab)] == "rad" and not lab.startswith("board.")
+            and abs(params[labels.index(lab)]) > PLAUSIBLE_OFFSET]
+
+
+def plausibility_warnings(model: HumanoidModel, free, params, view_rms, names,
+                          residual_variance: float, *, offsets: bool = True) -> list[Diagnostic]:
+    """``inconsistent_data`` warnings after a solve: joint/camera-rotation offsets beyond
+    :data:`PLAUSIBLE_OFFSET` (unless ``offsets`` is false: :func:`calibrate` judges those with
+    :func:`robocal.plausibility.check_slips`), views whose RMS is 10x the median view's (and > 1 px),
+    and a residual variance 25x the noise model's. Each suggests a wrong joint record, foot label or
+    model."""
+    out = []
+    big = implausible_offsets(model, free, params) if offsets else []
     if big:
         out.append(Diagnostic("inconsistent_data", "implausible offsets (> {:.0f} deg): {}; check the joint "
                               "records, foot labels and model".format(
@@ -697,7 +706,8 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
               outlier_sigma: float = 3.0, progress: bool = False,
               check_consistency: bool = True, consistency_px: float = NOMINAL_MIN_PX,
               consistency_ratio: float = NOMINAL_RATIO, reject_outliers: bool = False,
-              max_rejected_fraction: float = 0.25) -> HumanoidCalibration:
+              max_rejected_fraction: float = 0.25, accept_implausible: bool = False,
+              declared: dict | None = None) -> HumanoidCalibration:
     """Estimate the selected offsets from the corners of every view.
 
     Parameters
@@ -743,9 +753,20 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
         foot label put them (:func:`check_views_consistent`), and warn
         (``inconsistent_data``) about implausible offsets after the solve
         (:func:`plausibility_warnings`).
+        With it, the data set is first checked for the likely slips
+        (:func:`robocal.rigs.humanoid.slips.check_data`: transposed board, mirrored images, square,
+        board centre or joint records in the wrong unit, swapped feet, reversed image list) and
+        joint/camera offsets beyond :data:`PLAUSIBLE_OFFSET` after the solve are implausible
+        (:class:`~robocal.errors.ImplausibleInputError`, naming the slip when one explains it).
     consistency_px, consistency_ratio : float
         The thresholds of that check [px, -]: a view is refused beyond
         ``max(consistency_px, consistency_ratio * median view)`` (defaults 60 px, 4).
+    accept_implausible : bool
+        Go on with implausible data as given: an ``implausible_input`` warning instead of the error
+        (CLI ``--accept-implausible``).
+    declared : dict, optional
+        Units the data set's fields were written in (``load_dataset``'s ``info["declared"]``), so a
+        slip is named in the file's units; default SI.
 
     Returns
     -------
@@ -773,8 +794,14 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
     n_res = 2 * int(present.sum())
     if n_res < len(free):
         raise NotEnoughDataError(f"{n_res} residuals for {len(free)} parameters")
+    slip_warnings: list[Diagnostic] = []
     if check_consistency:
-        check_views_consistent(model, used, x0, min_px=consistency_px, ratio=consistency_ratio)
+        from robocal.rigs.humanoid.slips import check_data
+
+        slip_warnings = check_data(model, used, declared=declared, consistency_px=consistency_px,
+                                   accept_implausible=accept_implausible)
+        if not slip_warnings:  # accepted implausible data would only be refused view by view here
+            check_views_consistent(model, used, x0, min_px=consistency_px, ratio=consistency_ratio)
     joint_sigma = joint_resolution / np.sqrt(12.0)
     sig = 0.3 if corner_sigma is None else float(corner_sigma)
     prob, S = build_problem(model, used, free, tie=tie, x0=x0, analytic=True,
@@ -812,8 +839,8 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
         gauge = sorted(held_all, key=model.parameter_labels().index)
     prob, S = build_problem(model, used, free, tie=tie, x0=x0, analytic=(jac == "analytic"),
                             corner_sigma=sig, joint_sigma=joint_sigma)
-    res = solve(prob, method=method, jac=None if jac == "analytic" else jac, progress=progress,
-                outlier_sigma=outlier_sigma)
+    res = _solve(prob, method=method, jac=None if jac == "analytic" else jac, progress=progress,
+                 outlier_sigma=outlier_sigma)
     first_iterations = res.iterations
     first_history = np.asarray(res.cost_history)
     two_pass = False
@@ -822,8 +849,8 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
         sig = corner_noise(model, used, res.params["p"].reshape(-1), present)
         prob, S = build_problem(model, used, free, tie=tie, x0=res.params["p"].reshape(-1),
                                 analytic=(jac == "analytic"), corner_sigma=sig, joint_sigma=joint_sigma)
-        res = solve(prob, method=method, jac=None if jac == "analytic" else jac, progress=progress,
-                    outlier_sigma=outlier_sigma)
+        res = _solve(prob, method=method, jac=None if jac == "analytic" else jac, progress=progress,
+                     outlier_sigma=outlier_sigma)
         two_pass = True
     params = res.params["p"].reshape(-1)
     V, N = used.corners.shape[:2]
@@ -855,8 +882,8 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
             sig = corner_noise(model, used, params, keep)
         prob, S = build_problem(model, used, free, tie=tie, x0=params, analytic=(jac == "analytic"),
                                 corner_sigma=sig, joint_sigma=joint_sigma, keep=keep)
-        res = solve(prob, method=method, jac=None if jac == "analytic" else jac, progress=progress,
-                    outlier_sigma=outlier_sigma)
+        res = _solve(prob, method=method, jac=None if jac == "analytic" else jac, progress=progress,
+                     outlier_sigma=outlier_sigma)
         params = res.params["p"].reshape(-1)
         resid, view_rms, score, flat = _corner_stats(model, used, params, S, res.residual_variance,
                                                      outlier_sigma, keep)
@@ -886,9 +913,21 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
         warnings.append(Diagnostic("dropped", f"{len(dropped)} view(s) without a fully and correctly detected "
                                               f"board were dropped: {[data.names[i] for i in dropped]}",
                                    indices=tuple(dropped)))
+    warnings = slip_warnings + warnings
     if check_consistency:
         vr = np.where(keep.any(axis=1), view_rms, np.nan)
-        warnings += plausibility_warnings(model, free, params, vr, used.names, res.residual_variance)
+        big = implausible_offsets(model, free, params)
+        if big and not slip_warnings:  # (an accepted slip has said why already)
+            rms = float(np.sqrt(np.nanmean(resid[keep] ** 2))) if keep.any() else float("nan")
+            diag = check_slips(
+                what="offsets", residual=max(abs(v) for _, v in big), unit="deg", plausible=False,
+                reason="implausible offsets (> {:.0f} deg) for an assembled robot: {} (reprojection RMS {:.3g} px); "
+                       "check the joint records, foot labels and model".format(
+                           np.degrees(PLAUSIBLE_OFFSET), ", ".join(f"{a} {b:+.1f} deg" for a, b in big), rms),
+                accept=accept_implausible)
+            warnings.append(diag)
+        warnings += plausibility_warnings(model, free, params, vr, used.names, res.residual_variance,
+                                          offsets=bool(slip_warnings))
     selected = [lab for lab in model.parameter_labels() if lab in free or lab in gauge]
     return HumanoidCalibration(model, used, res, params, selected, resid, view_rms, outliers, messages,
                                warnings, score, sig, joint_resolution, first_iterations, list(gauge),
@@ -896,6 +935,25 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
                                n_params=len(pre.labels), two_pass=two_pass, keep=keep,
                                rejected_corners=rejected, rejected_views=rejected_views,
                                missing_corners=missing_corners, reject_outliers=bool(reject_outliers))
+
+
+def _solve(prob, **kw) -> LSQResult:
+    """:func:`robocal.estimation.solve`, with a NaN residual turned into the one-line reason.
+
+    The forward model returns NaN for a corner behind the camera (``project(check=False)``): LM only
+    gets there when the corners and joint records cannot come from one robot (the slips
+    :func:`robocal.rigs.humanoid.slips.check_data` names, or data accepted despite them), and
+    wanders through offsets of tens of radians before. The parameter dump of the solver's message
+    would tell the user nothing."""
+    try:
+        return solve(prob, **kw)
+    except NonFiniteError as exc:
+        if "returned NaN" not in exc.message:
+            raise
+        raise ImplausibleInputError(
+            "the fit diverged: the offsets grew until a board fell behind the camera (a NaN corner), so "
+            "the corners and joint records cannot come from one robot; check the joint records and their "
+            "unit, the feet, the board (rows, cols, square, centre) and the camera") from None
 
 
 def _corner_stats(model, data, params, S, residual_variance, outlier_sigma, keep=None):

@@ -14,7 +14,7 @@ import numpy as np
 import yaml
 
 from robocal.cli import DemoContext, DemoOutcome, Rig
-from robocal.cli._common import RawHelp, add_out_argument, add_seed_argument, examples_epilog, prepare_out_dir, write_run
+from robocal.cli._common import RawHelp, add_accept_implausible_argument, add_out_argument, add_seed_argument, examples_epilog, prepare_out_dir, write_run
 from robocal.errors import InputError
 from robocal.io import atomic_write_text, load_result
 from robocal.report import Report, new_figure
@@ -32,9 +32,9 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
                        description="True offsets ~0.5 deg, poses within the joint limits with the board fully "
                                    "visible, joint readings quantised to 0.1 deg, rendered images with blur and "
                                    "noise.",
-                       epilog=examples_epilog("robocal humanoid simulate --out sim",
-                                              "robocal humanoid simulate --views 12 --seed 3 --out sim",
-                                              "robocal humanoid calibrate sim/run.yaml --out cal"))
+                       epilog=examples_epilog("robocal humanoid simulate --out humanoid-sim",
+                                              "robocal humanoid simulate --views 12 --seed 3 --out humanoid-sim",
+                                              "robocal humanoid calibrate humanoid-sim/run.yaml --out humanoid-cal"))
     p.add_argument("--views", type=int, default=8, help="views per foot")
     p.add_argument("--blur", type=float, default=0.8, help="image blur sigma [px]")
     p.add_argument("--image-noise", type=float, default=2.0, help="image noise sigma [grey levels]")
@@ -50,8 +50,8 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
                        description="Input format: docs/rigs/humanoid.md (format robocal.humanoid-data/1).\n"
                                    "Parameter sets: seed (21, default), seed+camera_xy, legs, all, or a "
                                    "comma list of names (LKneePitch, camera.roll, board.left.x, ...).",
-                       epilog=examples_epilog(f"robocal humanoid calibrate {EXAMPLES}/run.yaml --out cal",
-                                              "robocal humanoid calibrate sim/run.yaml --tie --out cal   "
+                       epilog=examples_epilog(f"robocal humanoid calibrate {EXAMPLES}/run.yaml --out humanoid-cal",
+                                              "robocal humanoid calibrate humanoid-sim/run.yaml --tie --out humanoid-cal   "
                                               "# data from one HipYawPitch motor",
                                               f"robocal humanoid calibrate {EXAMPLES}/run.yaml "
                                               "--params seed+camera_xy --out cal"))
@@ -72,6 +72,7 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
                         "for a robot with offsets beyond ~1 deg")
     p.add_argument("--consistency-ratio", type=float, default=4.0,
                    help="see --consistency-px")
+    add_accept_implausible_argument(p)
     add_out_argument(p)
     p.set_defaults(func=_cmd_calibrate)
 
@@ -81,8 +82,8 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
                                    "limits, whole board in view and facing the camera, feet apart) add the one "
                                    "that most increases log det of the Fisher information. Writes plan.yaml "
                                    "(joint angles to command) and report.html (predicted stds after each pose).",
-                       epilog=examples_epilog("robocal humanoid plan --poses 12 --out plan",
-                                              "robocal humanoid plan --poses 20 --candidates 100 --out plan",
+                       epilog=examples_epilog("robocal humanoid plan --poses 12 --out humanoid-plan",
+                                              "robocal humanoid plan --poses 20 --candidates 100 --out humanoid-plan",
                                               f"robocal humanoid plan --data {EXAMPLES}/run.yaml --corner-sigma 0.1 "
                                               "--out plan"))
     p.add_argument("--poses", type=int, default=12, help="poses to choose")
@@ -101,7 +102,7 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
 
     p = sub.add_parser("report", help="rebuild report.html from a result.json",
                        formatter_class=RawHelp,
-                       epilog=examples_epilog("robocal humanoid report cal/result.json --out rep"))
+                       epilog=examples_epilog("robocal humanoid report humanoid-cal/result.json --out humanoid-report"))
     p.add_argument("result", type=Path, help="result.json written by 'robocal humanoid calibrate'")
     add_out_argument(p)
     p.set_defaults(func=_cmd_report)
@@ -177,7 +178,9 @@ def _cmd_calibrate(args) -> int:
     cal = calibrate(model, data, parameters=args.params, tie=args.tie, jac="2-point" if args.fd else "analytic",
                     corner_sigma=args.corner_sigma, joint_resolution=info["joint_resolution"],
                     reject_outliers=args.reject_outliers, consistency_px=args.consistency_px,
-                    consistency_ratio=args.consistency_ratio)
+                    consistency_ratio=args.consistency_ratio, accept_implausible=args.accept_implausible,
+                    progress=True,
+                    declared=info["declared"])
     out = prepare_out_dir(args.out, "humanoid-calibrate")
     truth = _truth_of(args.input, model)
     write_outputs(cal, out, inputs=info["inputs"], truth=truth)
@@ -280,11 +283,11 @@ RIG = Rig(
     description="Kinematic calibration of a NAO-class humanoid: the lower head camera watches a checkerboard "
                 "pinned under each foot; Levenberg-Marquardt over joint offsets, camera and board mounting "
                 "(the seed's 21 parameters), with uncertainties, identifiability and outliers.\n\n"
-                + examples_epilog("robocal humanoid simulate --out sim",
-                                  "robocal humanoid calibrate sim/run.yaml --out cal",
-                                  f"robocal humanoid calibrate {EXAMPLES}/run.yaml --out cal",
-                                  "robocal humanoid plan --poses 12 --out plan",
-                                  "robocal humanoid report cal/result.json --out rep"),
+                + examples_epilog("robocal humanoid simulate --out humanoid-sim",
+                                  "robocal humanoid calibrate humanoid-sim/run.yaml --out humanoid-cal",
+                                  f"robocal humanoid calibrate {EXAMPLES}/run.yaml --out humanoid-cal",
+                                  "robocal humanoid plan --poses 12 --out humanoid-plan",
+                                  "robocal humanoid report humanoid-cal/result.json --out humanoid-report"),
     add_commands=_add_commands,
     demo=_demo,
 )

@@ -29,7 +29,7 @@ import numpy as np
 import yaml
 
 from robocal.camera import CameraModel, Checkerboard
-from robocal.errors import FileFormatError, InconsistentDataError, InputError
+from robocal.errors import FileFormatError, ImplausibleInputError, InconsistentDataError, InputError
 from robocal.io import atomic_write_text, load_document
 from robocal.rigs.humanoid.model import FEET, HumanoidModel
 from robocal.rigs.humanoid.simulate import JOINT_RESOLUTION, HumanoidDataset
@@ -46,8 +46,14 @@ def load_dataset(path, *, detect: bool = True, progress: bool = False) -> tuple[
     (:func:`robocal.rigs.humanoid.detect.detect_views`: a board not fully found
     leaves that view's corners NaN, a badly detected corner its own; each with a
     message in ``data.messages``).
-    ``info`` holds the joint resolution [rad] and the input files (for the
-    result's hashes).
+    ``info`` holds the joint resolution [rad], the input files (for the
+    result's hashes) and ``declared``: the units the board square, board centre
+    and joint records were written in (so :func:`robocal.rigs.humanoid.slips.check_data`
+    names a slip in the file's units).
+
+    Joint records outside the joint limits that all lie within them read in the
+    other angle unit are an :class:`~robocal.errors.ImplausibleInputError`
+    naming ``joints.unit``.
     """
     path = Path(path)
     doc = load_document(path)
@@ -108,7 +114,12 @@ def load_dataset(path, *, detect: bool = True, progress: bool = False) -> tuple[
     records = [dict(zip(names, row)) for row in rec]
     where = f"{path}: joints.records"
     theta = model.q_from_records(records, source=where)
-    model.check_limits(theta, source=where, tolerance=0.5 * resolution + 1e-12)
+    tol = 0.5 * resolution + 1e-12
+    try:
+        model.check_limits(theta, source=where, tolerance=tol)
+    except InputError as exc:
+        _joint_unit_slip(model, theta, unit, tol, exc, source=f"{path}: joints.unit")
+        raise
 
     files = [_image_path(path, s) for s in images]
     missing = [str(p) for p in files if not p.is_file()]
@@ -121,7 +132,38 @@ def load_dataset(path, *, detect: bool = True, progress: bool = False) -> tuple[
         from robocal.rigs.humanoid.detect import detect_views
 
         detect_views(model, data, progress=progress)
-    return model, data, {"joint_resolution": resolution, "inputs": inputs}
+    declared = {"board.square": _declared(b, "square", "length") or "m",
+                "board.centre": _declared(b, "centre", "length") or "m", "joints": unit}
+    return model, data, {"joint_resolution": resolution, "inputs": inputs, "declared": declared}
+
+
+def _declared(doc, key: str, kind: str) -> str | None:
+    """The unit ``doc[key]`` was written in: its inline ``unit`` or the document's default for ``kind``."""
+    raw = doc.raw(key, None)
+    if isinstance(raw, dict) and "unit" in raw:
+        return str(raw["unit"])
+    return doc.units.get(kind)
+
+
+def _joint_unit_slip(model: HumanoidModel, theta, unit: str, tol: float, exc: InputError, *, source: str) -> None:
+    """Raise :class:`ImplausibleInputError` when records outside the limits all fit them in the other unit."""
+    k = np.radians(1.0) if unit == "rad" else np.degrees(1.0)
+    lo, hi = [], []
+    for name in model.joint_names:
+        lim = model.tree.joint(name).limits
+        lo.append(-np.inf if lim is None else lim[0])
+        hi.append(np.inf if lim is None else lim[1])
+    lo, hi = np.array(lo), np.array(hi)
+
+    def excess(q):
+        return float(np.degrees(np.max(np.maximum(np.maximum(lo - q, q - hi), 0.0))))
+
+    if excess(theta * k) <= np.degrees(tol):
+        other = "deg" if unit == "rad" else "rad"
+        raise ImplausibleInputError(
+            f"the joint records look like {other}, not {unit}: read as {unit} they lie up to {excess(theta):.0f} "
+            f"deg outside the joint limits, read as {other} all within them ({exc.message.split(': ', 1)[-1]}); "
+            f"set joints.unit: {other}", source=source, slip=f"joints_{other}_as_{unit}")
 
 
 def _image_path(doc_path: Path, s: str) -> Path:
