@@ -34,11 +34,11 @@ Log format: see docs/rigs/flow.md (run.yaml + per-sensor flow.csv or raw frames.
 
 examples:
   robocal flow simulate --out flow-sim
-  robocal flow odometry examples/flow/loop/run.yaml --out odo
-  robocal flow odometry examples/flow/frames/run.yaml --out odof     (raw frames)
-  robocal flow calibrate examples/flow/calibration/run.yaml --out cal
-  robocal flow evaluate examples/flow/loop/run.yaml --array cal/array_calibrated.yaml --out ev
-  robocal flow convert-mavlink flow.tlog --array array.yaml --sensor-map 0:s60,1:s120,2:s270 --out conv"""
+  robocal flow odometry examples/flow/loop/run.yaml --out flow-odo
+  robocal flow odometry examples/flow/frames/run.yaml --out flow-odo-frames     (raw frames)
+  robocal flow calibrate examples/flow/calibration/run.yaml --out flow-cal
+  robocal flow evaluate examples/flow/loop/run.yaml --array flow-cal/array_calibrated.yaml --out flow-eval
+  robocal flow convert-mavlink flow.tlog --array array.yaml --sensor-map 0:s60,1:s120,2:s270 --out flow-conv"""
 
 
 _KERNEL_ARGS = ("subpixel", "refine", "search", "aggregate")
@@ -370,8 +370,8 @@ def add_commands(parser: argparse.ArgumentParser) -> None:
     p = sub.add_parser("simulate", help="simulate a drive: frames, flow log, gyro, height, truth, wheel odometry",
                        formatter_class=RawHelp, epilog=examples_epilog(
                            "robocal flow simulate --out flow-sim",
-                           "robocal flow simulate --trajectory calibration --duration 8 --out flow-cal",
-                           "robocal flow simulate --texture brick --gap 0.5,0.2,0.05 --no-frames --out flow-brick"))
+                           "robocal flow simulate --trajectory calibration --duration 8 --out flow-sim-cal",
+                           "robocal flow simulate --texture brick --gap 0.5,0.2,0.05 --no-frames --out flow-sim-brick"))
     p.add_argument("--trajectory", default="loop", choices=("loop", "calibration", "straight"),
                    help="loop = smooth random curves; calibration = straights, turns on the spot and arcs (for "
                         "'calibrate'); straight = constant speed")
@@ -390,9 +390,9 @@ def add_commands(parser: argparse.ArgumentParser) -> None:
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser("odometry", help="dead reckoning from a run (flow log or raw frames)", formatter_class=RawHelp,
-                       epilog=examples_epilog("robocal flow odometry examples/flow/loop/run.yaml --out odo",
-                                              "robocal flow odometry examples/flow/frames/run.yaml --subpixel quarter --out odof",
-                                              "robocal flow odometry flow-sim/run.yaml --refine lk --out odo"))
+                       epilog=examples_epilog("robocal flow odometry examples/flow/loop/run.yaml --out flow-odo",
+                                              "robocal flow odometry examples/flow/frames/run.yaml --subpixel quarter --out flow-odo-frames",
+                                              "robocal flow odometry flow-sim/run.yaml --refine lk --out flow-odo"))
     p.add_argument("input", type=Path, help="run.yaml")
     p.add_argument("--allow-missing", action="store_true", help="treat missing sensor records as invalid frames")
     p.add_argument("--no-robust", action="store_true", help="do not drop disagreeing sensors")
@@ -403,7 +403,7 @@ def add_commands(parser: argparse.ArgumentParser) -> None:
 
     p = sub.add_parser("calibrate", help="calibrate R, psi, phi, scale of every sensor from a run with a reference",
                        formatter_class=RawHelp,
-                       epilog=examples_epilog("robocal flow calibrate examples/flow/calibration/run.yaml --out cal"))
+                       epilog=examples_epilog("robocal flow calibrate examples/flow/calibration/run.yaml --out flow-cal"))
     p.add_argument("input", type=Path, help="run.yaml with a 'reference' trajectory")
     p.add_argument("--window", type=float, default=0.1, help="window length, s")
     p.add_argument("--loss", default="linear", choices=("linear", "soft_l1", "huber", "cauchy"),
@@ -414,8 +414,8 @@ def add_commands(parser: argparse.ArgumentParser) -> None:
 
     p = sub.add_parser("evaluate", help="ATE / RPE of flow (and wheel) odometry against the reference",
                        formatter_class=RawHelp,
-                       epilog=examples_epilog("robocal flow evaluate examples/flow/loop/run.yaml --out ev",
-                                              "robocal flow evaluate examples/flow/loop/run.yaml --array cal/array_calibrated.yaml --out ev"))
+                       epilog=examples_epilog("robocal flow evaluate examples/flow/loop/run.yaml --out flow-eval",
+                                              "robocal flow evaluate examples/flow/loop/run.yaml --array flow-cal/array_calibrated.yaml --out flow-eval"))
     p.add_argument("input", type=Path, help="run.yaml with a 'reference' trajectory")
     p.add_argument("--array", type=Path, default=None, help="a calibrated array (YAML) to compare with the nominal one")
     add_out_argument(p)
@@ -426,8 +426,8 @@ def add_commands(parser: argparse.ArgumentParser) -> None:
                        formatter_class=RawHelp, epilog=examples_epilog(
                            "robocal flow convert-mavlink examples/flow/mavlink/flow.tlog --array examples/flow/mavlink/array.yaml \\\n"
                            "      --sensor-map 0:s60,1:s120,2:s270 --out conv",
-                           "robocal flow odometry conv/run.yaml --out odo",
-                           "robocal flow convert-mavlink my.tlog --array array.yaml --sensor-map 0:left,1:right --rate 100 --out conv"))
+                           "robocal flow odometry flow-conv/run.yaml --out flow-odo",
+                           "robocal flow convert-mavlink my.tlog --array array.yaml --sensor-map 0:left,1:right --rate 100 --out flow-conv"))
     p.add_argument("input", type=Path, help=".tlog: records of an 8-byte big-endian timestamp (us) + one MAVLink 1/2 frame")
     p.add_argument("--array", type=Path, required=True,
                    help="YAML with the array's 'sensors' (name, R, psi, phi, scale; as in run.yaml)")

@@ -180,7 +180,7 @@ def _add_lineprofiler(parser) -> None:
     sub = parser.add_subparsers(dest="subcommand", metavar="COMMAND")
     p = sub.add_parser("simulate", help="write simulated FPDP and MCT input files (and hand-eye pose lists)",
                        formatter_class=RawHelp,
-                       epilog=examples_epilog("robocal lineprofiler simulate --out sim --seed 1"))
+                       epilog=examples_epilog("robocal lineprofiler simulate --out lineprofiler-sim --seed 1"))
     add_out_argument(p)
     add_seed_argument(p)
     p.add_argument("--poses", type=_int_at_least(5, "FPDP fits X and the sphere centre from 5 or more"),
@@ -193,19 +193,19 @@ def _add_lineprofiler(parser) -> None:
     p.set_defaults(func=_simulate)
     p = sub.add_parser("calibrate", help="FPDP + geometric refinement, or MCT, from an input YAML",
                        formatter_class=RawHelp,
-                       epilog=examples_epilog(f"robocal lineprofiler calibrate {EXAMPLES}/fpdp_input.yaml --out out",
-                                              f"robocal lineprofiler calibrate {EXAMPLES}/mct_input.yaml --out mct"))
+                       epilog=examples_epilog(f"robocal lineprofiler calibrate {EXAMPLES}/fpdp_input.yaml --out lineprofiler-cal",
+                                              f"robocal lineprofiler calibrate {EXAMPLES}/mct_input.yaml --out lineprofiler-mct"))
     p.add_argument("input", type=Path, help="input YAML: sphere radius, arm, profiles CSV (FPDP); or 'method: mct' "
                                             "with tracker, heights, block and scan files (see docs/rigs/lineprofiler.md)")
     add_out_argument(p)
     p.set_defaults(func=_calibrate)
     p = sub.add_parser("report", help="re-render report.html from a result.json", formatter_class=RawHelp,
-                       epilog=examples_epilog("robocal lineprofiler report out/result.json --out out2"))
+                       epilog=examples_epilog("robocal lineprofiler report lineprofiler-cal/result.json --out lineprofiler-report"))
     p.add_argument("result", type=Path, help="result.json written by 'robocal lineprofiler calibrate'")
     add_out_argument(p)
     p.set_defaults(func=_report)
     p = sub.add_parser("compare", help="simulated re-run of the seed's FPDP vs MCT comparison",
-                       formatter_class=RawHelp, epilog=examples_epilog("robocal lineprofiler compare --out cmp"))
+                       formatter_class=RawHelp, epilog=examples_epilog("robocal lineprofiler compare --out lineprofiler-compare"))
     add_out_argument(p)
     add_seed_argument(p)
     p.add_argument("--runs", type=_int_at_least(2, "the spread of repeated calibrations needs 2 or more"),
@@ -242,11 +242,11 @@ RIG = Rig(name="lineprofiler", help="hand-eye calibration of an arm-mounted line
           description="Line-laser profiler hand-eye calibration: FPDP (sphere, linear), geometric refinement on all "
                       "profile points, MCT (laser tracker and standard block), FPDP vs MCT re-run in "
                       "simulation.\n\n" + examples_epilog(
-                          "robocal lineprofiler simulate --out sim",
-                          f"robocal lineprofiler calibrate {EXAMPLES}/fpdp_input.yaml --out out",
-                          f"robocal lineprofiler calibrate {EXAMPLES}/mct_input.yaml --out mct",
-                          "robocal lineprofiler report out/result.json --out out2",
-                          "robocal lineprofiler compare --out cmp"),
+                          "robocal lineprofiler simulate --out lineprofiler-sim",
+                          f"robocal lineprofiler calibrate {EXAMPLES}/fpdp_input.yaml --out lineprofiler-cal",
+                          f"robocal lineprofiler calibrate {EXAMPLES}/mct_input.yaml --out lineprofiler-mct",
+                          "robocal lineprofiler report lineprofiler-cal/result.json --out lineprofiler-report",
+                          "robocal lineprofiler compare --out lineprofiler-compare"),
           add_commands=_add_lineprofiler, demo=_demo)
 
 

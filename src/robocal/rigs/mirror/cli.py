@@ -41,10 +41,10 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
         formatter_class=RawHelp,
         description="The default scene reproduces the patent's published T_cm, T_cri and T_rc and distortion; "
                     "see docs/rigs/mirror.md for what had to be assumed.",
-        epilog=examples_epilog("robocal mirror simulate --out sim",
-                               "robocal mirror simulate --placements 4 --sigma 0.5 --seed 3 --out sim",
-                               "robocal mirror simulate --images --out sim   # rendered images, ArUco body tags",
-                               "robocal mirror calibrate sim/mirror_input.yaml --out cal"))
+        epilog=examples_epilog("robocal mirror simulate --out mirror-sim",
+                               "robocal mirror simulate --placements 4 --sigma 0.5 --seed 3 --out mirror-sim",
+                               "robocal mirror simulate --images --out mirror-sim   # rendered images, ArUco body tags",
+                               "robocal mirror calibrate mirror-sim/mirror_input.yaml --out mirror-cal"))
     p.add_argument("--placements", type=_number(int, 1, False), default=1, help="number of mirror placements (images)")
     p.add_argument("--sigma", type=_number(float, 0.0, False), default=0.5,
                    help="pixel noise sigma [px] of point files; 0 = noise-free, sigma_px then left out of the file "
@@ -63,11 +63,11 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
                     "or robocal.rigs.mirror.files. Your own camera: 'camera: {file: my_camera.yaml}' (an OpenCV "
                     "calibration: camera_matrix, dist_coeffs, image size; cv2.FileStorage YAML/XML, ROS or JSON); "
                     "the example files use the patent scene's assumed 768 x 576, f = 800 px camera.",
-        epilog=examples_epilog(f"robocal mirror calibrate {EXAMPLES}/published_single.yaml --out cal",
-                               f"robocal mirror calibrate {EXAMPLES}/four_placements.yaml --out cal",
-                               f"robocal mirror calibrate {EXAMPLES}/aruco_images.yaml --out cal",
-                               f"robocal mirror calibrate {EXAMPLES}/own_camera.yaml --out cal   # OpenCV camera file",
-                               f"robocal mirror calibrate {EXAMPLES}/published_single.yaml --no-refine --out cal"))
+        epilog=examples_epilog(f"robocal mirror calibrate {EXAMPLES}/published_single.yaml --out mirror-cal",
+                               f"robocal mirror calibrate {EXAMPLES}/four_placements.yaml --out mirror-cal",
+                               f"robocal mirror calibrate {EXAMPLES}/aruco_images.yaml --out mirror-cal",
+                               f"robocal mirror calibrate {EXAMPLES}/own_camera.yaml --out mirror-cal   # OpenCV camera file",
+                               f"robocal mirror calibrate {EXAMPLES}/published_single.yaml --no-refine --out mirror-cal"))
     p.add_argument("input", type=Path, help="calibration input (YAML/JSON)")
     p.add_argument("--no-refine", action="store_true",
                    help="patent's single-image estimates only (averaged over images), no joint least squares; "
@@ -77,7 +77,7 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
 
     p = sub.add_parser(
         "report", help="redraw report.html from a result.json", formatter_class=RawHelp,
-        epilog=examples_epilog("robocal mirror report cal/result.json --out cal"))
+        epilog=examples_epilog("robocal mirror report mirror-cal/result.json --out mirror-report"))
     p.add_argument("result", type=Path, help="result.json written by 'robocal mirror calibrate'")
     add_out_argument(p)
     p.set_defaults(func=_cmd_report)
@@ -139,9 +139,9 @@ RIG = Rig(
         "of the robot; the camera sees the markers and the reflection of feature points on the body.\n"
         "One image gives the camera pose in the robot frame (the patent's method); several mirror\n"
         "placements are refined jointly with uncertainty.\n\n"
-        + examples_epilog("robocal mirror simulate --placements 4 --out sim",
-                          f"robocal mirror calibrate {EXAMPLES}/published_single.yaml --out cal",
-                          "robocal mirror report cal/result.json --out cal")
+        + examples_epilog("robocal mirror simulate --placements 4 --out mirror-sim",
+                          f"robocal mirror calibrate {EXAMPLES}/published_single.yaml --out mirror-cal",
+                          "robocal mirror report mirror-cal/result.json --out mirror-report")
     ),
     add_commands=_add_commands,
     demo=_demo,

@@ -42,9 +42,9 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
                        description=("Writes OUT/projector.yaml: projector A of the seed's room, N floor points with\n"
                                    "world noise and the joint angles read there, and a 'truth' section (the true\n"
                                    "head) that `evaluate` uses."),
-                       epilog=examples_epilog("robocal projector simulate --out sim",
-                                              "robocal projector simulate --points 10 --noise 2 --out sim --seed 4",
-                                              "robocal projector calibrate sim/projector.yaml --out cal"))
+                       epilog=examples_epilog("robocal projector simulate --out projector-sim",
+                                              "robocal projector simulate --points 10 --noise 2 --out projector-sim --seed 4",
+                                              "robocal projector calibrate projector-sim/projector.yaml --out projector-cal"))
     p.add_argument("--points", type=int, default=8, metavar="N", help=f"number of floor points [3..{MAX_SIM_POINTS}]")
     p.add_argument("--noise", type=float, default=5.0, metavar="MM", help="world measurement noise sigma [mm], > 0")
     p.add_argument("--theta-noise", type=float, default=0.0, metavar="DEG", help="encoder noise sigma [deg], >= 0")
@@ -56,9 +56,9 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
                        formatter_class=RawHelp,
                        description=("Input format: see docs/rigs/projector.md or robocal.rigs.projector.files.\n"
                                    "Writes OUT/result.json and OUT/report.html; exit 2 on bad input."),
-                       epilog=examples_epilog(f"robocal projector calibrate {EXAMPLES}/seed_projector_A.yaml --out out",
-                                              f"robocal projector calibrate {EXAMPLES}/room_A.yaml --out out",
-                                              f"robocal projector calibrate {EXAMPLES}/room_A_csv.yaml --strict --out out"))
+                       epilog=examples_epilog(f"robocal projector calibrate {EXAMPLES}/seed_projector_A.yaml --out projector-cal",
+                                              f"robocal projector calibrate {EXAMPLES}/room_A.yaml --out projector-cal",
+                                              f"robocal projector calibrate {EXAMPLES}/room_A_csv.yaml --strict --out projector-cal"))
     p.add_argument("input", type=Path, help="calibration input (YAML/JSON)")
     p.add_argument("--strict", action="store_true", help="inconsistent pairwise distances, spots beyond the tilt "
                    "limit and estimates outside their physical bounds are errors (exit 2) instead of warnings")
@@ -71,8 +71,8 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
                        description=("Commands a 3 x 3 grid of floor points with the calibrated model and measures\n"
                                    "where the true head (the input's 'truth') lands the spot. Writes\n"
                                    "OUT/report.html (and result.json, or evaluation.json with --result)."),
-                       epilog=examples_epilog(f"robocal projector evaluate {EXAMPLES}/room_A.yaml --out ev",
-                                              f"robocal projector evaluate {EXAMPLES}/room_A.yaml --result out/result.json"
+                       epilog=examples_epilog(f"robocal projector evaluate {EXAMPLES}/room_A.yaml --out projector-eval",
+                                              f"robocal projector evaluate {EXAMPLES}/room_A.yaml --result projector-cal/result.json"
                                               " --spacing 1.5 --out ev"))
     p.add_argument("input", type=Path, help="calibration input with a 'truth' section (as written by simulate)")
     p.add_argument("--result", type=Path, default=None, help="use this calibration result instead of calibrating")
@@ -90,10 +90,10 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
                                    "and report.html.\n"
                                    "Exit 0: every sample served; 1: a stretch is infeasible (its reason and fix\n"
                                    "are printed); 2: bad input (e.g. a point no projector reaches)."),
-                       epilog=examples_epilog(f"robocal projector path {EXAMPLES}/path_room.yaml --out path",
-                                              f"robocal projector path {EXAMPLES}/path_timed.yaml --out path",
-                                              f"robocal projector path {EXAMPLES}/path_timed.yaml --retime --out path",
-                                              f"robocal projector path {EXAMPLES}/path_nadir.yaml --out path",
+                       epilog=examples_epilog(f"robocal projector path {EXAMPLES}/path_room.yaml --out projector-path",
+                                              f"robocal projector path {EXAMPLES}/path_timed.yaml --out projector-path",
+                                              f"robocal projector path {EXAMPLES}/path_timed.yaml --retime --out projector-path",
+                                              f"robocal projector path {EXAMPLES}/path_nadir.yaml --out projector-path",
                                               f"robocal projector path {EXAMPLES}/path_near_nadir.yaml --nadir-snap 15 "
                                               "--out path"))
     p.add_argument("input", type=Path, help="path input (YAML/JSON)")
@@ -399,9 +399,9 @@ RIG = Rig(
         "  calibrate  R_0_W, t_0_W by the seed's method, the closed form and nonlinear LS\n"
         "  evaluate   the seed's Table 2 protocol + floor error map on a simulated rig\n"
         "  path       world path -> timed joint commands, several projectors, hand-overs\n\n"
-        + examples_epilog(f"robocal projector calibrate {EXAMPLES}/seed_projector_A.yaml --out out",
-                          "robocal projector simulate --out sim && robocal projector evaluate sim/projector.yaml --out ev",
-                          f"robocal projector path {EXAMPLES}/path_room.yaml --out path")
+        + examples_epilog(f"robocal projector calibrate {EXAMPLES}/seed_projector_A.yaml --out projector-cal",
+                          "robocal projector simulate --out projector-sim && robocal projector evaluate projector-sim/projector.yaml --out projector-eval",
+                          f"robocal projector path {EXAMPLES}/path_room.yaml --out projector-path")
     ),
     add_commands=_add_commands,
     demo=_demo,
