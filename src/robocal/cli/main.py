@@ -146,9 +146,10 @@ def demo_seed(seed: int, rig: str) -> np.random.SeedSequence:
     or leaving out a rig shifted every later rig's data (issue 18: the
     mirror's "1 image error" read 254, 206 or 120 mm for three ``--rigs``
     choices). CRC-32 of the name is stable across runs and platforms (unlike
-    ``hash``), and ``SeedSequence`` mixes the pair into independent streams.
+    ``hash``); as a spawn key it gives the child ``SeedSequence(seed).spawn``
+    would give at that index, independent of every other rig's.
     """
-    return np.random.SeedSequence([int(seed), zlib.crc32(rig.encode("utf-8"))])
+    return np.random.SeedSequence(int(seed), spawn_key=(zlib.crc32(rig.encode("utf-8")),))
 
 
 def _print_table(rows) -> None:
@@ -238,15 +239,21 @@ def main(argv=None) -> int:
                 code = int(args.func(args) or 0)
             for w in held:
                 warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
-            # demo's 1 means "a rig's check failed": the run finished and its report is the answer
-            run.finish("complete" if code == 0 or (code == 1 and args.command == "demo") else "failed",
-                       error=None if code == 0 else f"exit status {code}")
+            # a command that returns has finished its files: 1 is a verdict ("a rig's check
+            # failed" in demo, "infeasible" in projector path) written into them, not an error
+            run.finish("complete")
         return code
     except RobocalError as exc:
         msg = str(exc).replace("\n", " ")
         # an error raised deep in a library call may not know the file it came from
+        # (a command with several input files and no `input`, like `handeye calibrate
+        # GRIPPER TARGET`, gets them all: the message is about their combination)
         src = getattr(args, "input", None)
-        if exc.source is None and src is not None and str(src) not in msg:
+        if src is None and args is not None:
+            files = _input_files(args)
+            src = " + ".join(map(str, files)) if 0 < len(files) <= 3 else None
+        if exc.source is None and src is not None and not any(
+                n in msg for n in {str(src), *(Path(p).name for p in str(src).split(" + "))}):
             msg = f"{src}: {msg}"
         print(f"robocal: error: {msg}", file=sys.stderr)
         return EXIT_USER_ERROR
