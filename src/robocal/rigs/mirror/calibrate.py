@@ -1050,7 +1050,8 @@ def _name_outliers(w: Diagnostic, layout: _Layout, obs_list) -> Diagnostic:
 
 
 def calibrate(camera: CameraModel, rectangle: MarkerRectangle, body_points_r, observations, *,
-              sigma_px: float | None = None, refine: bool = True, progress: bool = False) -> MirrorCalibration:
+              sigma_px: float | None = None, refine: bool = True, progress: bool = False,
+              accept_implausible: bool = False, declared: dict | None = None) -> MirrorCalibration:
     """Calibrate ``T_r_c`` from K >= 1 mirror images (joint refinement).
 
     Parameters
@@ -1067,6 +1068,14 @@ def calibrate(camera: CameraModel, rectangle: MarkerRectangle, body_points_r, ob
         Run the joint least squares (else: average of the single-image
         estimates, with the covariance of that average, ``sum(C_k) / K^2``
         from each image's :func:`predicted_covariance` ``C_k``).
+    accept_implausible : bool
+        Body points or rectangle in an implausible unit, a camera estimated far from the body it is
+        mounted on, or a mirrored body model (:mod:`robocal.rigs.mirror.slips`) are an
+        :class:`~robocal.errors.ImplausibleInputError` naming the slip; with this, an
+        ``implausible_input`` warning and the answer for the data as given (CLI ``--accept-implausible``).
+    declared : dict, optional
+        Units ``mirror_rectangle`` and ``body_points`` were written in
+        (:func:`robocal.rigs.mirror.slips.declared_units`), to name a slip in the file's units.
     """
     obs_list = list(observations)
     if not obs_list:
@@ -1079,9 +1088,16 @@ def calibrate(camera: CameraModel, rectangle: MarkerRectangle, body_points_r, ob
     if P_all.ndim != 2 or P_all.shape[1] != 3:
         raise ShapeError(f"body_points_r must have shape (N, 3), got {P_all.shape}")
     check_camera(camera)
+    from robocal.rigs.mirror.slips import check_answer, check_body_span
+
+    # before any PnP: a body model 1000x too small makes OpenCV's SQPnP fail with an assertion
+    slip_warnings = check_body_span(P_all, declared=declared, accept=accept_implausible)
     singles = [calibrate_single(camera, rectangle, P_all, o, sigma_px=sigma_px) for o in obs_list]
     singles = _consensus_choice(singles, camera, rectangle, P_all, obs_list, sigma_px)
-    warnings = camera_warnings(camera) + rectangle_warnings(rectangle)
+    if not slip_warnings:
+        slip_warnings = check_answer(camera, rectangle, P_all, obs_list, singles, sigma_px=sigma_px,
+                                     declared=declared, accept=accept_implausible)
+    warnings = slip_warnings + camera_warnings(camera) + rectangle_warnings(rectangle)
     warnings += [w for o in obs_list for w in o.warnings]
     warnings += [w for s in singles for w in s.warnings]
     T_c_m0 = np.stack([s.T_c_m for s in singles])

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from robocal.cli import DemoContext, DemoOutcome, Rig
-from robocal.cli._common import RawHelp, add_out_argument, add_seed_argument, examples_epilog, prepare_out_dir, write_run
+from robocal.cli._common import RawHelp, add_accept_implausible_argument, add_out_argument, add_seed_argument, examples_epilog, prepare_out_dir, write_run
 from robocal.errors import InputError, RobocalError
 from robocal.io import load_result
 
@@ -72,6 +72,7 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--no-refine", action="store_true",
                    help="patent's single-image estimates only (averaged over images), no joint least squares; "
                         "the std is that of the average")
+    add_accept_implausible_argument(p)
     add_out_argument(p)
     p.set_defaults(func=_cmd_calibrate)
 
@@ -98,7 +99,8 @@ def _cmd_calibrate(args) -> int:
     from robocal.rigs.mirror import workflow
 
     out = prepare_out_dir(args.out, "mirror-calibrate")
-    cal, result, report = workflow.calibrate_file(args.input, refine=not args.no_refine, out_dir=out)
+    cal, result, report = workflow.calibrate_file(args.input, refine=not args.no_refine, out_dir=out,
+                                                  accept_implausible=args.accept_implausible)
     write_run(out, result, report)
     t = cal.T_r_c[:3, 3] * 1e3
     s = cal.std_translation * 1e3
