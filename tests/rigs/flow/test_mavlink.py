@@ -213,11 +213,11 @@ def test_converted_simulator_log_gives_the_same_odometry(tmp_path, capsys):
     assert np.allclose(a.t, b.t, atol=1e-6) and np.array_equal(a.quality, b.quality)
     assert np.allclose(a.flow, b.flow, atol=2e-4)
     assert np.allclose(a.gyro, b.gyro, atol=1e-5) and np.allclose(a.height, b.height, atol=1e-6)
-    for name, run in (("ref", src / "run.yaml"), ("conv", tmp_path / "conv" / "run.yaml")):
+    for name, run in (("odo_ref", src / "run.yaml"), ("odo_conv", tmp_path / "conv" / "run.yaml")):
         assert main(["flow", "odometry", str(run), "--out", str(tmp_path / name), "--no-progress"]) == 0
     capsys.readouterr()
-    ta, pa = _poses(tmp_path / "ref" / "trajectory.csv")
-    tb, pb = _poses(tmp_path / "conv" / "trajectory.csv")
+    ta, pa = _poses(tmp_path / "odo_ref" / "trajectory.csv")
+    tb, pb = _poses(tmp_path / "odo_conv" / "trajectory.csv")
     assert np.allclose(ta, tb, atol=1e-6)
     assert np.max(np.abs(pa - pb)) < 1e-5
 

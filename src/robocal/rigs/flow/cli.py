@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from robocal.cli import DemoContext, DemoOutcome, Rig
-from robocal.cli._common import RawHelp, add_out_argument, add_seed_argument, examples_epilog, prepare_out_dir, progress, write_run
+from robocal.cli._common import RawHelp, add_accept_implausible_argument, add_out_argument, add_seed_argument, examples_epilog, prepare_out_dir, progress, write_run
 from robocal.errors import InputError
 from robocal.io import CalibrationResult, atomic_write_text
 from robocal.report import Report
@@ -56,6 +56,13 @@ def _physical_memory() -> float:
         return 16e9
 
 
+def _stages(desc: str, n: int, args):
+    """A stage bar on a terminal for long runs (10^6 log rows: minutes, mostly reading): ``tick()`` starts
+    the next stage."""
+    it = iter(progress(range(n), desc=desc, total=n, enabled=not getattr(args, "no_progress", False)))
+    return lambda: next(it, None)
+
+
 def _flow_config(args, spec=None) -> FlowConfig:
     from robocal.rigs.flow.kernel import FlowConfig
 
@@ -91,6 +98,8 @@ def _add_flow_args(p, *, debias: bool = True, simulate: bool = False):
                        help="remove the kernel's sub-pixel bias (pixel locking), measured on the run's frames (a flow "
                             "log: on gravel frames), from every displacement")
     p.add_argument("--no-progress", action="store_true", help="never show progress bars")
+    if not simulate:
+        add_accept_implausible_argument(p)
 
 
 def cmd_simulate(args) -> int:
@@ -146,10 +155,14 @@ def cmd_odometry(args) -> int:
     out = prepare_out_dir(args.out, "flow-odometry")
     pg = lambda it, desc: progress(it, desc=desc, enabled=not args.no_progress)  # noqa: E731
     _check_kernel_args(args, spec)
+    tick = _stages("flow odometry: read, judge, fuse; report", 2, args)
+    tick()
     od, flows, steps = odometry_run(spec, config=_flow_config(args, spec), allow_missing=args.allow_missing,
-                                    robust=not args.no_robust, method=args.integration, progress=pg)
+                                    robust=not args.no_robust, method=args.integration, progress=pg,
+                                    accept_implausible=args.accept_implausible)
     from robocal.rigs.flow.log import write_poses_csv
 
+    tick()
     write_poses_csv(out / "trajectory.csv", od.t, od.poses, comment=f"flow odometry of {spec.path.name}")
     errors = None
     report = Report("robocal flow odometry", subtitle=str(spec.path))
@@ -199,7 +212,11 @@ def cmd_calibrate(args) -> int:
     _check_kernel_args(args, spec)
     out = prepare_out_dir(args.out, "flow-calibrate")
     pg = lambda it, desc: progress(it, desc=desc, enabled=not args.no_progress)  # noqa: E731
-    cal, steps = calibration_run(spec, config=_flow_config(args, spec), window=args.window, loss=args.loss, progress=pg)
+    tick = _stages("flow calibrate: read, judge, fit; report", 2, args)
+    tick()
+    cal, steps = calibration_run(spec, config=_flow_config(args, spec), window=args.window, loss=args.loss, progress=pg,
+                                 accept_implausible=args.accept_implausible)
+    tick()
     res = calibration_result(cal, spec)
     report = Report("robocal flow calibrate", subtitle=str(spec.path))
     sec = report.section("Calibrated array")
@@ -279,7 +296,10 @@ def cmd_evaluate(args) -> int:
     out = prepare_out_dir(args.out, "flow-evaluate")
     pg = lambda it, desc: progress(it, desc=desc, enabled=not args.no_progress)  # noqa: E731
     _check_kernel_args(args, spec)
-    od, _, steps = odometry_run(spec, config=_flow_config(args, spec), progress=pg)
+    tick = _stages("flow evaluate: read, judge, fuse; evaluate, report", 2, args)
+    tick()
+    od, _, steps = odometry_run(spec, config=_flow_config(args, spec), progress=pg,
+                                accept_implausible=args.accept_implausible)
     cal_od = None
     if args.array is not None:
         from robocal.io import load_document
@@ -289,6 +309,7 @@ def cmd_evaluate(args) -> int:
         if arr.n != spec.array.n:
             raise InputError(f"{args.array}: {arr.n} sensors, but {spec.path} has {spec.array.n}")
         cal_od = dead_reckon(steps, arr)
+    tick()
     curves, errors = evaluation_run(spec, od, calibrated=cal_od)
     report = Report("robocal flow evaluate", subtitle=str(spec.path))
     _traj_section(report, "Trajectory errors", curves, errors)
@@ -521,9 +542,17 @@ def demo(ctx: DemoContext) -> DemoOutcome:
     ate_n = ev["flow odometry (nominal array)"].ate_rmse
     ate_c = ev["flow odometry (calibrated)"].ate_rmse
     ate_w = ev["wheel odometry (slip)"].ate_rmse
-    passed = bool(ate_c < ate_n and ate_c < ate_w)
+    # the check: the calibration recovers the mounting within its stated uncertainty, and the fresh
+    # drive's odometry with it is as good as with the true mounting allows. "Calibrated beats nominal"
+    # on one drive is a coin toss when the flow noise, not the mounting, dominates the drive's error
+    # (the true mounting itself gave 2.5x the nominal ATE on one seed, docs/rigs/flow.md)
+    true_arr = simB.array_true.copy(scale=1.0 / np.asarray(simB.height_scale))
+    ate_t = evaluate_trajectory(dead_reckon(stB, true_arr).poses, runB.poses).ate_rmse
+    z = [abs(r["R err / total std"]) for r in rows] + [abs(r["scale err / total std"]) for r in rows]
+    passed = bool(max(z) < 3.0 and ate_c < 1.5 * ate_t + 2e-3)
     dt = time.perf_counter() - t0
     summary = {"ATE nominal": f"{ate_n * 1e3:.1f} mm", "ATE calibrated": f"{ate_c * 1e3:.1f} mm",
+               "ATE true mounting": f"{ate_t * 1e3:.1f} mm",
                "frames rejected (gap)": f"{int((~stB.valid).sum())}",
                "ATE wheels": f"{ate_w * 1e3:.1f} mm", "distance": f"{ev['wheel odometry (slip)'].distance:.2f} m",
                "time": f"{dt:.1f} s"}

@@ -67,6 +67,9 @@ class SensorSteps:
         Raw flow, pixel scale and a sample of the frames when the steps come
         from frames (:func:`robocal.rigs.flow.log.steps_from_frames`): what the
         calibration's kernel-bias model needs (:mod:`robocal.rigs.flow.kernel_bias`).
+    height : ndarray, shape (n, K), optional
+        The logged distance to the floor, m (NaN where a sensor has no record): what
+        the plausibility check (:mod:`robocal.rigs.flow.plausibility`) judges.
     """
 
     t: np.ndarray
@@ -77,6 +80,7 @@ class SensorSteps:
     reasons: list | None = None
     warnings: list = field(default_factory=list)
     kernel: object = None
+    height: np.ndarray | None = None
 
     def __post_init__(self):
         t = np.asarray(self.t, float)

@@ -22,7 +22,30 @@ from robocal.rigs.flow.model import SensorArray, seed_array
 from robocal.rigs.flow.odometry import Odometry, dead_reckon
 from robocal.rigs.flow.simulate import SimConfig, SimRun, simulate_run
 
-__all__ = ["write_simulation", "odometry_run", "calibration_run", "evaluation_run", "array_yaml", "mounted_array"]
+__all__ = ["write_simulation", "judge_run", "odometry_run", "calibration_run", "evaluation_run", "array_yaml", "mounted_array"]
+
+
+def _read_poses(path):
+    """:func:`read_poses_csv`, read once per file version: the plausibility check, the calibration and
+    the evaluation all need the reference (1.5 s per 10^5 rows in the core CSV loader)."""
+    p = Path(path)
+    st = p.stat()
+    key = (str(p.resolve()), st.st_mtime_ns, st.st_size)
+    if _POSES_CACHE.get("key") != key:
+        _POSES_CACHE.clear()
+        _POSES_CACHE.update(key=key, value=read_poses_csv(p))
+    t, poses = _POSES_CACHE["value"]
+    return t.copy(), poses.copy()
+
+
+_POSES_CACHE: dict = {}
+
+#: most points a figure line gets: a 10^6-row log's velocity figure took minutes to draw in full
+_PLOT_POINTS = 5000
+
+
+def _every(n: int) -> int:
+    return max(1, -(-n // _PLOT_POINTS))
 
 
 def mounted_array() -> SensorArray:
@@ -81,12 +104,52 @@ def write_simulation(run: SimRun, out_dir, *, frames: bool = True, flow_config: 
     return paths
 
 
+def judge_run(spec: RunSpec, steps, config: FlowConfig, *, allow_missing: bool = False,
+              accept_implausible: bool = False) -> list:
+    """The run's plausibility (:mod:`robocal.rigs.flow.plausibility`): against its reference when it has
+    one, else its heights against the optics. Raises :class:`~robocal.errors.ImplausibleInputError`
+    naming the likely slip; with ``accept_implausible`` returns the ``implausible_input`` warning."""
+    from dataclasses import replace as _replace
+
+    from robocal.rigs.flow.log import read_flow_csv, steps_from_records
+    from robocal.rigs.flow.plausibility import check_height, check_reference
+
+    from_frames = spec.frames is not None                   # load_steps prefers the frames
+    height_from = (spec.frames if from_frames else spec.flow_log).name
+    src = str(spec.path)
+    if spec.reference is not None:
+        t_ref, p_ref = _read_poses(spec.reference)
+        _interp(spec.reference, t_ref, p_ref, steps.t)      # coverage, with the file named
+        rescaled = None
+        if not from_frames:
+            def rescaled(k):
+                rec = read_flow_csv(spec.flow_log, spec.array.n, allow_missing=allow_missing)
+                return steps_from_records(_replace(rec, gyro=rec.gyro * k), spec.focal_px, config,
+                                          sigma_px=spec.sigma_px)
+        d = check_reference(steps, t_ref, p_ref, spec.array, height_from=height_from,
+                            reference_name=spec.reference.name, rescaled_gyro=rescaled,
+                            accept=accept_implausible, source=src)
+    elif steps.height is not None:
+        d = check_height(steps.height, spec.focal_px, spec.array, height_from=height_from,
+                         accept=accept_implausible, source=src)
+    else:
+        d = None
+    return [d] if d is not None else []
+
+
 def odometry_run(spec: RunSpec, *, config: FlowConfig | None = None, array: SensorArray | None = None,
-                 allow_missing: bool = False, robust: bool = True, method: str = "exact", progress=None):
-    """Dead reckoning of a logged run; returns (Odometry, flows or None, steps)."""
+                 allow_missing: bool = False, robust: bool = True, method: str = "exact", progress=None,
+                 accept_implausible: bool = False):
+    """Dead reckoning of a logged run; returns (Odometry, flows or None, steps).
+
+    The run is judged first (:func:`judge_run`): an implausible one raises
+    :class:`~robocal.errors.ImplausibleInputError` unless ``accept_implausible``.
+    """
     config = config or FlowConfig(window=spec.window)
     steps, flows = load_steps(spec, config, allow_missing=allow_missing, progress=progress)
+    judged = judge_run(spec, steps, config, allow_missing=allow_missing, accept_implausible=accept_implausible)
     od = dead_reckon(steps, array or spec.array, robust=robust, method=method)
+    od.warnings[:0] = judged
     if flows is not None:
         for i, ff in enumerate(flows):
             lim = config.search + 0.5
@@ -102,7 +165,9 @@ def odometry_run(spec: RunSpec, *, config: FlowConfig | None = None, array: Sens
 def _traj_section(report: Report, title: str, curves: dict, errors: dict) -> None:
     sec = report.section(title)
     fig, ax = new_figure(size=(6.0, 5.0))
-    plot_trajectories(curves, ax=ax, title="true / flow odometry / wheel odometry (cf. seed Fig. 4)")
+    k = _every(max(len(c) for c in curves.values()))
+    plot_trajectories({n: np.concatenate([c[::k], c[-1:]]) for n, c in ((n, np.asarray(c)) for n, c in curves.items())},
+                      ax=ax, title="true / flow odometry / wheel odometry (cf. seed Fig. 4)")
     sec.figure(fig, "Trajectories in the world frame; dots mark the end.")
     rows = []
     first = next(iter(errors.values()), None)
@@ -156,7 +221,7 @@ def evaluation_run(spec: RunSpec, od: Odometry, *, calibrated: Odometry | None =
         from robocal.errors import InputError
 
         raise InputError(f"{spec.path}: evaluation needs a 'reference' trajectory file")
-    t_ref, p_ref = read_poses_csv(spec.reference)
+    t_ref, p_ref = _read_poses(spec.reference)
     ref = _interp(spec.reference, t_ref, p_ref, od.t)
     curves = {"true": ref, "flow odometry": od.poses}
     errors = {"flow odometry": evaluate_trajectory(od.poses, ref)}
@@ -172,8 +237,8 @@ def evaluation_run(spec: RunSpec, od: Odometry, *, calibrated: Odometry | None =
 
 
 def calibration_run(spec: RunSpec, *, config: FlowConfig | None = None, window: float = 0.1, loss: str = "linear",
-                    progress=None):
-    """Array calibration from a logged run with a reference trajectory."""
+                    progress=None, accept_implausible: bool = False):
+    """Array calibration from a logged run with a reference trajectory (judged first, see :func:`judge_run`)."""
     from robocal.errors import InputError
 
     if spec.reference is None:
@@ -181,9 +246,11 @@ def calibration_run(spec: RunSpec, *, config: FlowConfig | None = None, window: 
     config = config or FlowConfig(window=spec.window)
     nominal = spec.array.copy(scale=np.ones(spec.array.n))
     steps, flows = load_steps(spec, config, progress=progress)
-    t_ref, p_ref = read_poses_csv(spec.reference)
+    t_ref, p_ref = _read_poses(spec.reference)
     _interp(spec.reference, t_ref, p_ref, steps.t)          # coverage, with the file named
+    judged = judge_run(spec, steps, config, accept_implausible=accept_implausible)
     cal = calibrate_array(steps, t_ref, p_ref, nominal, window=window, loss=loss)
+    cal.warnings[:0] = judged
     return cal, steps
 
 
@@ -227,11 +294,12 @@ def odometry_result(od: Odometry, spec: RunSpec, errors: dict | None = None) -> 
 
 def velocity_figure(od: Odometry):
     fig, axs = new_figure(3, 1, size=(6.4, 5.5), sharex=True)
-    tm = 0.5 * (od.t[1:] + od.t[:-1])
+    k = _every(len(od.t) - 1)                                # drawn every k-th interval on long runs
+    tm = (0.5 * (od.t[1:] + od.t[:-1]))[::k]
     for a, lab in enumerate(("vx [m/s]", "vy [m/s]", "omega [rad/s]")):
-        axs[a].plot(tm, od.velocity[:, a], lw=0.6)
-        s = od.velocity_std[:, a]
-        axs[a].fill_between(tm, od.velocity[:, a] - 3 * s, od.velocity[:, a] + 3 * s, alpha=0.3, lw=0)
+        v, s = od.velocity[::k, a], od.velocity_std[::k, a]
+        axs[a].plot(tm, v, lw=0.6)
+        axs[a].fill_between(tm, v - 3 * s, v + 3 * s, alpha=0.3, lw=0)
         axs[a].set_ylabel(lab)
     axs[-1].set_xlabel("t [s]")
     fig.suptitle("robot velocity from the array, +/-3 sigma band from the geometry")
@@ -240,9 +308,10 @@ def velocity_figure(od: Odometry):
 
 def quality_figure(steps, names):
     fig, ax = new_figure(size=(6.4, 3.0))
-    tm = steps.t[1:]
+    k = _every(len(steps.t) - 1)
+    tm = steps.t[1:][::k]
     for i, nm in enumerate(names):
-        ax.plot(tm, steps.quality[i], lw=0.7, label=nm)
+        ax.plot(tm, steps.quality[i][::k], lw=0.7, label=nm)
     ax.set_xlabel("t [s]")
     ax.set_ylabel("quality (0..255)")
     ax.legend(fontsize=8)

@@ -15,10 +15,11 @@ from robocal.cli import (
     add_seed_argument,
     examples_epilog,
     prepare_out_dir,
-    progress,
     write_run,
 )
 from robocal.io import CalibrationResult, atomic_write_text, hash_inputs
+from robocal.cli._common import add_accept_implausible_argument
+from robocal.progress import progress
 from robocal.report import Report, Section
 
 EXAMPLES = Path("examples/lineprofiler")
@@ -251,16 +252,41 @@ RIG = Rig(name="lineprofiler", help="hand-eye calibration of an arm-mounted line
 
 
 # ----------------------------------------------------------------------------- handeye
+def _stages(desc: str, n: int):
+    """A stage bar on a terminal (10^4 poses: ~8 s to read, ~15 s to solve): ``tick()`` starts the next stage."""
+    it = iter(progress(range(n), desc=desc, total=n))
+    return lambda: next(it, None)
+
+
 def _load_pose_pair(args):
     """``(T_base_gripper, T_cam_target)`` from the two pose lists, the robot stream resampled at the
-    sensor's timestamps when both have timestamps that differ."""
+    sensor's timestamps when both have timestamps that differ. Errors name the file(s)."""
+    from robocal.errors import RobocalError, ShapeError
     from robocal.rigs.lineprofiler.io import interpolate_poses, load_poses
 
     Tg, tg = load_poses(args.gripper_poses)
     Tc, tc = load_poses(args.target_poses)
     if tg is not None and tc is not None and (len(tg) != len(tc) or np.any(np.abs(tg - tc) > 1e-9)):
-        Tg = interpolate_poses(tg, Tg, tc)
+        try:
+            Tg = interpolate_poses(tg, Tg, tc)
+        except RobocalError as exc:
+            raise exc.with_source(f"{args.gripper_poses} resampled at the times of {args.target_poses}") from None
+    elif len(Tg) != len(Tc):
+        raise ShapeError(f"{args.gripper_poses} has {len(Tg)} poses but {args.target_poses} has {len(Tc)}: "
+                         "without timestamps in both lists the counts must match (pose i with pose i)")
     return Tg, Tc
+
+
+def _solve_named(args, fn, *a, **kw):
+    """Run a hand-eye solver; its errors (too few poses, degenerate motions, ...) name the two files."""
+    from robocal.errors import ImplausibleInputError, RobocalError
+
+    try:
+        return fn(*a, **kw)
+    except ImplausibleInputError:
+        raise                                   # names the file in its message already
+    except RobocalError as exc:
+        raise exc.with_source(f"{args.gripper_poses} + {args.target_poses}") from None
 
 
 def _pose_list_arguments(p) -> None:
@@ -271,8 +297,13 @@ def _pose_list_arguments(p) -> None:
 def _handeye_calibrate(args) -> int:
     from robocal.rigs.lineprofiler.handeye import calibrate_hand_eye
 
+    tick = _stages("handeye: read poses, solve", 2)
+    tick()
     Tg, Tc = _load_pose_pair(args)
-    res = calibrate_hand_eye(Tg, Tc, args.method, refine=not args.no_refine)
+    tick()
+    res = _solve_named(args, calibrate_hand_eye, Tg, Tc, args.method, refine=not args.no_refine,
+                       accept_implausible=args.accept_implausible,
+                       names=(Path(args.gripper_poses).name, Path(args.target_poses).name))
     std = {"T_gripper_cam.rotvec": [res.std.get(k) for k in ("rx", "ry", "rz")] if res.std else None,
            "T_gripper_cam.translation": [res.std.get(k) for k in ("tx", "ty", "tz")] if res.std else None}
     result = CalibrationResult(
@@ -302,9 +333,14 @@ def _robot_world(args) -> int:
     from robocal.geometry import invert_transform
     from robocal.rigs.lineprofiler.handeye import calibrate_robot_world, invert_with_covariance
 
+    tick = _stages("handeye robot-world: read poses, solve", 2)
+    tick()
     Tg, Tc = _load_pose_pair(args)
+    tick()
     # A X = Z B with A = T_cam_target, B = T_gripper_base: X = T_target_base, Z = T_cam_gripper
-    res = calibrate_robot_world(Tc, invert_transform(Tg), refine=not args.no_refine)
+    res = _solve_named(args, calibrate_robot_world, Tc, invert_transform(Tg), refine=not args.no_refine,
+                       accept_implausible=args.accept_implausible,
+                       names=(Path(args.gripper_poses).name, Path(args.target_poses).name))
 
     def std_of(prefix):
         if not res.std:
@@ -375,6 +411,7 @@ def _add_handeye(parser) -> None:
     p.add_argument("--method", default="tsai", choices=["tsai", "park", "horaud", "andreff", "daniilidis"],
                    help="closed-form AX = XB solver (then refined unless --no-refine)")
     p.add_argument("--no-refine", action="store_true", help="closed form only (no covariance)")
+    add_accept_implausible_argument(p)
     add_out_argument(p)
     p.set_defaults(func=_handeye_calibrate)
     p = sub.add_parser("robot-world", help="A X = Z B: T_gripper_cam and T_base_target together (Shah + refinement)",
@@ -383,6 +420,7 @@ def _add_handeye(parser) -> None:
                            "--out rw"))
     _pose_list_arguments(p)
     p.add_argument("--no-refine", action="store_true", help="Shah's closed form only (no covariance)")
+    add_accept_implausible_argument(p)
     add_out_argument(p)
     p.set_defaults(func=_robot_world)
 

@@ -69,6 +69,8 @@ __all__ = [
     "calibrate_hand_eye",
     "calibrate_robot_world",
     "transform_error",
+    "judge_poses",
+    "closure_residuals",
 ]
 
 AXXB_METHODS = ("tsai", "park", "horaud", "andreff", "daniilidis")
@@ -78,6 +80,22 @@ MIN_ROTATION = np.deg2rad(2.0)
 MIN_AXIS_SPREAD = np.deg2rad(2.0)
 #: Axis spread (rad) below which the result is flagged as weakly determined.
 WEAK_AXIS_SPREAD = np.deg2rad(10.0)
+
+# Plausibility of the pose lists (:func:`judge_poses`). The closure T_base_gripper X T_cam_target = Y
+# turns a rotation error d into a translation error of about d times the lever (the target's distance
+# from the camera plus the camera's from the gripper), so with consistent data the translation RMS is
+# about the rotation RMS times the lever (the shipped example: ratio 1.1). A unit slip on one list's
+# translations breaks that (target in mm: ratio 28, gripper in mm: 2.8e4); a translation-only noise
+# source can too, hence the absolute floor below which no translation residual is judged.
+#: translation residual / (rotation residual x lever) above which the translations are implausible
+TRANS_ROT_RATIO_MAX = 10.0
+#: translation residual (m) below which the translations are never judged implausible
+TRANS_FLOOR = 0.01
+#: rotation residual (rad) above which pose inversions / quaternion orders are tried (0.17 deg:
+#: the example has 0.72 mrad; an inverted list 11 mrad, scalar-first quaternions 10.5 mrad)
+ROT_TRY = 3e-3
+#: a camera farther from the gripper than this many times the robot's reach is implausible
+REACH_FACTOR = 10.0
 
 
 # ----------------------------------------------------------------------------- results
@@ -153,7 +171,19 @@ def _check_poses(T, name: str) -> np.ndarray:
     return T
 
 
+#: Most relative motions "all" pairs gives (n <= 200 poses); beyond, "all" takes the pairs (i, i + k) for
+#: strides k = 1, 2, 4, ... < n: O(n log n) motions instead of n^2 / 2 (10^4 poses: 1.3e5 instead of
+#: 5e7 motions, 6.4 GB of 4x4 matrices), every pose still in motions of every scale.
+MAX_ALL_PAIRS = 20_000
+
+
 def _pair_indices(n: int, pairs: str) -> list[tuple[int, int]]:
+    if pairs == "all" and n * (n - 1) // 2 > MAX_ALL_PAIRS:
+        out, k = [], 1
+        while k < n:
+            out += [(i, i + k) for i in range(n - k)]
+            k *= 2
+        return out
     if pairs == "all":
         return [(i, j) for i in range(n) for j in range(i + 1, n)]
     if pairs == "consecutive":
@@ -165,7 +195,8 @@ def relative_motions(T_base_gripper, T_cam_target, *, pairs: str = "all"):
     """Relative motions ``(A, B)`` (M, 4, 4) with ``A X = X B`` from absolute poses.
 
     ``A = T_base_gripper[j]^-1 T_base_gripper[i]``, ``B = T_cam_target[j] T_cam_target[i]^-1``
-    for the pairs ``(i, j)`` (all ``i < j`` or consecutive ones).
+    for the pairs ``(i, j)`` (all ``i < j`` up to :data:`MAX_ALL_PAIRS` of them, else strides of powers
+    of two; or consecutive ones).
     """
     Tg = _check_poses(T_base_gripper, "T_base_gripper")
     Tc = _check_poses(T_cam_target, "T_cam_target")
@@ -221,7 +252,7 @@ def check_motions(A, B=None, *, min_rotation: float = MIN_ROTATION, min_axis_spr
         # angle phi the ratio s2/s1 is tan(phi/2).
         s = np.linalg.svd(axes, compute_uv=False)
         spread = float(2 * np.arctan(s[1] / s[0]))
-        common = np.linalg.svd(axes)[2][0]
+        common = np.linalg.svd(axes, full_matrices=False)[2][0]
     else:
         spread, common = 0.0, axes[0]
     if spread < min_axis_spread:
@@ -331,7 +362,7 @@ def _translation(RA, tA, RB_tB_rot, Rx):
     rhs = (np.einsum("ij,nj->ni", Rx, tB) - tA).reshape(-1)
     s = np.linalg.svd(M, compute_uv=False)
     if s[-1] < 1e-6 * s[0]:
-        v = np.linalg.svd(M)[2][-1]
+        v = np.linalg.svd(M, full_matrices=False)[2][-1]
         raise DegenerateGeometryError(
             f"the translation of X along {np.round(v, 3).tolist()} is undetermined (rotation axes parallel)")
     t, *_ = np.linalg.lstsq(M, rhs, rcond=None)
@@ -429,6 +460,148 @@ def solve_ax_xb(A, B, method: str = "tsai", *, min_rotation: float = MIN_ROTATIO
     return transform_from(R, t), chk
 
 
+# ----------------------------------------------------------------------------- plausibility
+def closure_residuals(T_base_gripper, T_cam_target, method: str = "tsai", *, pairs: str = "consecutive"):
+    """Closed-form X and the RMS closure residuals ``(rot_rms rad, trans_rms m, X)`` of two pose lists.
+
+    ``Y`` is the mean of ``T_base_gripper[i] X T_cam_target[i]`` (the fixed target); the residuals are
+    each pose's deviation from it (rotation vector, translation).
+    """
+    Tg, Tc = np.asarray(T_base_gripper, float), np.asarray(T_cam_target, float)
+    A, B = relative_motions(Tg, Tc, pairs=pairs)
+    X, _ = solve_ax_xb(A, B, method)
+    Yall = Tg @ X @ Tc
+    Y = transform_from(project_to_rotation(np.mean(Yall[:, :3, :3], axis=0)), Yall[:, :3, 3].mean(axis=0))
+    r = _pose_residual(Yall, Y[None])
+    return float(np.sqrt(np.mean(r[:, :3] ** 2))), float(np.sqrt(np.mean(r[:, 3:] ** 2))), X
+
+
+def _translations_plausible(Tg, Tc, rot_rms, trans_rms, X) -> tuple[bool, str]:
+    lever = float(np.sqrt(np.mean(np.sum(Tc[:, :3, 3] ** 2, axis=1)))) + float(np.linalg.norm(X[:3, 3]))
+    reach = max(float(np.max(np.linalg.norm(Tg[:, :3, 3], axis=1))), 0.2)
+    tx = float(np.linalg.norm(X[:3, 3]))
+    if tx > max(2.0, REACH_FACTOR * reach):
+        return False, (f"the camera comes out {tx:.3g} m from the gripper, more than {REACH_FACTOR:g} x the "
+                       f"gripper's largest distance from the base ({reach:.3g} m)")
+    if trans_rms > TRANS_FLOOR and trans_rms > TRANS_ROT_RATIO_MAX * rot_rms * lever:
+        return False, (f"the translation residual {1e3 * trans_rms:.3g} mm is {trans_rms / max(rot_rms * lever, 1e-300):.3g} x "
+                       f"what the rotation residual {1e3 * rot_rms:.3g} mrad gives over the {lever:.3g} m lever "
+                       f"(consistent poses: about 1, plausible <= {TRANS_ROT_RATIO_MAX:g})")
+    return True, ""
+
+
+def _quat_scalar_first(T):
+    """The rotations a file meant when its qx, qy, qz, qw columns held w, x, y, z."""
+    from scipy.spatial.transform import Rotation
+
+    q = Rotation.from_matrix(T[:, :3, :3]).as_quat()        # what was read, scalar-last (x', y', z', w')
+    out = np.array(T, float, copy=True)
+    out[:, :3, :3] = Rotation.from_quat(q[:, [1, 2, 3, 0]]).as_matrix()
+    return out
+
+
+def judge_poses(T_base_gripper, T_cam_target, *, names=("T_base_gripper", "T_cam_target"),
+                method: str = "tsai", accept: bool = False, source: str | None = None) -> list:
+    """Judge two pose lists before calibration; name the slip when they are implausible.
+
+    Two cheap figures of the closed-form closure (:func:`closure_residuals`, consecutive pairs):
+
+    * **rotation residual**: above :data:`ROT_TRY` the lists are tried inverted (``T_a_b`` given as
+      ``T_b_a``) and with scalar-first quaternions; one that lowers the residual 5 x is named.
+    * **translations**: the translation residual against the rotation residual times the lever
+      (:data:`TRANS_ROT_RATIO_MAX`, above :data:`TRANS_FLOOR`), and ``|t_gripper_cam|`` against the
+      robot's reach (:data:`REACH_FACTOR`); when implausible, each list's translations are tried
+      /1000 and x1000 (mm <-> m).
+
+    Parameters
+    ----------
+    T_base_gripper, T_cam_target : array_like, shape (N, 4, 4)
+        As read (metres).
+    names : (str, str)
+        The two lists' files, for the message.
+    accept : bool
+        ``--accept-implausible``: a warning instead of :class:`~robocal.errors.ImplausibleInputError`.
+
+    Returns
+    -------
+    list of Diagnostic
+        Empty when plausible; one ``implausible_input`` warning when accepted.
+    """
+    from robocal.plausibility import Slip, check_slips
+
+    Tg, Tc = np.asarray(T_base_gripper, float), np.asarray(T_cam_target, float)
+    rot, trans, X = closure_residuals(Tg, Tc, method)
+    out = []
+    gname, tname = names
+
+    def rot_of(a, b):
+        return 1e3 * closure_residuals(a, b, method)[0]
+
+    if rot > ROT_TRY:
+        rslips = [
+            Slip("target_poses_inverted", f"the poses of {tname} look inverted (T_target_cam given as T_cam_target)",
+                 "with them inverted", lambda: rot_of(Tg, invert_transform(Tc))),
+            Slip("gripper_poses_inverted", f"the poses of {gname} look inverted (T_gripper_base given as "
+                 "T_base_gripper)", "with them inverted", lambda: rot_of(invert_transform(Tg), Tc)),
+            Slip("target_quaternion_scalar_first", f"the quaternions of {tname} look scalar-first (w, x, y, z), "
+                 "not scalar-last", "with (w, x, y, z) read", lambda: rot_of(Tg, _quat_scalar_first(Tc))),
+            Slip("gripper_quaternion_scalar_first", f"the quaternions of {gname} look scalar-first (w, x, y, z), "
+                 "not scalar-last", "with (w, x, y, z) read", lambda: rot_of(_quat_scalar_first(Tg), Tc)),
+        ]
+        # on a poorly excited set (small rotations about few axes) several may explain the data about
+        # equally: the best is named, the others within 10 % listed, rather than a guess
+        from dataclasses import replace as _replace
+
+        from robocal.plausibility import try_slips
+
+        trial = try_slips(rslips, 1e3 * rot, unit="mrad")
+        if trial.best is not None:
+            also = [n for n, v in trial.tried if v is not None and n != trial.best.name
+                    and v <= 1.1 * trial.best_value]
+            pick = trial.best if not also else _replace(
+                trial.best, describe=f"{trial.best.describe} (or, as well explained by these motions: "
+                                     f"{', '.join(also)})")
+            d = check_slips(what="rotation residual", residual=1e3 * rot, unit="mrad", plausible=False,
+                            reason="", slips=[pick], accept=accept, source=source)
+            out.append(d)
+            return out
+    ok, reason = _translations_plausible(Tg, Tc, rot, trans, X)
+    if ok:
+        return out
+
+    def trans_of(a, b):
+        # scaling both lists alike keeps them consistent, so the undone slip must also give physical
+        # sizes: a gripper within 2 cm..20 m of the base, a target 5 mm..100 m from the camera
+        reach = float(np.max(np.linalg.norm(a[:, :3, 3], axis=1)))
+        dist = float(np.median(np.linalg.norm(b[:, :3, 3], axis=1)))
+        if not (0.02 <= reach <= 20.0 and 0.005 <= dist <= 100.0):
+            return np.nan
+        r, t, x = closure_residuals(a, b, method)
+        return 1e3 * t if _translations_plausible(a, b, r, t, x)[0] else np.nan
+
+    def scaled(T, k):
+        T = np.array(T, float, copy=True)
+        T[:, :3, 3] *= k
+        return T
+
+    tslips = [
+        Slip("target_mm_as_m", f"x, y, z of {tname} look like mm, not m", "with /1000",
+             lambda: trans_of(Tg, scaled(Tc, 1e-3))),
+        Slip("gripper_mm_as_m", f"x, y, z of {gname} look like mm, not m", "with /1000",
+             lambda: trans_of(scaled(Tg, 1e-3), Tc)),
+        Slip("both_mm_as_m", f"x, y, z of {gname} and {tname} look like mm, not m", "with /1000",
+             lambda: trans_of(scaled(Tg, 1e-3), scaled(Tc, 1e-3))),
+        Slip("target_m_as_mm", f"x, y, z of {tname} look like m, not mm", "with x1000",
+             lambda: trans_of(Tg, scaled(Tc, 1e3))),
+        Slip("gripper_m_as_mm", f"x, y, z of {gname} look like m, not mm", "with x1000",
+             lambda: trans_of(scaled(Tg, 1e3), Tc)),
+    ]
+    d = check_slips(what="translation residual", residual=1e3 * trans, unit="mm", plausible=False, reason=reason,
+                    slips=tslips, accept=accept, source=source)
+    out.append(d)
+    return out
+
+
 # ----------------------------------------------------------------------------- refinement
 def transform_error(T_est, T_true) -> tuple[float, float]:
     """Rotation (rad) and translation (m) error of an estimate: angle of ``R_est R_true^T`` and ``|t_est - t_true|``."""
@@ -462,7 +635,8 @@ def _std_dict(res, prefix: str) -> dict:
 
 def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, refine: bool = True,
                        pairs: str = "all", min_rotation: float = MIN_ROTATION,
-                       min_axis_spread: float = MIN_AXIS_SPREAD) -> HandEyeResult:
+                       min_axis_spread: float = MIN_AXIS_SPREAD, accept_implausible: bool = False,
+                       names=("T_base_gripper", "T_cam_target")) -> HandEyeResult:
     """Eye-in-hand calibration ``X = T_gripper_cam`` from absolute poses.
 
     Parameters
@@ -479,7 +653,13 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
         (rotation and translation residuals weighted by their RMS after the
         closed form), which gives the covariance of X.
     pairs : {'all', 'consecutive'}
-        Relative motions used by the closed form.
+        Relative motions used by the closed form ('all': every pair up to 200 poses, beyond that
+        the pairs ``(i, i + 2^k)``, see :data:`MAX_ALL_PAIRS`).
+    accept_implausible : bool
+        Go on (with an ``implausible_input`` warning) when :func:`judge_poses` finds the lists
+        implausible; by default that raises :class:`~robocal.errors.ImplausibleInputError`.
+    names : (str, str)
+        The two lists' files, for the plausibility message.
 
     Returns
     -------
@@ -490,7 +670,7 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
     A, B = relative_motions(Tg, Tc, pairs=pairs)
     m = _check_method(method)
     X0, chk = solve_ax_xb(A, B, m, min_rotation=min_rotation, min_axis_spread=min_axis_spread)
-    warnings = list(chk.warnings)
+    warnings = judge_poses(Tg, Tc, names=names, accept=accept_implausible) + list(chk.warnings)
     Yall = Tg @ X0 @ Tc
     Y0 = transform_from(project_to_rotation(np.mean(Yall[:, :3, :3], axis=0)), Yall[:, :3, 3].mean(axis=0))
     r0 = _pose_residual(Yall, Y0[None])
@@ -558,7 +738,8 @@ def invert_with_covariance(T, cov):
 
 def calibrate_robot_world(T_cam_world, T_gripper_base, *, refine: bool = True,
                           min_rotation: float = MIN_ROTATION,
-                          min_axis_spread: float = MIN_AXIS_SPREAD) -> RobotWorldResult:
+                          min_axis_spread: float = MIN_AXIS_SPREAD, accept_implausible: bool = False,
+                          names=("T_base_gripper", "T_cam_world")) -> RobotWorldResult:
     """Robot-world / hand-eye ``A_i X = Z B_i`` (Shah's closed form, optional refinement).
 
     Parameters
@@ -567,6 +748,9 @@ def calibrate_robot_world(T_cam_world, T_gripper_base, *, refine: bool = True,
         ``A``: the world (target) frame seen by the camera, metres.
     T_gripper_base : array_like, shape (N, 4, 4)
         ``B``: the inverse of the robot's forward kinematics.
+    accept_implausible, names
+        As in :func:`calibrate_hand_eye` (the lists are judged as ``T_base_gripper = B^-1`` and
+        ``T_cam_target = A``, by :func:`judge_poses`); ``names``: the robot's and the camera's files.
 
     Returns
     -------
@@ -583,13 +767,14 @@ def calibrate_robot_world(T_cam_world, T_gripper_base, *, refine: bool = True,
     i, j = np.array(_pair_indices(len(TB), "all")).T
     chk = check_motions(TB[j] @ invert_transform(TB[i]), min_rotation=min_rotation,
                         min_axis_spread=min_axis_spread, what="X and Z")
+    judged = judge_poses(invert_transform(TB), TA, names=names, accept=accept_implausible)
     Rx, Rz = _rw_rotation(TA[:, :3, :3], TB[:, :3, :3])
     M = np.concatenate([np.hstack([a, -np.eye(3)]) for a in TA[:, :3, :3]])
     rhs = (np.einsum("ij,nj->ni", Rz, TB[:, :3, 3]) - TA[:, :3, 3]).reshape(-1)
     sol, *_ = np.linalg.lstsq(M, rhs, rcond=None)
     X0, Z0 = transform_from(Rx, sol[:3]), transform_from(Rz, sol[3:])
     r0 = _pose_residual(TA @ X0, Z0 @ TB)
-    warnings = list(chk.warnings)
+    warnings = judged + list(chk.warnings)
     out = RobotWorldResult(X=X0, Z=Z0, method="shah", rot_rms=float(np.sqrt(np.mean(r0[:, :3] ** 2))),
                            trans_rms=float(np.sqrt(np.mean(r0[:, 3:] ** 2))), warnings=warnings)
     if not refine:
