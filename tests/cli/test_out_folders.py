@@ -31,6 +31,7 @@ def _writer_rig(name="toy"):
 
 
 def _write(args, label):
+    print("working")  # the expensive part a command does before it claims its folder
     out = prepare_out_dir(args.out, label)
     for f in args.files.split(","):
         if f == "result.json":
@@ -90,8 +91,8 @@ def test_another_commands_folder_is_refused_in_one_line_naming_it_and_the_fix(tm
     run("toy", "first", "--files", "run.yaml,images/a.png,images/b.png", "--out", out)
     before = _listing(out)
     for argv in (("toy", "second"), ("other", "first")):
-        code, _, err = run(*argv, "--out", out)
-        assert code == 2
+        code, stdout, err = run(*argv, "--out", out)
+        assert code == 2 and "working" not in stdout  # refused before the work, not after it
         assert err.count("\n") == 1 and err.startswith("robocal: error: --out: ")
         assert "holds the files of a `robocal toy first` run (images/, run.yaml)" in err
         assert "choose another folder or add --force" in err
@@ -207,3 +208,10 @@ def test_an_unwritable_out_is_one_line_naming_the_folder(tmp_path, run, monkeypa
     code, _, err = run("toy", "first", "--out", out)
     assert code == 2 and err.count("\n") == 1 and ".tmp" not in err
     assert f"cannot write into {out}" in err
+
+
+def test_an_out_below_a_file_is_refused_before_the_work(tmp_path, run):
+    (tmp_path / "plain").write_text("x\n")
+    code, stdout, err = run("toy", "first", "--out", tmp_path / "plain" / "out")
+    assert code == 2 and "working" not in stdout and err.count("\n") == 1
+    assert "plain is a file" in err

@@ -26,7 +26,7 @@ import robocal
 from robocal.cli._common import FORCE_HELP, OneLineErrorParser, RawHelp, _seed, examples_epilog, prepare_out_dir
 from robocal.cli._rig import DemoContext, discover_rigs, registered_rig_names
 from robocal.errors import InputError, RobocalError
-from robocal.io import CommandRun, set_command_line, write_result
+from robocal.io import CommandRun, preflight, set_command_line, write_result
 from robocal.report import Report
 
 __all__ = ["main", "build_parser", "run_demo"]
@@ -232,6 +232,7 @@ def main(argv=None) -> int:
                          rig=words[0] if words and words[0] not in ("demo", "rigs") else None,
                          force=bool(getattr(args, "force", False)), inputs=tuple(_input_files(args)))
         with run:
+            preflight(getattr(args, "out", None))  # refuse a wrong --out before the work, not after it
             # Warnings are held back while the command runs: when it then fails (the
             # numeric warnings before fx: 1e300's LinAlgError), the one error line is
             # the whole answer; when it succeeds they are shown as usual.

@@ -326,7 +326,7 @@ def monte_carlo(
     if progress:
         from tqdm import tqdm
 
-        children = tqdm(children, desc="Monte Carlo", unit="trial", leave=False)
+        children = tqdm(children, desc="Monte Carlo", unit="trial", leave=False, disable=None)  # None: off when stderr is no terminal
     errs, preds, failures = [], [], []
     k = None
     for i, child in enumerate(children):

@@ -311,7 +311,7 @@ def solve(
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(desc="least squares", unit="it", leave=False)
+        bar = tqdm(desc="least squares", unit="it", leave=False, disable=None)  # None: off when stderr is no terminal
     tr = _Tracker(ev, loss, f_scale, callback, bar)
     status, message, x = None, None, None
     try:

@@ -36,7 +36,7 @@ from robocal.errors import InputError
 from robocal.io._atomic import _PROTECTED, atomic_write_text
 
 __all__ = ["MANIFEST", "INCOMPLETE", "RUN_SCHEMA", "CommandRun", "RunFolder", "claim_folder", "active_run",
-           "read_manifest"]
+           "read_manifest", "preflight"]
 
 MANIFEST = ".robocal-run.json"
 INCOMPLETE = "INCOMPLETE"
@@ -207,6 +207,68 @@ class CommandRun:
             f.close(state, error)
 
 
+def _survey(out: Path, same_command, *, force: bool, protected) -> tuple[set, set, str | None]:
+    """``(theirs, foreign, what)`` of a folder about to be claimed, or the one-line refusal.
+
+    ``theirs``: the files of the earlier run recorded there (to remove);
+    ``foreign``: files robocal did not write (to keep); ``what``: the earlier
+    run's command. ``same_command(manifest)`` tells whether that run was of the
+    command now starting.
+    """
+    try:
+        present = _files(out)
+    except OSError as exc:
+        raise InputError(f"cannot list the directory {out} ({exc.strerror or exc})", source="--out") from None
+    earlier = read_manifest(out)
+    if earlier is not None:
+        listed = earlier.get("files")
+        kept_before = set(earlier.get("kept") or ())
+        # a run that never recorded its files (killed) owned all but what it kept
+        theirs = (set(listed) if isinstance(listed, list) else present - kept_before) & present
+    else:
+        theirs, kept_before = set(), set()
+    foreign = present - theirs
+    what = earlier.get("command") or earlier.get("label") if earlier else None
+    # the same command again: its files go; files a --force run of it kept may stay
+    same = earlier is not None and same_command(earlier) and foreign <= kept_before
+    if (theirs or foreign) and not same and not force:
+        parts = []
+        if theirs:
+            parts.append(f"the files of a `{what}` run ({_shown(theirs)})")
+        if foreign:
+            parts.append(f"files robocal did not write ({_shown(foreign)})")
+        fix = ("add --force to replace that run's files (yours are kept)" if theirs and foreign else
+               "add --force to replace them" if theirs else "add --force to write beside them (they are kept)")
+        raise InputError(f"{out} holds {' and '.join(parts)}; choose another folder or {fix}", source="--out")
+    resolved = {str((out / n).resolve()): n for n in theirs}
+    clash = sorted(resolved[p] for p in protected if p in resolved)
+    if clash:
+        raise InputError(f"{out} holds {clash[0]}, an input of this command written by a `{what}` run; "
+                         "replacing that run would remove it: choose another folder", source="--out")
+    return theirs, foreign, what
+
+
+def preflight(out) -> None:
+    """Refuse ``--out`` before the command does any work, as :func:`claim_folder` would at its start.
+
+    A command calls :func:`claim_folder` once its inputs are read, often after
+    the expensive part; the CLI checks the folder first so that a refusal
+    costs nothing. The earlier run is judged by its ``command`` (the label is
+    not known yet); nothing is changed.
+    """
+    run = active_run()
+    if run is None or out is None:
+        return
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out} is a file, expected a directory (new or existing)", source="--out")
+    existing = next((p for p in (out, *out.parents) if p.exists()), None)
+    if existing is not None and existing != out and not existing.is_dir():
+        raise InputError(f"cannot create the directory {out} ({existing} is a file)", source="--out")
+    if out.is_dir():
+        _survey(out, lambda m: m.get("command") == run.command, force=run.force, protected=run.protected)
+
+
 def claim_folder(out: Path, label: str, *, force: bool | None = None) -> Path:
     """Make ``out`` this run's output folder (see the module docstring); return it.
 
@@ -228,36 +290,7 @@ def claim_folder(out: Path, label: str, *, force: bool | None = None) -> Path:
     force = run.force if force is None else bool(force)
     if any(f.path.resolve() == out.resolve() for f in run.folders):
         return out  # claimed earlier by this run
-    try:
-        present = _files(out)
-    except OSError as exc:
-        raise InputError(f"cannot list the directory {out} ({exc.strerror or exc})", source="--out") from None
-    earlier = read_manifest(out)
-    if earlier is not None:
-        listed = earlier.get("files")
-        kept_before = set(earlier.get("kept") or ())
-        # a run that never recorded its files (killed) owned all but what it kept
-        theirs = (set(listed) if isinstance(listed, list) else present - kept_before) & present
-    else:
-        theirs, kept_before = set(), set()
-    foreign = present - theirs
-    what = earlier.get("command") or earlier.get("label") if earlier else None
-    # the same command again: its files go; files a --force run of it kept may stay
-    same = earlier is not None and earlier.get("label") == label and foreign <= kept_before
-    if (theirs or foreign) and not same and not force:
-        parts = []
-        if theirs:
-            parts.append(f"the files of a `{what}` run ({_shown(theirs)})")
-        if foreign:
-            parts.append(f"files robocal did not write ({_shown(foreign)})")
-        fix = ("add --force to replace that run's files (yours are kept)" if theirs and foreign else
-               "add --force to replace them" if theirs else "add --force to write beside them (they are kept)")
-        raise InputError(f"{out} holds {' and '.join(parts)}; choose another folder or {fix}", source="--out")
-    resolved = {str((out / n).resolve()): n for n in theirs}
-    clash = sorted(resolved[p] for p in run.protected if p in resolved)
-    if clash:
-        raise InputError(f"{out} holds {clash[0]}, an input of this command written by a `{what}` run; "
-                         "replacing that run would remove it: choose another folder", source="--out")
+    theirs, foreign, what = _survey(out, lambda m: m.get("label") == label, force=force, protected=run.protected)
     kept = foreign
     try:
         if theirs:
