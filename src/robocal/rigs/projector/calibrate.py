@@ -36,6 +36,7 @@ import numpy as np
 from robocal.diagnostics import Diagnostic
 from robocal.errors import (
     ConvergenceError,
+    RobocalError,
     DegenerateGeometryError,
     InconsistentDataError,
     InputError,
@@ -290,18 +291,23 @@ def distance_consistency(points_W, points_0, *, sigma: float | None = None, n_si
             yield i, j, dW, d0, lim
 
     keep_all = n <= ALL_PAIRS_MAX
+    # the median relative difference, for the scale test below: from the first anchors' pairs (O(N))
+    ratios = []
+    for i, j in _pair_index(n):
+        ratios.append((np.linalg.norm(p0[i, :2] - p0[j, :2], axis=1) - np.linalg.norm(pw[i, :2] - pw[j, :2], axis=1))
+                      / np.linalg.norm(pw[i, :2] - pw[j, :2], axis=1))
+        if len(ratios) >= 8:
+            break
+    sc_med = float(np.median(np.concatenate(ratios)))  # the median: one bad point must not drag the scale
     stream = chunks() if n <= 20 * ALL_PAIRS_MAX else progress(chunks(), desc="pairwise distances",
                                                                total=N_ANCHORS)
-    parts, ratios = [], []
+    parts = []
     for i, j, dW, d0, lim in stream:
-        diff = d0 - dW
-        if len(ratios) < 8:  # enough pairs for a median scale, O(N) memory
-            ratios.append(diff / dW)
         if keep_all:
             parts.append((i, j, dW, d0, lim))
-        else:
-            # keep the pairs bad as they are or after any uniform scale within 10 % (the scale test below)
-            b = np.abs(diff) > lim - 0.1 * dW
+        else:  # keep only the pairs bad as they are or after removing the median scale (O(N) memory)
+            diff = d0 - dW
+            b = (np.abs(diff) > lim) | (np.abs(diff - sc_med * dW) > lim)
             parts.append((i[b], j[b], dW[b], d0[b], lim[b]))
     cat = [np.concatenate(x) for x in zip(*parts)]
     ii, jj, dW, d0, lim = cat
@@ -315,7 +321,7 @@ def distance_consistency(points_W, points_0, *, sigma: float | None = None, n_si
     blamed = is_bad
     n_bad = int(is_bad.sum())
     if n >= 4 and n_bad >= 3:
-        sc = float(np.median(np.concatenate(ratios)))  # the median: one bad point must not drag the scale
+        sc = sc_med
         after = np.abs(diff - sc * dW) > lim
         if after.sum() <= n_bad / 3:
             scale, blamed = sc, after
@@ -330,9 +336,12 @@ def distance_consistency(points_W, points_0, *, sigma: float | None = None, n_si
         suspects.append(k)
         keep = (left_i != k) & (left_j != k)
         left_i, left_j, excess = left_i[keep], left_j[keep], excess[keep]
-    rows = list(zip(ii.tolist(), jj.tolist(), dW.tolist(), d0.tolist(), diff.tolist(), (diff / dW).tolist()))
-    rows = [(int(a), int(b), float(c), float(d), float(e), float(f)) for a, b, c, d, e, f in rows]
-    bad = [r for r, b in zip(rows, is_bad) if b]
+    sel = slice(None) if keep_all else is_bad
+    rows = list(zip(ii[sel].tolist(), jj[sel].tolist(), dW[sel].tolist(), d0[sel].tolist(), diff[sel].tolist(),
+                    (diff / dW)[sel].tolist()))
+    bad = rows if not keep_all else [r for r, b in zip(rows, is_bad) if b]
+    if not keep_all:
+        bad = bad[:100_000]  # a uniform scale error makes every pair bad: the table keeps the first ones
     pairs = rows if keep_all else bad
     warns = []
     if scale is not None:
@@ -478,6 +487,15 @@ def _unit(v: np.ndarray, what: str) -> np.ndarray:
     return v / n
 
 
+def _units(v: np.ndarray, what: str, others, ref) -> np.ndarray:
+    """Rows of ``v`` normalised (eq. 12), naming the first zero one (a duplicated point)."""
+    nv = np.linalg.norm(v, axis=1)
+    if np.any(nv == 0):
+        k = int(np.flatnonzero(nv == 0)[0])
+        raise DegenerateGeometryError(f"seed method: {what}{others[k]} - {what}{ref} is a zero vector (duplicated point)")
+    return v / nv[:, None]
+
+
 def seed_initial_rotation(a, b, c, d) -> np.ndarray:
     """Closed-form rotation with ``R c = d`` and ``R a`` closest to ``b`` (seed eqs. 15-23).
 
@@ -547,8 +565,8 @@ def seed_method(points_W, points_0, *, alpha: float = 0.5, eps0: float = 1e-12, 
         raise InputError(f"seed order must be a permutation of 0..{n - 1}, got {order}")
     ref = order[-1]
     others = order[:-1]
-    A = np.array([_unit(pw[i] - pw[ref], f"^WP{i} - ^WP{ref}") for i in others])
-    B = np.array([_unit(p0[i] - p0[ref], f"^0P{i} - ^0P{ref}") for i in others])
+    A = _units(pw[others] - pw[ref], "^WP", others, ref)
+    B = _units(p0[others] - p0[ref], "^0P", others, ref)
     R = seed_initial_rotation(A[0], B[0], A[1], B[1])
     R_init = R.copy()
     Y = B.reshape(-1)
@@ -564,7 +582,8 @@ def seed_method(points_W, points_0, *, alpha: float = 0.5, eps0: float = 1e-12, 
     converged = False
     it = 0
     for it in range(1, max_iter + 1):
-        delta = alpha * (np.linalg.pinv(J) @ eps)  # eq. 29, Moore-Penrose
+        # eq. 29, Moore-Penrose: J^+ = (J^T J)^+ J^T exactly, a 3 x 3 pseudo-inverse instead of a (3N x 3) SVD
+        delta = alpha * (np.linalg.pinv(J.T @ J) @ (J.T @ eps))
         R = rotx(delta[0]) @ roty(delta[1]) @ rotz(delta[2]) @ R  # eq. 24
         eps_new, J = step(R)
         costs.append(float(eps_new @ eps_new))
@@ -1015,72 +1034,116 @@ def _bound_violations(est: ExtrinsicEstimate, model: ProjectorModel, free, tilt_
     return out
 
 
-def _slip_checks(pw, th, p0_given, model: ProjectorModel, sigma, *, accept: bool, source: str | None):
+#: Plausible ceiling heights H (m) of a projector room; a slip check that moves H outside is no explanation.
+H_PLAUSIBLE = (0.5, 50.0)
+#: The slip checks fit at most this many points (evenly spaced): a unit slip shows in any of them.
+SLIP_SAMPLE = 2000
+
+
+def _slip_checks(pw, th, p0_given, model: ProjectorModel, sigma, joint_noise, *, accept: bool,
+                 source: str | None):
     """Judge the input's physical scales; name the likely slip (robocal.plausibility).
 
-    Figure of merit: the median floor residual (mm) of the closed-form rigid fit
-    with the nominal model. A rigid transform preserves distances and
-    handedness, so a unit slip on one side (world points, H, the {0} points, the
-    joint angles) or swapped world columns (a mirror image) leaves it far above
-    the noise. Plausible: the scale ratio of the two sets within (0.5, 2) and the
-    median residual at most ``max(10 sigma, 5 % of the points' spread)`` (the 5 %
-    leaves room for the nominal model's own error: a tilt offset or ``h`` off).
-    Each slip is undone on its own and the fit redone.
+    Figure of merit: the median floor residual (mm, in the world points' unit
+    as read) of a fit that allows for the nominal model's own error: yaw, t,
+    ``h`` and the tilt offset free (seed eqs. 1, 6); a rigid fit when the
+    ``{0}`` points are given directly. It counts as no fit (inf) when ``H``
+    leaves :data:`H_PLAUSIBLE`, when the spots' and world points' spreads
+    differ by more than 2x, when the fitted ``h`` leaves ``(0, 1.5 H]`` or
+    the tilt offset +-10 deg, or when it exceeds 5 % of the world points' own
+    spread (a slip that shrinks them shrinks their residual too). Plausible: a figure of at most 10x the stated
+    noise at the largest tilt (5 % of the points' spread without stated noise).
+
+    A unit slip on one side (world points, H, the joint angles), swapped world
+    columns (a mirror image, which no rotation fits) or swapped angle columns
+    leave it far above that; each slip is undone on its own and the fit redone.
+    When the scales agree and no slip explains a poor fit, this returns None:
+    the consistency check and the outlier test report it. With ``{0}`` points
+    given directly their z is tied to ``H`` (checked before), so a scale slip
+    is named on the world points. At most :data:`SLIP_SAMPLE` points are used.
     """
-    from robocal.plausibility import Slip, check_slips
+    from robocal.plausibility import Slip, check_slips, try_slips
 
-    def spots(m, t):
-        return _spots(m, t) if t is not None else p0_given
+    n = pw.shape[0]
+    idx = np.arange(n) if n <= SLIP_SAMPLE else np.linspace(0, n - 1, SLIP_SAMPLE).round().astype(int)
+    pw_s = pw[idx]
+    th_s = None if th is None else th[idx]
+    p0_s = None if p0_given is None else p0_given[idx]
 
-    def merit(w, m=model, t=th, p0=None):
-        p = spots(m, t) if p0 is None else p0
-        fit = rigid_fit(p, w)
-        r = (p @ fit.R.T + fit.t - w)[:, :2]
-        return 1e3 * float(np.median(np.linalg.norm(r, axis=1)))
+    def merit(w, m=model, t=th_s, p0=None):
+        if not H_PLAUSIBLE[0] <= m.H <= H_PLAUSIBLE[1]:
+            return math.inf
+        p = (_spots(m, t) if t is not None else p0_s) if p0 is None else p0
+        if not 0.5 < spread_ratio(w, p) < 2.0:
+            return math.inf
+        if t is None:
+            fit = rigid_fit(p, w)
+            r = (p @ fit.R.T + fit.t - w)[:, :2]
+        else:
+            est = nonlinear(w, theta=t, model=m, estimate=("h", "tilt_offset"), x0=closed_form(w, p))
+            h, o2 = est.extra["h"], est.extra["offsets"][1]
+            if not (0.0 < h <= 1.5 * m.H and abs(o2) <= math.radians(10.0)):
+                return math.inf
+            r = est.residuals
+        med = float(np.median(np.linalg.norm(r, axis=1)))
+        # a slip that shrinks the world points shrinks their residual too: a fit is one only against its own spread
+        sp = float(np.sqrt(np.mean(np.sum((w[:, :2] - w[:, :2].mean(0)) ** 2, axis=1))))
+        return 1e3 * med if med <= 0.05 * sp else math.inf
 
-    p0 = spots(model, th)
-    spread = float(np.sqrt(np.mean(np.sum((pw[:, :2] - pw[:, :2].mean(0)) ** 2, axis=1))))
-    ratio = spread_ratio(pw, p0)
-    base = merit(pw)
-    limit = max(10e3 * sigma if sigma else 0.0, 0.05e3 * spread)
-    if 0.5 < ratio < 2.0 and base <= limit:
+    p0 = _spots(model, th_s) if th_s is not None else p0_s
+    spread = float(np.sqrt(np.mean(np.sum((pw_s[:, :2] - pw_s[:, :2].mean(0)) ** 2, axis=1))))
+    ratio = spread_ratio(pw_s, p0)
+    if sigma:
+        jt = 0.0 if joint_noise is None else float(joint_noise[1])
+        tmax = _tilt_span(model, th_s, p0)[1]
+        limit = 10e3 * math.hypot(sigma, model.h * jt / math.cos(min(tmax, 1.5)) ** 2)
+    else:
+        limit = 0.05e3 * spread
+    try:
+        base = merit(pw_s)
+    except RobocalError:
+        base = math.inf
+    if not math.isfinite(base):  # no fit as given: the message quotes the rigid fit's residual (always finite)
+        fit = rigid_fit(p0, pw_s)
+        r = (p0 @ fit.R.T + fit.t - pw_s)[:, :2]
+        base = max(1e3 * float(np.median(np.linalg.norm(r, axis=1))), 1.01 * limit)
+    if base <= limit:
         return None
     slips = []
     for f, unit_big, unit_small in ((1e3, "mm", "m"), (1e2, "cm", "m"), (1e1, "mm", "cm")):
         slips.append(Slip(f"world_{unit_big}_as_{unit_small}",
                           f"`points.world` looks like {unit_big} declared as {unit_small} ({f:g}x too large)",
-                          f"with /{f:g}", lambda f=f: merit(pw / f)))
+                          f"with /{f:g}", lambda f=f: merit(pw_s / f)))
         slips.append(Slip(f"world_{unit_small}_as_{unit_big}",
                           f"`points.world` looks like {unit_small} declared as {unit_big} ({f:g}x too small)",
-                          f"with x{f:g}", lambda f=f: merit(pw * f)))
+                          f"with x{f:g}", lambda f=f: merit(pw_s * f)))
         if th is not None:
             slips.append(Slip(f"H_{unit_big}_as_{unit_small}",
                               f"`projector.H` (and d1) look like {unit_big} declared as {unit_small} ({f:g}x too large)",
-                              f"with /{f:g}", lambda f=f: merit(pw, m=model.with_(H=model.H / f, d1=model.d1 / f,
-                                                                                    d2=model.d2 / f))))
+                              f"with /{f:g}", lambda f=f: merit(pw_s, m=model.with_(H=model.H / f, d1=model.d1 / f,
+                                                                                      d2=model.d2 / f))))
             slips.append(Slip(f"H_{unit_small}_as_{unit_big}",
                               f"`projector.H` (and d1) look like {unit_small} declared as {unit_big} ({f:g}x too small)",
-                              f"with x{f:g}", lambda f=f: merit(pw, m=model.with_(H=model.H * f, d1=model.d1 * f,
-                                                                                    d2=model.d2 * f))))
+                              f"with x{f:g}", lambda f=f: merit(pw_s, m=model.with_(H=model.H * f, d1=model.d1 * f,
+                                                                                      d2=model.d2 * f))))
     slips.append(Slip("world_xy_swapped", "`points.world` x and y look swapped (a mirror image: no rotation fits)",
-                      "with x and y swapped back", lambda: merit(pw[:, [1, 0, 2]])))
+                      "with x and y swapped back", lambda: merit(pw_s[:, [1, 0, 2]])))
     if th is not None:
         d = math.degrees(1.0)
         slips.append(Slip("angles_rad_as_deg", "`points.joint_angles` look like rad declared as deg",
-                          "read as rad", lambda: merit(pw, t=th * d)))
+                          "read as rad", lambda: merit(pw_s, t=th_s * d)))
         slips.append(Slip("angles_deg_as_rad", "`points.joint_angles` look like deg declared as rad",
-                          "read as deg", lambda: merit(pw, t=th / d)))
+                          "read as deg", lambda: merit(pw_s, t=th_s / d)))
         slips.append(Slip("angles_swapped", "`points.joint_angles` columns look swapped (tilt, pan instead of pan, tilt)",
-                          "with the columns swapped back", lambda: merit(pw, t=th[:, ::-1])))
-    if 0.5 < ratio < 2.0:
-        from robocal.plausibility import try_slips
-
-        # the scales agree: a poor fit is the consistency check's and outlier test's to report, unless a slip
-        # (swapped columns, a mirror image, a small unit factor) explains it
-        if try_slips(slips, base, threshold=limit).best is None:
-            return None
-    reason = (f"the floor points do not fit a rigid motion of the projector's spots: distances in {{0}} are "
-              f"{ratio:.3g} times those in {{W}}, median residual {base:.3g} mm (plausible: <= {limit:.3g} mm)")
+                          "with the columns swapped back", lambda: merit(pw_s, t=th_s[:, ::-1])))
+    h_ok = H_PLAUSIBLE[0] <= model.H <= H_PLAUSIBLE[1]
+    if 0.5 < ratio < 2.0 and h_ok and try_slips(slips, base, threshold=limit).best is None:
+        # the scales agree: a poor fit is the consistency check's and outlier test's to report
+        return None
+    reason = (f"projector.H = {model.H:.4g} m is outside the plausible {H_PLAUSIBLE[0]:g}-{H_PLAUSIBLE[1]:g} m"
+              if not h_ok else
+              f"the floor points do not fit the projector's spots: distances in {{0}} are {ratio:.3g} times those "
+              f"in {{W}}, median residual {base:.3g} mm (plausible: <= {limit:.3g} mm)")
     return check_slips(what="median residual", residual=base, unit="mm", plausible=False, reason=reason,
                        slips=slips, accept=accept, source=source, threshold=limit)
 
@@ -1183,7 +1246,8 @@ def calibrate(points_W, *, theta=None, points_0=None, model: ProjectorModel | No
     if np.abs(pw[:, 2]).max() > 1e-9:
         raise InputError("points_W: world points must lie on the floor (z_W = 0)")
     input_warnings = []
-    slip = _slip_checks(pw, th, p0 if th is None else None, model, sigma, accept=accept_implausible, source=source)
+    slip = _slip_checks(pw, th, p0 if th is None else None, model, sigma, jn, accept=accept_implausible,
+                        source=source)
     if slip is not None:
         input_warnings.append(slip)
     reach = beyond_tilt_limit(model, p0, "joint_angles" if th is not None else "points_0")

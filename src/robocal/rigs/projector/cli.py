@@ -30,8 +30,10 @@ EXAMPLES = Path("examples/projector")
 #: (tests/rigs/projector/test_projector_cli.py) asserts that they equal path's.
 NADIR_SNAP = 1e-3
 MAX_NADIR_SNAP = 0.1
-#: ``simulate --points`` cap: the pairwise-distance check is O(N^2) in memory (1e8 points were killed, OOM).
+#: ``simulate --points`` cap (the largest size tested in the docs; calibrate itself is O(N)).
 MAX_SIM_POINTS = 10_000
+#: ``simulate`` writes the points to ``points.csv`` beside the YAML file above this many.
+CSV_POINTS = 1000
 
 
 def _add_commands(parser: argparse.ArgumentParser) -> None:
@@ -130,6 +132,13 @@ def _cmd_simulate(args) -> int:
                               theta_sigma=math.radians(args.theta_noise))
     out = prepare_out_dir(args.out, "projector-simulate")
     doc = scenario_document(sc)
+    if args.points > CSV_POINTS:  # a long YAML list takes PyYAML seconds per thousand points to read back
+        pts = doc["points"]
+        rows = np.column_stack([np.asarray(pts["world"]), np.asarray(pts["joint_angles"])])
+        text = "x [mm],y [mm],theta1 [deg],theta2 [deg]\n" + "".join(
+            f"{r[0]:.3f},{r[1]:.3f},{r[2]:.9f},{r[3]:.9f}\n" for r in rows.tolist())
+        print(f"wrote {atomic_write_text(out / 'points.csv', text)}")
+        doc["points"] = {"file": "points.csv"}
     text = (f"# robocal projector simulate --points {args.points} --noise {args.noise} --theta-noise "
             f"{args.theta_noise} --seed {args.seed}\n"
             "# Calibration input; 'truth' holds the simulated projector (used by `evaluate`).\n"

@@ -230,6 +230,14 @@ def _check_joint_angles(th: np.ndarray, model: ProjectorModel, field_error, csv_
     if bad.size == 0:
         return
     k = int(bad[0])
+    pan_as_tilt = np.abs(th[:, 0] + model.offsets[1]) <= model.tilt_limit
+    if np.all(pan_as_tilt):  # the pan column would be valid tilts: the columns are swapped, not the unit
+        msg = (f"`points.joint_angles` columns look swapped (tilt, pan instead of pan, tilt): row {k} (0-based) has "
+               f"tilt theta2 = {math.degrees(th[k, 1]):.6g} deg, at or beyond the horizon ({bad.size} such row(s)), "
+               f"while every theta1 is within the tilt limit; give the columns as pan, tilt")
+        if field_error is not None:
+            raise field_error("joint_angles", msg, SingularConfigurationError)
+        raise SingularConfigurationError(f"columns theta1, theta2: {msg}", source=str(csv_path))
     msg = (f"row {k} (0-based): tilt theta2 = {th[k, 1]:.6g} rad (= {math.degrees(th[k, 1]):.6g} deg) puts the beam at or above "
            f"the horizon, so the spot never reaches the floor ({bad.size} such row(s)); are the angles in the declared "
            f"unit (degrees declared as rad?)")

@@ -45,6 +45,11 @@ def plot_cost_curves(estimates: dict, ax=None):
     return ax
 
 
+#: Residual plots draw at most this many points, and label every point only up to MAX_LABELLED.
+MAX_DRAWN = 2000
+MAX_LABELLED = 30
+
+
 def plot_residuals(points_W: np.ndarray, residuals: np.ndarray, ax=None, *, scale: float | None = None):
     """Floor residuals (m) as arrows at the measured points (exaggerated by ``scale``)."""
     if ax is None:
@@ -54,11 +59,21 @@ def plot_residuals(points_W: np.ndarray, residuals: np.ndarray, ax=None, *, scal
     if scale is None:
         span = float(np.ptp(points_W[:, :2], axis=0).max()) or 1.0
         scale = 0.1 * span / max(float(n.max()), 1e-12)
-    ax.scatter(points_W[:, 0], points_W[:, 1], c="k", s=12)
-    ax.quiver(points_W[:, 0], points_W[:, 1], r[:, 0] * scale, r[:, 1] * scale, angles="xy", scale_units="xy",
-              scale=1, color="tab:red")
-    for i, p in enumerate(points_W):
-        ax.annotate(f"{i}: {1000 * n[i]:.1f} mm", p[:2], fontsize=7, xytext=(3, 3), textcoords="offset points")
+    # A figure of 10^4 labelled arrows took minutes to lay out: many points are drawn as a sample (every
+    # point with one of the largest residuals kept) and only the largest residuals are labelled.
+    worst = np.argsort(-n)
+    shown = np.arange(len(n)) if len(n) <= MAX_DRAWN else np.union1d(
+        worst[:MAX_DRAWN // 10], np.linspace(0, len(n) - 1, MAX_DRAWN - MAX_DRAWN // 10).astype(int))
+    labelled = shown if len(n) <= MAX_LABELLED else worst[:10]
+    ax.scatter(points_W[shown, 0], points_W[shown, 1], c="k", s=12 if len(shown) <= 200 else 2)
+    ax.quiver(points_W[shown, 0], points_W[shown, 1], r[shown, 0] * scale, r[shown, 1] * scale, angles="xy",
+              scale_units="xy", scale=1, color="tab:red")
+    for i in labelled:
+        ax.annotate(f"{i}: {1000 * n[i]:.1f} mm", points_W[i, :2], fontsize=7, xytext=(3, 3),
+                    textcoords="offset points")
+    if len(shown) < len(n):
+        ax.text(0.01, 0.01, f"{len(shown)} of {len(n)} points drawn (the largest residuals among them)",
+                transform=ax.transAxes, fontsize=7)
     ax.set_aspect("equal")
     ax.margins(0.18)  # room for the point labels at the edge
     ax.set_xlabel("x_W [m]")
@@ -75,7 +90,8 @@ def plot_error_map(xs, ys, err, ax=None, *, points=None, nadir=None, title="floo
     im = ax.pcolormesh(xs, ys, 1000 * np.asarray(err), shading="auto", cmap="viridis")
     ax.figure.colorbar(im, ax=ax, label=label)
     if points is not None:
-        ax.scatter(points[:, 0], points[:, 1], c="w", edgecolors="k", s=25, label=points_label)
+        pts = points if len(points) <= MAX_DRAWN else points[np.linspace(0, len(points) - 1, MAX_DRAWN).astype(int)]
+        ax.scatter(pts[:, 0], pts[:, 1], c="w", edgecolors="k", s=25 if len(pts) <= 200 else 3, label=points_label)
     if nadir is not None:
         ax.plot(*nadir, "r+", ms=10, label="nadir")
     if points is not None or nadir is not None:
