@@ -316,6 +316,9 @@ def steps_from_frames(frames, t, gyro, height, focal_px: float, config: FlowConf
     return SensorSteps(t, disp, valid, sigma, quality, reasons=reasons, kernel=trace, height=height), flows
 
 
+#: peak working bytes per byte of a flow.csv (measured: 1.4 GB for 10^6 rows, 70 MB), rounded up
+FLOW_LOG_BYTES_PER_BYTE = 25.0
+
 #: working bytes per frame byte of ``odometry`` on raw frames: the loaded frames, the kernel's
 #: pixel-major copy of one sensor's frames and its per-frame outputs; measured peak 2.3x on the
 #: frames example and a 60 s simulated run, rounded up
@@ -469,5 +472,10 @@ def load_steps(spec: RunSpec, config: FlowConfig | None = None, *, allow_missing
                              f"{spec.array.n} sensors of {spec.path.name}, got {d['frames'].shape}")
         steps, flows = steps_from_frames(d["frames"], d["t"], d["gyro"], d["height"], spec.focal_px, config, progress=progress)
         return steps, flows
+    from robocal.resources import require_memory
+
+    # peak 1.4 GB for a 10^6-row, 70 MB flow.csv (odometry, calibrate, evaluate): ~20 x the file
+    size = spec.flow_log.stat().st_size
+    require_memory(FLOW_LOG_BYTES_PER_BYTE * size, f"the {size / 1e6:,.0f} MB flow log", source=str(spec.flow_log))
     rec = read_flow_csv(spec.flow_log, spec.array.n, allow_missing=allow_missing)
     return steps_from_records(rec, spec.focal_px, config, sigma_px=spec.sigma_px), None

@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from robocal.errors import FileFormatError
+from robocal.errors import FileFormatError, InputError
 from robocal.io import CalibrationResult, hash_inputs, load_document
 from robocal.kinematics import DHChain
 from robocal.progress import progress
@@ -104,14 +104,148 @@ class SphereCalibration:
     profiles: list
 
 
-def calibrate_sphere(q, profiles, chain, sphere_radius: float, *, sign="auto", joint_sigma=None) -> SphereCalibration:
+#: FPDP residual RMS (sphere centres through the arm, m) of a plausible scan: above both this share of
+#: the sphere radius and :data:`FPDP_FLOOR`. The example: 0.16 mm on R = 25.4 mm (0.6 %); a radius 10 %
+#: off gives 6.6 mm, a diameter given as the radius 23.6 mm, R in m read as mm 3.96 mm (every circle
+#: larger than the sphere), R in mm read as m 14 m.
+FPDP_MAX_SHARE = 0.05
+#: FPDP residual (m) below which the radius is never judged implausible (arm accuracy of a large arm)
+FPDP_FLOOR = 1e-3
+
+
+def judge_sphere(q, profiles, chain, sphere_radius: float, f: FPDPResult, *, sign="auto", accept: bool = False,
+                 radius_from: str = "`sphere_radius`", profiles_from: str = "the profiles", source: str | None = None):
+    """Judge the sphere radius against the profiles through FPDP's residual; name the slip when implausible.
+
+    The sphere centre each profile gives (its circle and ``sqrt(R^2 - r_c^2)`` off the laser plane)
+    must be one point through the arm: with a wrong radius or wrongly scaled profile points the centres
+    scatter by a share of R (:data:`FPDP_MAX_SHARE`). Slips tried (each one more FPDP, < 1 s on the
+    example): the radius x1000, /1000, /2 (a diameter), the profile points /1000, x1000.
+
+    Returns a Diagnostic (accepted) or None; raises :class:`~robocal.errors.ImplausibleInputError`.
+    """
+    from robocal.plausibility import Slip, check_slips
+
+    R = float(sphere_radius)
+    if not (f.rms > FPDP_MAX_SHARE * R and f.rms > FPDP_FLOOR):
+        return None
+
+    def refit(r=R, k=1.0):
+        pr = profiles if k == 1.0 else [np.asarray(p) * k for p in profiles]
+        g = fpdp_calibrate(q, pr, chain, r, sign=sign)
+        ok = not (g.rms > FPDP_MAX_SHARE * r and g.rms > FPDP_FLOOR)
+        return 1e3 * g.rms if ok else np.nan
+
+    slips = [Slip("radius_mm_as_m", f"{radius_from} looks like mm, not m", "with /1000", lambda: refit(r=R / 1e3)),
+             Slip("radius_m_as_mm", f"{radius_from} looks like m, not mm", "with x1000", lambda: refit(r=R * 1e3)),
+             Slip("radius_is_diameter", f"{radius_from} looks like the diameter", "with /2",
+                  lambda: refit(r=R / 2)),
+             Slip("profiles_mm_as_m", f"x, z of {profiles_from} look like mm, not m", "with /1000",
+                  lambda: refit(k=1e-3)),
+             Slip("profiles_m_as_mm", f"x, z of {profiles_from} look like m, not mm", "with x1000",
+                  lambda: refit(k=1e3))]
+    return check_slips(what="FPDP residual", residual=1e3 * f.rms, unit="mm", plausible=False,
+                       reason=(f"the sphere centres the profiles give scatter by {1e3 * f.rms:.3g} mm RMS through the "
+                               f"arm, {100 * f.rms / R:.3g} % of the {1e3 * R:.4g} mm sphere radius (plausible: <= "
+                               f"{100 * FPDP_MAX_SHARE:g} % or {1e3 * FPDP_FLOOR:g} mm): a wrong radius or arm model?"),
+                       slips=slips, accept=accept, source=source)
+
+
+#: tracker length along P3's line / P3's stroke (and the arc's swept angle / R2's turn) of plausible
+#: MCT files: 1 up to tracker and encoder errors (the example: 1.0000 and 1.000); mm read as m is 1000,
+#: deg read as rad 57.3
+MCT_RATIO_RANGE = (0.8, 1.25)
+
+
+def _mct_ratios(data):
+    """(tracker length along the line / P3 stroke, arc angle / R2 turn) of MCT data (SI units)."""
+    from robocal.geometry import fit_circle_3d, fit_line
+
+    j3 = int(np.argmax(np.ptp(data.q_line, axis=0)))           # the joint that moves along the line
+    s = (data.line_T - data.line_T.mean(axis=0)) @ fit_line(data.line_T).direction
+    k_line = abs(np.polyfit(data.q_line[:, j3], s, 1)[0]) if np.ptp(data.q_line[:, j3]) > 0 else np.nan
+    j2 = int(np.argmax(np.ptp(data.q_arc, axis=0)))
+    arc = fit_circle_3d(data.arc_T)
+    lo, hi = np.argmin(data.q_arc[:, j2]), np.argmax(data.q_arc[:, j2])
+    a, b = data.arc_T[lo] - arc.centre, data.arc_T[hi] - arc.centre
+    swept = np.arctan2(np.linalg.norm(np.cross(a, b)), a @ b)
+    turn = np.ptp(data.q_arc[:, j2])
+    return float(k_line), float(swept / turn) if turn > 0 else np.nan
+
+
+def judge_mct(data, *, files: dict, accept: bool = False, source: str | None = None):
+    """Judge MCT tracker readings against the joint readings; name the slip when implausible.
+
+    Along P3's line the ball moves as far as P3 slides; around R2's arc it turns as far as R2 turns.
+    A tracker file in m under an ``[mm]`` header (or joints the other way) makes the first ratio 1000
+    or 0.001, joint angles in rad under ``[deg]`` the second 0.017 (:data:`MCT_RATIO_RANGE`). Cheap:
+    one line and one circle fit. ``files``: ``{"line": name, "arc": name}`` for the message.
+    """
+    from dataclasses import replace as _replace
+
+    from robocal.plausibility import Slip, check_slips
+
+    try:
+        k_line, k_arc = _mct_ratios(data)
+    except (InputError, ValueError, np.linalg.LinAlgError):
+        return None                             # degenerate files: the calibration's own errors name them
+    lo, hi = MCT_RATIO_RANGE
+
+    def off(k):
+        return 100 * (max(k, 1 / k) - 1) if np.isfinite(k) and k > 0 else np.inf
+
+    out = None
+    if not lo <= k_line <= hi:
+        def line_with(T=1.0):
+            k = _mct_ratios(_replace(data, line_T=data.line_T * T))[0]
+            return off(k) if lo <= k <= hi else np.nan
+        line, name = files.get("line", "the line file"), "P3 stroke"
+        out = check_slips(
+            what=f"mismatch of the tracker length and the {name}", residual=off(k_line), unit="%", plausible=False,
+            reason=(f"along the line of {line} the tracker ball moves {k_line:.4g} x as far as the joint readings "
+                    f"say P3 slides (plausible {lo:g}..{hi:g})"),
+            slips=[Slip("tracker_mm_as_m", f"x, y, z of {line} look like mm, not m (or its P3 readings m, not mm)",
+                        "with /1000", lambda: line_with(1e-3)),
+                   Slip("tracker_m_as_mm", f"x, y, z of {line} look like m, not mm (or its P3 readings mm, not m)",
+                        "with x1000", lambda: line_with(1e3))],
+            accept=accept, source=source)
+    if not lo <= k_arc <= hi and out is None:
+        arc = files.get("arc", "the arc file")
+
+        def arc_with(f):
+            q = data.q_arc.copy()
+            j2 = int(np.argmax(np.ptp(q, axis=0)))
+            q[:, j2] *= f
+            k = _mct_ratios(_replace(data, q_arc=q))[1]
+            return off(k) if lo <= k <= hi else np.nan
+        out = check_slips(
+            what="mismatch of the tracker arc and the R2 turn", residual=off(k_arc), unit="%", plausible=False,
+            reason=(f"around the arc of {arc} the tracker ball turns {k_arc:.4g} x as far as the joint readings "
+                    f"say R2 turns (plausible {lo:g}..{hi:g})"),
+            slips=[Slip("angle_rad_as_deg", f"the R2 readings of {arc} look like rad, not deg", "with rad -> deg",
+                        lambda: arc_with(180 / np.pi)),
+                   Slip("angle_deg_as_rad", f"the R2 readings of {arc} look like deg, not rad", "with deg -> rad",
+                        lambda: arc_with(np.pi / 180))],
+            accept=accept, source=source)
+    return out
+
+
+def calibrate_sphere(q, profiles, chain, sphere_radius: float, *, sign="auto", joint_sigma=None,
+                     accept_implausible: bool = False, names: dict | None = None) -> SphereCalibration:
     """FPDP (linear, seed eqs. 3-4) then the geometric refinement on every point.
 
     ``joint_sigma`` (per joint, m or rad): noise of the joint readings; the
     refinement then estimates one joint correction per pose (see
     :func:`~.refine.refine_sphere`), otherwise it takes the readings as exact.
+    The radius is judged against the profiles first (:func:`judge_sphere`): an
+    implausible one raises :class:`~robocal.errors.ImplausibleInputError` unless
+    ``accept_implausible``; ``names`` (``radius_from``, ``profiles_from``, ``source``)
+    name the input for that message.
     """
     f = fpdp_calibrate(q, profiles, chain, sphere_radius, sign=sign)
+    d = judge_sphere(q, profiles, chain, sphere_radius, f, sign=sign, accept=accept_implausible, **(names or {}))
+    if d is not None:
+        f.warnings.insert(0, d)
     used = f.used
     hold = [k for k in f.undetermined if k.startswith("X.")]
     qu, pu = np.asarray(q)[used], [profiles[i] for i in used]
@@ -203,15 +337,23 @@ def refine_memory(n_points: int, n_profiles: int, dof: int = 0) -> float:
     return base + 4.0 * 8.0 * n_points * cols + 8.0 * cols * cols
 
 
-def calibrate_file(path) -> tuple[SphereCalibration | MCTCalibration, dict]:
-    """Calibrate from an input YAML (FPDP + refinement, or ``method: mct``); returns it and the input hashes."""
+def calibrate_file(path, *, accept_implausible: bool = False) -> tuple[SphereCalibration | MCTCalibration, dict]:
+    """Calibrate from an input YAML (FPDP + refinement, or ``method: mct``); returns it and the input hashes.
+
+    ``accept_implausible``: go on (with a warning) when the sphere radius is implausible for the profiles.
+    """
     doc = load_document(path)
     chain = load_arm(doc)
     method = doc.str("method", default="fpdp", choices=("fpdp", "mct"))
     if method == "mct":
         data, files, t_sigma, h_sigma, dh_sigma, enc_sigma = load_mct_file(doc, chain)
+        tr = doc.sub("tracker")
+        judged = judge_mct(data, files={"line": Path(tr.str("line")).name, "arc": Path(tr.str("arc")).name},
+                           accept=accept_implausible, source=str(path))
         res = mct_calibrate(data, chain, tracker_sigma=t_sigma, height_sigma=h_sigma, dh_sigma=dh_sigma,
                             encoder_sigma=enc_sigma)
+        if judged is not None:
+            res.warnings.insert(0, judged)
         return MCTCalibration(res, data, chain), hash_inputs([path, *files])
     R = doc.float("sphere_radius", kind="length", positive=True)
     prof_path = doc.path("profiles")
@@ -251,7 +393,10 @@ def calibrate_file(path) -> tuple[SphereCalibration | MCTCalibration, dict]:
                    f"the refinement of {n_points:,} profile points in {len(profiles):,} profiles"
                    + (" with joint_sigma" if joint_sigma is not None else ""), source=str(prof_path))
     next(stages, None)
-    cal = calibrate_sphere(q, profiles, chain, R, sign=sign, joint_sigma=joint_sigma)
+    cal = calibrate_sphere(q, profiles, chain, R, sign=sign, joint_sigma=joint_sigma,
+                           accept_implausible=accept_implausible,
+                           names={"radius_from": f"`sphere_radius` ({R * 1e3:.4g} mm as read)",
+                                  "profiles_from": Path(prof_path).name, "source": str(path)})
     next(stages, None)
     return cal, hash_inputs(files)
 

@@ -118,7 +118,7 @@ def _write_mct(out: Path, rig, rng, args) -> None:
 def _calibrate(args) -> int:
     from robocal.rigs.lineprofiler.calibrate import calibrate_file, report_from, result_from
 
-    cal, inputs = calibrate_file(args.input)
+    cal, inputs = calibrate_file(args.input, accept_implausible=args.accept_implausible)
     result = result_from(cal, inputs)
     out = prepare_out_dir(args.out, "lineprofiler-calibrate")
     write_run(out, result, report_from(result, cal))
@@ -198,6 +198,7 @@ def _add_lineprofiler(parser) -> None:
                                               f"robocal lineprofiler calibrate {EXAMPLES}/mct_input.yaml --out lineprofiler-mct"))
     p.add_argument("input", type=Path, help="input YAML: sphere radius, arm, profiles CSV (FPDP); or 'method: mct' "
                                             "with tracker, heights, block and scan files (see docs/rigs/lineprofiler.md)")
+    add_accept_implausible_argument(p)
     add_out_argument(p)
     p.set_defaults(func=_calibrate)
     p = sub.add_parser("report", help="re-render report.html from a result.json", formatter_class=RawHelp,
