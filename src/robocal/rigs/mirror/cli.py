@@ -100,7 +100,7 @@ def _cmd_calibrate(args) -> int:
 
     out = prepare_out_dir(args.out, "mirror-calibrate")
     cal, result, report = workflow.calibrate_file(args.input, refine=not args.no_refine, out_dir=out,
-                                                  accept_implausible=args.accept_implausible)
+                                                  accept_implausible=args.accept_implausible, progress=True)
     write_run(out, result, report)
     t = cal.T_r_c[:3, 3] * 1e3
     s = cal.std_translation * 1e3

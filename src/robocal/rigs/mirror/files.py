@@ -103,6 +103,8 @@ class MirrorInput:
     source: str = "<input>"
     mirror_tags: MirrorTags | None = None
     camera_file: str | None = None  # the file of ``camera: {file: ...}``, if any
+    #: units ``mirror_rectangle`` and ``body_points`` were written in (robocal.rigs.mirror.slips.declared_units)
+    declared: dict = field(default_factory=dict)
 
 
 def _uv(doc, key, n=None):
@@ -264,7 +266,10 @@ def load_input(path) -> MirrorInput:
                                          marker_sigma_scale=scale, **covs))
         except RobocalError as exc:
             raise exc.with_source(f"{src}: {e.prefix}") from None
-    return MirrorInput(cam, rect, body, obs, sigma, tags, images, src, mirror_tags, camera_file)
+    from robocal.rigs.mirror.slips import declared_units
+
+    return MirrorInput(cam, rect, body, obs, sigma, tags, images, src, mirror_tags, camera_file,
+                       declared_units(doc))
 
 
 def write_input(path, camera: CameraModel, rectangle: MarkerRectangle, body_points_r, observations, *,

@@ -47,12 +47,10 @@ __all__ = ["LENGTH_UNITS", "check_body_span", "check_answer", "declared_units"]
 LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
 
 
-def declared_units(path) -> dict:
+def declared_units(doc) -> dict:
     """Units ``mirror_rectangle`` and ``body_points`` were written in (``{"mirror_rectangle": "mm", "body_points":
-    "mm"}``; None where not known)."""
-    from robocal.io import load_document
-
-    doc = load_document(path)
+    "mm"}``; None where not known), from the input's :class:`~robocal.io.Document` (``load_input`` stores them in
+    ``MirrorInput.declared``: no second parse of a large file)."""
 
     def unit(d, key):
         raw = d.data.get(key) if isinstance(d.data, dict) else None

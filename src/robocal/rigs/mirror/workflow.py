@@ -105,13 +105,11 @@ def calibrate_file(path, *, refine: bool = True, progress: bool = False, out_dir
     stored relative to it (else relative to the current directory).
     ``accept_implausible``: see :func:`robocal.rigs.mirror.calibrate.calibrate`.
     """
-    from robocal.rigs.mirror.slips import declared_units
-
     inp = load_input(path)
     try:
         cal = calibrate(inp.camera, inp.rectangle, inp.body_points_r, inp.observations, sigma_px=inp.sigma_px,
                         refine=refine, progress=progress, accept_implausible=accept_implausible,
-                        declared=declared_units(path))
+                        declared=inp.declared)
     except RobocalError as exc:  # the library names the image and field; the user also needs the file
         raise (exc if exc.source else exc.with_source(str(path))) from None
     truth = _read_truth(path)
