@@ -189,3 +189,18 @@ def test_library_calibrate_checks_by_default(detected):
     d2.feet = ["right" if f == "left" else "left" for f in data.feet]
     with pytest.raises(ImplausibleInputError, match="`feet` look swapped"):
         calibrate(model, d2)
+
+
+def test_two_swapped_joint_columns_are_named(detected):
+    # two columns of the records swapped (a joints.names order slip): the views they move most are refused by
+    # the consistency check, and the slip behind them is named instead of "the joint record does not match"
+    model, data, info = detected
+    names = list(model.joint_names)
+    a, b = names.index("LHipPitch"), names.index("LKneePitch")
+    d2 = data.subset(np.ones(data.n_views, bool))
+    d2.theta[:, [a, b]] = data.theta[:, [b, a]]
+    with pytest.raises(ImplausibleInputError, match=r"the joint records' columns 'LHipPitch' and 'LKneePitch' look "
+                                                    r"swapped \(joints.names order\): with them swapped the median "
+                                                    r"corner distance .* drops from \d+ to [0-9.]+ px") as e:
+        calibrate(model, d2, declared=info["declared"])
+    assert e.value.slip == "joints_columns_swapped"

@@ -801,7 +801,14 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
         slip_warnings = check_data(model, used, declared=declared, consistency_px=consistency_px,
                                    accept_implausible=accept_implausible)
         if not slip_warnings:  # accepted implausible data would only be refused view by view here
-            check_views_consistent(model, used, x0, min_px=consistency_px, ratio=consistency_ratio)
+            try:
+                check_views_consistent(model, used, x0, min_px=consistency_px, ratio=consistency_ratio)
+            except InconsistentDataError as exc:
+                # some views only: a slip such as two swapped joint columns can explain them all
+                from robocal.rigs.humanoid.slips import name_slip
+
+                name_slip(model, used, declared=declared, consistency_px=consistency_px)
+                raise exc
     joint_sigma = joint_resolution / np.sqrt(12.0)
     sig = 0.3 if corner_sigma is None else float(corner_sigma)
     prob, S = build_problem(model, used, free, tie=tie, x0=x0, analytic=True,
@@ -839,8 +846,15 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
         gauge = sorted(held_all, key=model.parameter_labels().index)
     prob, S = build_problem(model, used, free, tie=tie, x0=x0, analytic=(jac == "analytic"),
                             corner_sigma=sig, joint_sigma=joint_sigma)
-    res = _solve(prob, method=method, jac=None if jac == "analytic" else jac, progress=progress,
-                 outlier_sigma=outlier_sigma)
+    try:
+        res = _solve(prob, method=method, jac=None if jac == "analytic" else jac, progress=progress,
+                     outlier_sigma=outlier_sigma)
+    except ImplausibleInputError:  # diverged (a NaN corner): name the slip behind it when one explains it
+        if check_consistency:
+            from robocal.rigs.humanoid.slips import name_slip
+
+            name_slip(model, used, declared=declared, consistency_px=consistency_px)
+        raise
     first_iterations = res.iterations
     first_history = np.asarray(res.cost_history)
     two_pass = False
@@ -919,13 +933,16 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
         big = implausible_offsets(model, free, params)
         if big and not slip_warnings:  # (an accepted slip has said why already)
             rms = float(np.sqrt(np.nanmean(resid[keep] ** 2))) if keep.any() else float("nan")
-            diag = check_slips(
-                what="offsets", residual=max(abs(v) for _, v in big), unit="deg", plausible=False,
-                reason="implausible offsets (> {:.0f} deg) for an assembled robot: {} (reprojection RMS {:.3g} px); "
-                       "check the joint records, foot labels and model".format(
-                           np.degrees(PLAUSIBLE_OFFSET), ", ".join(f"{a} {b:+.1f} deg" for a, b in big), rms),
-                accept=accept_implausible)
-            warnings.append(diag)
+            from robocal.rigs.humanoid.slips import check_data
+
+            # the slips of the pre-check, tried now whatever the corner distance: the offsets say the data
+            # are wrong, the distance figure says which slip explains them
+            warnings += check_data(
+                model, used, declared=declared, consistency_px=consistency_px, accept_implausible=accept_implausible,
+                implausible_answer="implausible offsets (> {:.0f} deg) for an assembled robot: {} (reprojection RMS "
+                                   "{:.3g} px); check the joint records, foot labels and model".format(
+                                       np.degrees(PLAUSIBLE_OFFSET), ", ".join(f"{a} {b:+.1f} deg" for a, b in big),
+                                       rms))
         warnings += plausibility_warnings(model, free, params, vr, used.names, res.residual_variance,
                                           offsets=bool(slip_warnings))
     selected = [lab for lab in model.parameter_labels() if lab in free or lab in gauge]

@@ -21,7 +21,8 @@ hundreds of views):
 3. **corner distance**: the median distance between detected and predicted
    corners. Offsets of ~0.5 deg put corners ~2-30 px off, 2 deg up to 110 px;
    angles in rad declared deg, a board centre in the wrong unit, swapped
-   legs, a reversed image list or mirrored images put them 200-500 px off or
+   legs, a reversed image list, mirrored images, or joint columns out of
+   order (left and right legs, or any two joints) put them 200-500 px off or
    behind the camera.
 
 When a check fails, each likely slip is undone and the same figure
@@ -42,10 +43,10 @@ import numpy as np
 from robocal.camera import Checkerboard
 from robocal.diagnostics import Diagnostic
 from robocal.errors import InputError
-from robocal.plausibility import Slip, check_slips
+from robocal.plausibility import Slip, check_slips, try_slips
 from robocal.rigs.humanoid.model import _BOARD_ROTATION, FEET, HumanoidModel
 
-__all__ = ["DECLARED_SI", "LENGTH_UNITS", "check_data", "corner_distance", "size_ratio", "handedness",
+__all__ = ["DECLARED_SI", "LENGTH_UNITS", "check_data", "distance_slips", "corner_distance", "size_ratio", "handedness",
            "with_board", "SIZE_LIMIT", "DISTANCE_FACTOR", "length_slips", "joint_unit_slip"]
 
 #: Units a data set's fields were read in (the loader's ``info["declared"]``); the library's default is SI.
@@ -176,7 +177,7 @@ def joint_unit_slip(declared: str, apply: Callable[[float], float]) -> list[Slip
 
 
 def check_data(model: HumanoidModel, data, *, declared: dict | None = None, consistency_px: float = 60.0,
-               accept_implausible: bool = False) -> list[Diagnostic]:
+               accept_implausible: bool = False, implausible_answer: str | None = None) -> list[Diagnostic]:
     """The three checks of this module on detected ``data``; raise
     :class:`~robocal.errors.ImplausibleInputError` naming the slip (or, when none explains it, what is
     wrong), or with ``accept_implausible`` return ``implausible_input`` warnings.
@@ -186,6 +187,11 @@ def check_data(model: HumanoidModel, data, *, declared: dict | None = None, cons
     declared : dict, optional
         Units the fields were read in (``{"board.square": "mm", "board.centre": "mm", "joints":
         "deg"}``, the loader's ``info["declared"]``); default :data:`DECLARED_SI`.
+    implausible_answer : str, optional
+        Set after a solve whose answer is implausible (:func:`calibrate`: offsets beyond 5 deg), with
+        the reason: the corner-distance slips are then tried whatever the distance (a slip such as
+        two swapped joint columns can leave it under the bound and still pull the offsets to tens of
+        degrees), and the reason is the message when none explains the data.
     consistency_px : float
         The per-view consistency threshold [px] (``calibrate(consistency_px=)``); the median view is
         implausible beyond :data:`DISTANCE_FACTOR` times it, or times 60 px (the default) when it is
@@ -223,7 +229,7 @@ def check_data(model: HumanoidModel, data, *, declared: dict | None = None, cons
 
     sign = handedness(corners, rows, cols)
     n_mirror, n_known = int(np.sum(sign < 0)), int(np.sum(sign != 0))
-    if n_known and n_mirror > n_known / 2:
+    if implausible_answer is None and n_known and n_mirror > n_known / 2:
         base = corner_distance(model, theta, feet, corners, relabel=True)
         run(what="median corner distance from the joint records' prediction", residual=base, unit="px",
             plausible=False, threshold=consistency_px,
@@ -238,7 +244,7 @@ def check_data(model: HumanoidModel, data, *, declared: dict | None = None, cons
 
     pred = _predict(model, theta, feet)
     ratio = size_ratio(model, theta, feet, corners, pred=pred)
-    if np.isfinite(ratio) and not (1 / SIZE_LIMIT <= ratio <= SIZE_LIMIT):
+    if implausible_answer is None and np.isfinite(ratio) and not (1 / SIZE_LIMIT <= ratio <= SIZE_LIMIT):
         def mismatch(r: float) -> float:
             return max(r, 1 / r) if np.isfinite(r) and r > 0 else float("inf")
 
@@ -257,35 +263,99 @@ def check_data(model: HumanoidModel, data, *, declared: dict | None = None, cons
 
     base = corner_distance(model, theta, feet, corners, pred=pred)
     limit = DISTANCE_FACTOR * consistency_px
-    if not base <= limit:
-        def centre_scaled(k: float) -> float:
-            return corner_distance(with_board(model, centre=model.mounts[FEET[0]].centre * k), theta, feet,
-                                   corners, relabel=True)
-
-        def joints_scaled(k: float) -> float:
-            t2 = theta * k
-            model.check_limits(t2)  # outside the limits: not this slip (InputError)
-            return corner_distance(model, t2, feet, corners, relabel=True)
-
-        def legs_swapped() -> float:
-            other = np.array([FEET[1 - FEET.index(f)] for f in feet])
-            return corner_distance(model, theta, other, corners, relabel=True)
-
-        def order_reversed() -> float:
-            return corner_distance(model, theta, feet, corners[::-1], relabel=True)
-
-        slips = (joint_unit_slip(declared["joints"], joints_scaled)
-                 + length_slips("board.centre", declared["board.centre"], centre_scaled)
-                 + [Slip("feet_swapped", "`feet` look swapped (left <-> right)", "with left and right swapped",
-                         legs_swapped),
-                    Slip("images_reversed", "`images` look listed in reverse order of the joint records",
-                         "with the image list reversed", order_reversed),
-                    Slip("images_mirrored", "the images look mirrored left-right",
-                         "with the images flipped back", mirrored)])
+    if implausible_answer is not None or not base <= limit:
+        slips = distance_slips(model, data, declared)
         run(what="median corner distance from the joint records' prediction", residual=base, unit="px",
             plausible=False, threshold=consistency_px,
-            reason=f"the detected corners lie {base:.0f} px (median view) from where the joint records put "
-                   f"them, expected < {limit:.0f} px for offsets of a few degrees: check the joint records "
-                   f"and their unit, the feet, the board centre and the camera",
+            reason=implausible_answer or (
+                f"the detected corners lie {base:.0f} px (median view) from where the joint records put "
+                f"them, expected < {limit:.0f} px for offsets of a few degrees: check the joint records "
+                f"and their unit, the feet, the board centre and the camera"),
             slips=slips)
     return out
+
+
+def distance_slips(model: HumanoidModel, data, declared: dict | None = None) -> list[Slip]:
+    """The slips the corner-distance check tries (figure: :func:`corner_distance` with the slip undone).
+
+    Two swapped joint columns are one slip, the pair that fits best (every pair of moving joints is
+    projected once when this is called: ~15 ms each for 20 views, only on the failing path)."""
+    declared = {**DECLARED_SI, **(declared or {})}
+    theta, feet, corners = np.asarray(data.theta), np.asarray(data.feet), np.asarray(data.corners)
+    W = model.camera.width
+
+    def mirrored() -> float:
+        c2 = corners.copy()
+        c2[..., 0] = (W - 1) - c2[..., 0]
+        return corner_distance(model, theta, feet, c2, relabel=True)
+
+    def centre_scaled(k: float) -> float:
+        return corner_distance(with_board(model, centre=model.mounts[FEET[0]].centre * k), theta, feet,
+                               corners, relabel=True)
+
+    def joints_scaled(k: float) -> float:
+        t2 = theta * k
+        model.check_limits(t2)  # outside the limits: not this slip (InputError)
+        return corner_distance(model, t2, feet, corners, relabel=True)
+
+    def legs_swapped() -> float:
+        other = np.array([FEET[1 - FEET.index(f)] for f in feet])
+        return corner_distance(model, theta, other, corners, relabel=True)
+
+    names = list(model.joint_names)
+
+    def columns_swapped(pairs) -> float:
+        t2 = theta.copy()
+        for a, b in pairs:
+            t2[:, [a, b]] = t2[:, [b, a]]
+        model.check_limits(t2)  # outside the limits: not this slip (InputError)
+        return corner_distance(model, t2, feet, corners, relabel=True)
+
+    lr = [(names.index(n), names.index("R" + n[1:])) for n in names
+          if n.startswith("L") and "R" + n[1:] in names]
+    def order_reversed() -> float:
+        return corner_distance(model, theta, feet, corners[::-1], relabel=True)
+
+    slips = (joint_unit_slip(declared["joints"], joints_scaled)
+             + length_slips("board.centre", declared["board.centre"], centre_scaled)
+             + [Slip("feet_swapped", "`feet` look swapped (left <-> right)", "with left and right swapped",
+                     legs_swapped),
+                Slip("images_reversed", "`images` look listed in reverse order of the joint records",
+                     "with the image list reversed", order_reversed),
+                Slip("images_mirrored", "the images look mirrored left-right",
+                     "with the images flipped back", mirrored)]
+             + ([Slip("joints_left_right_swapped", "the joint records' left and right leg columns look swapped "
+                                                  "(joints.names order)", "with L* and R* swapped",
+                      lambda: columns_swapped(lr))] if lr else []))
+    best_pair, best = None, np.inf
+    for a in range(len(names)):
+        for b in range(a + 1, len(names)):
+            if np.ptp(theta[:, a]) == 0 and np.ptp(theta[:, b]) == 0:
+                continue
+            try:
+                v = columns_swapped([(a, b)])
+            except InputError:
+                continue
+            if v < best:
+                best_pair, best = (a, b), v
+    if best_pair is not None:
+        a, b = best_pair
+        slips.append(Slip("joints_columns_swapped", f"the joint records' columns {names[a]!r} and {names[b]!r} look "
+                                                    f"swapped (joints.names order)", "with them swapped",
+                          lambda: best))
+    return slips
+
+
+def name_slip(model: HumanoidModel, data, *, declared: dict | None = None, consistency_px: float = 60.0) -> None:
+    """Raise :class:`~robocal.errors.ImplausibleInputError` naming the :func:`distance_slips` slip that explains
+    ``data`` (the figure drops 5x and under ``max(consistency_px, 60)``); return quietly when none does, so the
+    caller raises its own error (a view refused by the consistency check, a diverged fit)."""
+    consistency_px = max(float(consistency_px), 60.0)
+    theta, feet, corners = np.asarray(data.theta), np.asarray(data.feet), np.asarray(data.corners)
+    base = corner_distance(model, theta, feet, corners)
+    slips = distance_slips(model, data, declared)
+    trial = try_slips(slips, base, threshold=consistency_px)
+    if trial.best is None:
+        return
+    check_slips(what="median corner distance from the joint records' prediction", residual=base, unit="px",
+                plausible=False, threshold=consistency_px, reason="", slips=[trial.best])
