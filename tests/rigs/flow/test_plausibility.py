@@ -141,3 +141,27 @@ def test_height_check_bounds():
     d = check_height(np.full((3, 10), 100.0), 166.7, arr, accept=True)
     assert d.code == "implausible_input" and d.params == ("height_mm_as_m",)
     assert SCALE_RANGE[0] < 1 < SCALE_RANGE[1]
+
+
+def test_gyro_in_degrees_and_focal_length_in_mm_are_named(tmp_path, capsys):
+    # gyro rates in deg/s under 'gyro_x [rad/s]': the gyro compensation subtracts 57 x the rotational flow
+    run = tmp_path / "g"
+    shutil.copytree(EX / "calibration", run)
+
+    def deg(f):
+        for k in (5, 6, 7):
+            f[k] = f"{np.degrees(float(f[k])):.6f}"
+        return f
+
+    _edit_csv(run / "flow.csv", deg)
+    code, _, err = _run(["flow", "calibrate", str(run / "run.yaml"), "--out", str(tmp_path / "o1"), "--no-progress"], capsys)
+    line = _one_line(err)
+    assert code == 2 and "the gyro rates in flow.csv look like deg/s, not rad/s: with deg/s -> rad/s" in line
+    # the 4 mm lens given as 'focal_px: 4': every displacement 42 x too long
+    run = tmp_path / "f"
+    shutil.copytree(EX / "calibration", run)
+    (run / "run.yaml").write_text((run / "run.yaml").read_text().replace("focal_px: 166.6667", "focal_px: 4.0"))
+    code, _, err = _run(["flow", "calibrate", str(run / "run.yaml"), "--out", str(tmp_path / "o2"), "--no-progress"], capsys)
+    line = _one_line(err)
+    assert code == 2 and "`camera: focal_px` (4) looks like the lens focal length in mm, not px" in line
+    assert "(f = 166.7 px)" in line

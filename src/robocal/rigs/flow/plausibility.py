@@ -46,6 +46,8 @@ __all__ = ["reference_misfit", "check_height", "check_reference", "MAX_FREE_MISF
 #: Largest relative misfit (RMS residual / RMS reference motion, per sensor) of the free window fit
 #: of a plausible run: the examples give 2-6 %; a mirrored path 69-73 %, a heading in deg 93-99 %.
 MAX_FREE_MISFIT = 0.3
+#: PX4FLOW's binned pixel (6 um MT9V034 pixels, 4x4 binning), m: a focal length in mm over it is in px
+BINNED_PIXEL = 24e-6
 #: Plausible range of a sensor's fitted scale (height or focal-length error of the metric flow).
 SCALE_RANGE = (1 / 3, 3.0)
 
@@ -106,6 +108,7 @@ def _free_plausible(free, scale) -> bool:
 
 def check_reference(steps: SensorSteps, t_ref, poses_ref, array: SensorArray, *, height_from: str = "the flow log",
                     reference_name: str = "the reference", rescaled_gyro: Callable[[float], SensorSteps] | None = None,
+                    refocused: Callable[[float], SensorSteps] | None = None, focal_px: float | None = None,
                     accept: bool = False, source: str | None = None):
     """Judge the run's flow against its reference trajectory; name the slip when implausible.
 
@@ -122,6 +125,10 @@ def check_reference(steps: SensorSteps, t_ref, poses_ref, array: SensorArray, *,
     rescaled_gyro : callable, optional
         ``f(k) -> SensorSteps`` rebuilt with every gyro rate multiplied by ``k`` (flow logs only):
         tries gyro rates in deg/s declared rad/s.
+    refocused, focal_px : callable, float, optional
+        ``f(focal) -> SensorSteps`` rebuilt with another focal length (px), and the one of run.yaml:
+        tries the lens focal length in mm given as ``focal_px`` (PX4FLOW's binned pixel,
+        :data:`BINNED_PIXEL`) and the unbinned focal length (x4 binning).
     accept : bool
         ``--accept-implausible``: return an ``implausible_input`` warning instead of raising.
 
@@ -165,6 +172,15 @@ def check_reference(steps: SensorSteps, t_ref, poses_ref, array: SensorArray, *,
     if rescaled_gyro is not None:
         slips.append(Slip("gyro_deg_as_rad", f"the gyro rates in {height_from} look like deg/s, not rad/s",
                           "with deg/s -> rad/s", lambda: trial(st=rescaled_gyro(np.pi / 180))))
+    if refocused is not None and focal_px is not None:
+        f = float(focal_px)
+        slips += [
+            Slip("focal_mm_as_px", f"`camera: focal_px` ({f:g}) looks like the lens focal length in mm, not px",
+                 f"with PX4FLOW's {BINNED_PIXEL * 1e6:g} um binned pixel (f = {f * 1e-3 / BINNED_PIXEL:.4g} px)",
+                 lambda: trial(st=refocused(f * 1e-3 / BINNED_PIXEL))),
+            Slip("focal_unbinned", f"`camera: focal_px` ({f:g}) looks like the unbinned focal length",
+                 f"with the 4x4 binning (f = {f / 4:.4g} px)", lambda: trial(st=refocused(f / 4))),
+        ]
     worst = int(np.nanargmax(np.where(np.isfinite(free), np.maximum(free, np.abs(np.log(scale))), -1)))
     reason = (f"the flow does not follow {ref}: sensor {array.names[worst]}'s best rigid fit leaves "
               f"{100 * free[worst]:.3g} % of the motion unexplained with scale {scale[worst]:.3g} "

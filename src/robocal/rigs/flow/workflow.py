@@ -120,15 +120,21 @@ def judge_run(spec: RunSpec, steps, config: FlowConfig, *, allow_missing: bool =
     if spec.reference is not None:
         t_ref, p_ref = _read_poses(spec.reference)
         _interp(spec.reference, t_ref, p_ref, steps.t)      # coverage, with the file named
-        rescaled = None
+        rescaled = refocused = None
         if not from_frames:
-            def rescaled(k):
+            # the slips' rebuilds from the log's records (read again: only on an implausible run)
+            def rebuild(gyro=1.0, focal=spec.focal_px):
                 rec = read_flow_csv(spec.flow_log, spec.array.n, allow_missing=allow_missing)
-                return steps_from_records(_replace(rec, gyro=rec.gyro * k), spec.focal_px, config,
-                                          sigma_px=spec.sigma_px)
+                return steps_from_records(_replace(rec, gyro=rec.gyro * gyro), focal, config, sigma_px=spec.sigma_px)
+
+            def rescaled(k):
+                return rebuild(gyro=k)
+
+            def refocused(f):
+                return rebuild(focal=f)
         d = check_reference(steps, t_ref, p_ref, spec.array, height_from=height_from,
-                            reference_name=spec.reference.name, rescaled_gyro=rescaled,
-                            accept=accept_implausible, source=src)
+                            reference_name=spec.reference.name, rescaled_gyro=rescaled, refocused=refocused,
+                            focal_px=spec.focal_px, accept=accept_implausible, source=src)
     elif steps.height is not None:
         d = check_height(steps.height, spec.focal_px, spec.array, height_from=height_from,
                          accept=accept_implausible, source=src)
