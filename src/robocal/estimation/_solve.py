@@ -125,7 +125,9 @@ class _Tracker:
     def fun(self, x):
         f = self.ev.weighted(x)
         self.cache = self.cache[-3:] + [(np.array(x, copy=True), f)]
-        return f
+        # a copy: SciPy 1.11/1.12 scale the returned residuals in place for a robust loss, which
+        # corrupted the cached ones (robust residual variance off by 1e12 at the lowest pins)
+        return f.copy()
 
     def jac(self, x, *args, **kwargs):
         f = self.lookup(x)
@@ -142,7 +144,7 @@ class _Tracker:
             if self.callback(info) is True:
                 raise _Stop
         self.last_J = self.ev.jacobian(x, f0=f)
-        return self.last_J
+        return self.last_J.copy()  # SciPy 1.11/1.12 scale it in place too (see fun)
 
 
 def _clipped_variance(q, dims, m, rank, n_sigma, max_iter=20) -> float:

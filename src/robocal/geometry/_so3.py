@@ -61,6 +61,8 @@ def _batched(fn, arr: np.ndarray, tail: int) -> np.ndarray:
     """Apply a SciPy Rotation constructor/export to any leading batch shape."""
     lead = arr.shape[: arr.ndim - tail]
     flat = arr.reshape((-1,) + arr.shape[arr.ndim - tail :])
+    if not flat.flags.writeable:
+        flat = flat.copy()  # SciPy 1.11-1.13's Rotation refuses read-only buffers
     out = fn(flat)
     return out.reshape(lead + out.shape[1:])
 

@@ -385,7 +385,9 @@ def test_consensus_switch_keeps_residuals_and_warnings_with_the_new_pose():
     import importlib
 
     mod = importlib.import_module("robocal.rigs.mirror.calibrate")
-    cam, scene, obs = _ambiguous_placements(102)  # image 0: ambiguous alone, switched 0 -> 1 by the others
+    # image 0: ambiguous alone, switched 0 -> 1 by the others. (Seed 102 was OpenCV 4 stopping its LM on
+    # the second IPPE pose short of a minimum; robocal now refines to convergence and its poses merge.)
+    cam, scene, obs = _ambiguous_placements(15)
     singles = [calibrate_single(cam, scene.rectangle, scene.body_points_r, o, sigma_px=0.5) for o in obs]
     assert singles[0].choice.chosen == 0 and not singles[0].choice.decisive
     cal = calibrate(cam, scene.rectangle, scene.body_points_r, obs, sigma_px=0.5)
