@@ -28,7 +28,6 @@ from robocal.errors import (ImplausibleInputError, InconsistentDataError, InputE
                              NotEnoughDataError)
 from robocal.estimation import LSQResult, Problem, analyze_jacobian, outlier_threshold, solve
 from robocal.io import CalibrationResult
-from robocal.plausibility import check_slips
 from robocal.rigs.humanoid.model import CAMERA_PARAMS, FEET, HumanoidModel
 from robocal.rigs.humanoid.simulate import JOINT_RESOLUTION, HumanoidDataset
 
