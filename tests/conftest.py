@@ -6,6 +6,13 @@ draw (stop 10's CI failed on a case no earlier run had drawn). To hunt for new
 failures, run with fresh random examples::
 
     HYPOTHESIS_PROFILE=explore python -m pytest -q -k "fuzz or property"
+
+Test order is random (pytest-randomly, in the test extra; the header prints
+``--randomly-seed=N`` to reproduce an order, ``-p no:randomly`` switches it
+off). It reseeds ``random`` and NumPy's global state before each test, which
+no test relies on (randomness comes from a seeded ``np.random.Generator``),
+and it does not touch Hypothesis: with ``derandomize=True`` Hypothesis draws
+from a seed of its own per test, so the examples are the same in any order.
 """
 
 import os
