@@ -17,7 +17,9 @@ Three solvers:
     ``h = H - d1`` and the tilt zero offset; covariance included.
 
 Noise model: the world measurements ``^W P`` (tape, total station) carry
-isotropic floor noise ``sigma`` per coordinate; the joint encoders are exact.
+isotropic floor noise ``sigma`` per coordinate; the joint encoders carry
+``joint_noise`` (pan, tilt), mapped to the floor per point by the spot model's
+joint Jacobian (:func:`floor_covariance`, issue 19).
 Because ``{W}``'s floor (z_W = 0) and the model's floor (z_0 = -H) are both
 planes, a rigid transform between them is a rotation about ``z`` plus a
 translation: only the yaw, ``t_x``, ``t_y`` are determined by floor points
@@ -28,6 +30,7 @@ violate the model's level-floor assumption, seed §2.1).
 from __future__ import annotations
 
 import math
+import sys
 import warnings
 from dataclasses import dataclass, field
 
@@ -176,10 +179,20 @@ def spread_ratio(points_W, points_0) -> float:
     return float(np.median(d0[ok] / dw[ok]))
 
 
+#: Peak working memory of :func:`calibrate` per point (bytes), measured at 10^5 and 10^6 points (BENCHMARKS.md)
+#: with margin; checked before the work starts (robocal.resources.require_memory).
+CAL_BYTES_PER_POINT = 4096
+#: Above this many points the steps that then take seconds show a progress bar (on a terminal).
+LARGE_N = 50_000
 #: Above this many points the pairwise check uses anchor points (O(N) pairs) instead of all N (N - 1) / 2 pairs.
 ALL_PAIRS_MAX = 100
 #: Number of anchor points of the O(N) pairwise check.
 N_ANCHORS = 64
+#: The O(N) check keeps at most this many bad pairs (the worst), names at most MAX_SUSPECTS points and tabulates
+#: at most MAX_TABLE_PAIRS pairs: a model error (a wrong h or tilt offset) can make most pairs bad.
+MAX_KEPT_PAIRS = 1_000_000
+MAX_SUSPECTS = 200
+MAX_TABLE_PAIRS = 10_000
 #: Family-wise false-alarm rate of the pairwise check when the noise is stated (Bonferroni over the pairs).
 CONSISTENCY_ALPHA = 0.01
 
@@ -299,16 +312,24 @@ def distance_consistency(points_W, points_0, *, sigma: float | None = None, n_si
         if len(ratios) >= 8:
             break
     sc_med = float(np.median(np.concatenate(ratios)))  # the median: one bad point must not drag the scale
-    stream = chunks() if n <= 20 * ALL_PAIRS_MAX else progress(chunks(), desc="pairwise distances",
-                                                               total=N_ANCHORS)
+    stream = progress(chunks(), desc="pairwise distances", total=N_ANCHORS, enabled=n > LARGE_N)
     parts = []
+    n_bad_all = n_after_all = 0
+    per_chunk = MAX_KEPT_PAIRS // N_ANCHORS
     for i, j, dW, d0, lim in stream:
         if keep_all:
             parts.append((i, j, dW, d0, lim))
-        else:  # keep only the pairs bad as they are or after removing the median scale (O(N) memory)
-            diff = d0 - dW
-            b = (np.abs(diff) > lim) | (np.abs(diff - sc_med * dW) > lim)
-            parts.append((i[b], j[b], dW[b], d0[b], lim[b]))
+            continue
+        # keep only the pairs bad as they are or after removing the median scale, and of those at most
+        # per_chunk with the largest excess: a model error can make most of 64 N pairs bad (O(N) memory)
+        diff = d0 - dW
+        ex = np.maximum(np.abs(diff), np.abs(diff - sc_med * dW)) / lim
+        n_bad_all += int(np.count_nonzero(np.abs(diff) > lim))
+        n_after_all += int(np.count_nonzero(np.abs(diff - sc_med * dW) > lim))
+        b = np.flatnonzero(ex > 1.0)
+        if b.size > per_chunk:
+            b = b[np.argpartition(-ex[b], per_chunk)[:per_chunk]]
+        parts.append((i[b], j[b], dW[b], d0[b], lim[b]))
     cat = [np.concatenate(x) for x in zip(*parts)]
     ii, jj, dW, d0, lim = cat
     diff = d0 - dW
@@ -319,16 +340,17 @@ def distance_consistency(points_W, points_0, *, sigma: float | None = None, n_si
                  else f"{100 * rel_tol:g} % of the distance")
     scale = None
     blamed = is_bad
-    n_bad = int(is_bad.sum())
+    n_bad = int(is_bad.sum()) if keep_all else n_bad_all
     if n >= 4 and n_bad >= 3:
         sc = sc_med
         after = np.abs(diff - sc * dW) > lim
-        if after.sum() <= n_bad / 3:
+        n_after = int(after.sum()) if keep_all else n_after_all
+        if n_after <= n_bad / 3:
             scale, blamed = sc, after
     suspects: list[int] = []
     left_i, left_j = ii[blamed], jj[blamed]
     excess = (np.abs(diff) / lim)[blamed]
-    while left_i.size and len(suspects) < 200:
+    while left_i.size and len(suspects) < MAX_SUSPECTS:
         both = np.concatenate([left_i, left_j])
         counts = np.bincount(both, minlength=n).astype(float)
         ex = np.bincount(both, weights=np.concatenate([excess, excess]), minlength=n)
@@ -336,12 +358,15 @@ def distance_consistency(points_W, points_0, *, sigma: float | None = None, n_si
         suspects.append(k)
         keep = (left_i != k) & (left_j != k)
         left_i, left_j, excess = left_i[keep], left_j[keep], excess[keep]
+    more = bool(left_i.size)
+    if not keep_all:  # the table: the worst bad pairs first
+        order = np.flatnonzero(is_bad)
+        order = order[np.argsort(-(np.abs(diff) / lim)[order])][:MAX_TABLE_PAIRS]
+        ii, jj, dW, d0, diff, lim, is_bad = (a[order] for a in (ii, jj, dW, d0, diff, lim, is_bad))
     sel = slice(None) if keep_all else is_bad
     rows = list(zip(ii[sel].tolist(), jj[sel].tolist(), dW[sel].tolist(), d0[sel].tolist(), diff[sel].tolist(),
                     (diff / dW)[sel].tolist()))
     bad = rows if not keep_all else [r for r, b in zip(rows, is_bad) if b]
-    if not keep_all:
-        bad = bad[:100_000]  # a uniform scale error makes every pair bad: the table keeps the first ones
     pairs = rows if keep_all else bad
     warns = []
     if scale is not None:
@@ -349,7 +374,8 @@ def distance_consistency(points_W, points_0, *, sigma: float | None = None, n_si
             "inconsistent_data",
             f"pairwise distances in {{0}} are uniformly {100 * scale:+.2f} % of those in {{W}} ({n_bad} of "
             f"{n_pairs} pairs beyond {threshold}): a scale error of the model, not of single points: {scale_hint}"
-            + (f"; after removing the scale, suspect point(s) {suspects}" if suspects else
+            + (f"; after removing the scale, suspect point(s) {suspects[:20]}{' ...' if len(suspects) > 20 or more else ''}"
+               if suspects else
                "; after removing the scale every pair agrees"),
             indices=tuple(suspects)))
     elif bad:
@@ -359,7 +385,7 @@ def distance_consistency(points_W, points_0, *, sigma: float | None = None, n_si
         warns.append(Diagnostic(
             "inconsistent_data",
             f"pairwise distances in {{W}} and {{0}} disagree beyond {threshold} ({desc}); a rigid transform cannot "
-            f"fit them: suspect point(s) {suspects[:20]}{' ...' if len(suspects) > 20 else ''} (the first most "
+            f"fit them: suspect point(s) {suspects[:20]}{' ...' if len(suspects) > 20 or more else ''} (the first most "
             f"implicated; worst pair {worst[0]}-{worst[1]}, {100 * worst[5]:+.1f} %)",
             indices=tuple(suspects)))
     return ConsistencyReport(pairs, bad, suspects, threshold, warns, scale, n_pairs)
@@ -581,7 +607,9 @@ def seed_method(points_W, points_0, *, alpha: float = 0.5, eps0: float = 1e-12, 
     costs = [float(eps @ eps)]
     converged = False
     it = 0
-    for it in range(1, max_iter + 1):
+    from robocal.progress import progress
+
+    for it in progress(range(1, max_iter + 1), desc="seed method, eq. (29)", enabled=n > LARGE_N):
         # eq. 29, Moore-Penrose: J^+ = (J^T J)^+ J^T exactly, a 3 x 3 pseudo-inverse instead of a (3N x 3) SVD
         delta = alpha * (np.linalg.pinv(J.T @ J) @ (J.T @ eps))
         R = rotx(delta[0]) @ roty(delta[1]) @ rotz(delta[2]) @ R  # eq. 24
@@ -872,7 +900,8 @@ def nonlinear(points_W, *, theta=None, points_0=None, model: ProjectorModel | No
     for k in range(passes):
         prob, raw = build(x_start, p_start, Winv)
         # trf, not lm: MINPACK keeps iterating on an exact (zero-residual) fit until max_nfev
-        res = solve(prob, method="trf", loss=loss, absolute_sigma=absolute_sigma and bool(sigma))
+        res = solve(prob, method="trf", loss=loss, absolute_sigma=absolute_sigma and bool(sigma),
+                    progress=n > LARGE_N and sys.stderr.isatty())
         if not np.all(np.isfinite(res.x)):
             raise ConvergenceError("nonlinear: the solver returned a non-finite estimate")
         x_start = [float(res.params["R"][2]), float(res.params["t"][0]), float(res.params["t"][1])]
@@ -1242,6 +1271,9 @@ def calibrate(points_W, *, theta=None, points_0=None, model: ProjectorModel | No
                              "point's floor covariance")
     if not 0 < tilt_offset_limit < math.pi / 2:
         raise InputError(f"tilt_offset_limit must be in (0, 90) deg, got {math.degrees(tilt_offset_limit):g} deg")
+    from robocal.resources import require_memory
+
+    require_memory(CAL_BYTES_PER_POINT * len(p0), f"calibrating {len(p0)} points", source=source)
     pw, p0 = check_correspondences(points_W, p0, unit_check=False)
     if np.abs(pw[:, 2]).max() > 1e-9:
         raise InputError("points_W: world points must lie on the floor (z_W = 0)")
