@@ -60,9 +60,11 @@ TARGETS = {
 #: documented exit 1 (a verdict, not an error)
 EXIT_1_ALLOWED = {"projector-path"}
 
-#: failures inside a rig's own code found by this fuzz and not yet fixed:
-#: (target, substring of the escaping exception's last traceback line) -> reason
-KNOWN = {}
+#: failures inside a rig's own code found by this fuzz and not yet fixed, tolerated so the suite
+#: stays green while they are: (target, substring of the escaping exception's last traceback line)
+#: -> reason. Empty: the one found (humanoid: a --out refusal after the whole solve, with
+#: progress-bar frames on stderr) is fixed.
+KNOWN: dict[tuple[str, str], str] = {}
 
 # -- mutations -------------------------------------------------------------------------------------------------
 
@@ -257,7 +259,7 @@ def _check(name, argv, capsys, case):
         last = traceback.format_exception_only(type(exc), exc)[-1].strip()
         for (target, sig), reason in KNOWN.items():
             if target == name and sig in last:
-                return  # a known rig failure, pinned by its own xfail test below
+                pytest.xfail(f"{name}: {case}: {reason}")
         pytest.fail(f"{name}: {case}: exception escaped main: {last}\n{traceback.format_exc()}")
     out, err = capsys.readouterr()
     if os.environ.get("ROBOCAL_FUZZ_LOG"):  # one line per case, to see what the draws reached
