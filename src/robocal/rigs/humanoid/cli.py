@@ -212,7 +212,8 @@ def _cmd_plan(args) -> int:
     else:
         model = default_model(tie_hip_yaw_pitch=args.tie)
     plan = plan_poses(model, args.poses, np.random.default_rng(args.seed), parameters=args.params,
-                      n_candidates=args.candidates, corner_sigma=args.corner_sigma, joint_resolution=resolution)
+                      n_candidates=args.candidates, corner_sigma=args.corner_sigma, joint_resolution=resolution,
+                      progress=True)
     out = prepare_out_dir(args.out, "humanoid-plan")
     doc = {"description": "leg poses chosen greedily for D-optimality (joint angles to command)",
            "feet": plan.feet,
