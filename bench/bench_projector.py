@@ -186,6 +186,32 @@ def main() -> None:
           f"rates, keep-current rule) {k / t_nm:,.0f} samples/s ({t_nm / t_plan:.0f}x slower); per-head command "
           f"streams with pre-aiming (projector_commands) {k / t_cmd:,.0f} samples/s")
 
+    bench_sizes([1_000, 10_000] if args.quick else [1_000, 10_000, 100_000])
+
+
+def bench_sizes(sizes) -> None:
+    """calibrate() (check + all three methods, h and tilt offset, joint noise) at growing N: time and the peak
+    of Python-traced memory (tracemalloc). Linear in N since the pairwise check stopped building N x N x 3."""
+    import time
+    import tracemalloc
+
+    from robocal.rigs.projector.calibrate import calibrate
+    from robocal.rigs.projector.simulate import simulate_calibration
+
+    print("\ncalibrate() at growing N (all methods, h + tilt offset, joint_noise 0.05 deg; CPU time, traced peak):")
+    for n in sizes:
+        sc = simulate_calibration(np.random.default_rng(n), n_points=n, sigma=0.005,
+                                  theta_sigma=math.radians(0.05))
+        tracemalloc.start()
+        t0 = time.process_time()
+        run = calibrate(sc.points_W, theta=sc.theta, model=sc.nominal, estimate=("h", "tilt_offset"),
+                        sigma=sc.sigma, joint_noise=(sc.theta_sigma, sc.theta_sigma))
+        dt = time.process_time() - t0
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        print(f"  N = {n:>7,}: {dt:6.2f} s CPU, peak {peak / 2**20:7.1f} MiB ({peak / n:,.0f} B/point), "
+              f"{run.consistency.n_pairs:,} pairs checked")
+
 
 if __name__ == "__main__":
     main()

@@ -179,9 +179,9 @@ def spread_ratio(points_W, points_0) -> float:
     return float(np.median(d0[ok] / dw[ok]))
 
 
-#: Peak working memory of :func:`calibrate` per point (bytes), measured at 10^5 and 10^6 points (BENCHMARKS.md)
+#: Peak working memory of :func:`calibrate` per point (bytes): 1.4 kB measured at 10^6 points (BENCHMARKS.md),
 #: with margin; checked before the work starts (robocal.resources.require_memory).
-CAL_BYTES_PER_POINT = 4096
+CAL_BYTES_PER_POINT = 2048
 #: Above this many points the steps that then take seconds show a progress bar (on a terminal).
 LARGE_N = 50_000
 #: Above this many points the pairwise check uses anchor points (O(N) pairs) instead of all N (N - 1) / 2 pairs.
