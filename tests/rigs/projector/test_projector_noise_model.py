@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import pytest
 
 WORLD_SIGMA = 0.005  # m
 JOINT_SIGMA = math.radians(0.05)  # rad, pan and tilt

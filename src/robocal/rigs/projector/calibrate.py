@@ -506,13 +506,6 @@ def _align(u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, float]:
     return w / n, ang
 
 
-def _unit(v: np.ndarray, what: str) -> np.ndarray:
-    n = np.linalg.norm(v)
-    if n == 0:
-        raise DegenerateGeometryError(f"seed method: {what} is a zero vector (duplicated point)")
-    return v / n
-
-
 def _units(v: np.ndarray, what: str, others, ref) -> np.ndarray:
     """Rows of ``v`` normalised (eq. 12), naming the first zero one (a duplicated point)."""
     nv = np.linalg.norm(v, axis=1)
@@ -1338,7 +1331,7 @@ def calibrate(points_W, *, theta=None, points_0=None, model: ProjectorModel | No
             msg = (f"{'; '.join(held.values())}: {why}; held at nominal "
                    + ", ".join(f"h = {model.h:.4g} m" if k == "h" else f"tilt offset {math.degrees(model.offsets[1]):g} deg"
                                for k in held)
-                   + " and the rest refitted")
+                   + " and the rest refitted (their std take the held value as exact)")
             if strict:
                 raise InconsistentDataError(msg, source=source)
             nl.warnings.insert(0, Diagnostic("parameter_held", msg, params=tuple(held)))

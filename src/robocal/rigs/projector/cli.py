@@ -49,7 +49,8 @@ def _add_commands(parser: argparse.ArgumentParser) -> None:
                                               "robocal projector calibrate projector-sim/projector.yaml --out projector-cal"))
     p.add_argument("--points", type=int, default=8, metavar="N", help=f"number of floor points [3..{MAX_SIM_POINTS}]")
     p.add_argument("--noise", type=float, default=5.0, metavar="MM", help="world measurement noise sigma [mm], > 0")
-    p.add_argument("--theta-noise", type=float, default=0.0, metavar="DEG", help="encoder noise sigma [deg], >= 0")
+    p.add_argument("--theta-noise", type=float, default=0.0, metavar="DEG",
+                   help="encoder noise sigma [deg], >= 0 (written to the input as joint_noise, which calibrate uses)")
     add_seed_argument(p)
     add_out_argument(p)
     p.set_defaults(func=_cmd_simulate)
