@@ -235,12 +235,10 @@ def _check_joint_angles(th: np.ndarray, model: ProjectorModel, field_error, csv_
         msg = (f"`points.joint_angles` columns look swapped (tilt, pan instead of pan, tilt): row {k} (0-based) has "
                f"tilt theta2 = {math.degrees(th[k, 1]):.6g} deg, at or beyond the horizon ({bad.size} such row(s)), "
                f"while every theta1 is within the tilt limit; give the columns as pan, tilt")
-        if field_error is not None:
-            raise field_error("joint_angles", msg, SingularConfigurationError)
-        raise SingularConfigurationError(f"columns theta1, theta2: {msg}", source=str(csv_path))
-    msg = (f"row {k} (0-based): tilt theta2 = {th[k, 1]:.6g} rad (= {math.degrees(th[k, 1]):.6g} deg) puts the beam at or above "
-           f"the horizon, so the spot never reaches the floor ({bad.size} such row(s)); are the angles in the declared "
-           f"unit (degrees declared as rad?)")
+    else:
+        msg = (f"row {k} (0-based): tilt theta2 = {th[k, 1]:.6g} rad (= {math.degrees(th[k, 1]):.6g} deg) puts the beam "
+               f"at or above the horizon, so the spot never reaches the floor ({bad.size} such row(s)); are the angles "
+               f"in the declared unit (degrees declared as rad?)")
     if field_error is not None:
         raise field_error("joint_angles", msg, SingularConfigurationError)
     raise SingularConfigurationError(f"columns theta1, theta2: {msg}", source=str(csv_path))
