@@ -463,3 +463,28 @@ def test_a_duplicate_key_is_an_error_naming_the_key_and_both_lines(tmp_path, tex
 def test_keys_repeated_in_different_mappings_or_by_a_merge_are_not_duplicates():
     doc = parse_document("a: {H: 1}\nb: {H: 2}\nbase: &b {x: 1}\nd:\n  <<: *b\n  x: 2\n")
     assert doc.data["d"] == {"x": 2} and doc.data["a"] == {"H": 1}
+
+
+@given(st.lists(st.lists(st.floats(allow_nan=False, allow_infinity=False, width=64), min_size=3, max_size=3),
+                min_size=0, max_size=20),
+       st.sampled_from(["{:r}", " {:r} ", "{:.17g}", "{:.17e}"]))
+def test_csv_fast_and_quoted_paths_read_the_same_numbers(rows, fmt):
+    # Files without quotes go through NumPy's C reader, files with a quoted cell
+    # through the csv module; both must give Python float()'s value of every cell
+    # (repr and %.17g round-trip a double exactly, so the comparison is exact).
+    fmt = fmt.replace("{:r}", "{!r}")
+    body = "".join(",".join(fmt.format(v) for v in r) + "\n" for r in rows)
+    plain = load_csv("plain.csv", text="a [m],b,c\n" + body)
+    quoted = load_csv("quoted.csv", text='a [m],"b",c\n' + body)
+    want = np.array(rows, dtype=float).reshape(-1, 3)
+    for j, name in enumerate("abc"):
+        np.testing.assert_array_equal(plain.column(name), want[:, j])
+        np.testing.assert_array_equal(quoted.column(name), want[:, j])
+    assert list(plain.lines) == list(quoted.lines) == list(range(2, 2 + len(rows)))
+
+
+def test_csv_cells_numpy_refuses_but_float_reads_take_the_careful_path():
+    table = load_csv("u.csv", text="a,b\n1_000,2\n")  # float("1_000") == 1000.0
+    assert table.column("a")[0] == 1000.0
+    with pytest.raises(FileFormatError, match=r"row 2 \(line 4\), column 'b': not a number: '2 # note'"):
+        load_csv("c.csv", text="a,b\n1,2\n# comment line\n3,2 # note\n")

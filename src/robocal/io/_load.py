@@ -509,26 +509,28 @@ def _split_header(cell: str) -> tuple[str, str | None]:
     return cell, None
 
 
-def load_csv(path, *, required=(), finite: bool = True, text: str | None = None) -> CsvTable:
-    """Load a numeric CSV file with a header row (``#`` lines are comments).
+def _fast_table(kept):
+    """(header cells, data) parsed by NumPy's C reader, or None to take the careful path.
 
-    Parameters
-    ----------
-    path : path-like
-        File to read (or a label when ``text`` is given).
-    required : sequence of str
-        Columns that must be present.
-    finite : bool
-        Reject NaN/inf values (the error names row and column).
+    Only for files without quoted cells, where a record is one line split at
+    commas. ``np.loadtxt`` reads 10^6 x 8 numbers in ~2 s where the ``csv``
+    module plus a Python conversion take ~7 s. Anything it refuses (a bad
+    cell, a short row, ``1_000`` which Python's float() reads but it does
+    not) goes to :func:`_csv_table`, which names the cell or reads it.
     """
-    source = str(path)
-    if text is None:
-        text = _read_text(Path(path), source)
-    text = text.removeprefix("\ufeff")
-    # (file line number, text) of the lines that are neither blank nor comments
-    kept = [(n, ln) for n, ln in enumerate(text.splitlines(), 1) if ln.strip() and not ln.lstrip().startswith("#")]
-    if not kept:
-        raise FileFormatError("file has no header row", source=source)
+    cells = kept[0][1].split(",")
+    body = [ln for _, ln in kept[1:]]
+    if not body:
+        return cells, np.empty((0, len(cells)))
+    try:
+        data = np.loadtxt(body, delimiter=",", comments=None, ndmin=2, dtype=float)
+    except ValueError:
+        return None
+    return (cells, data) if data.shape[1] == len(cells) else None
+
+
+def _csv_table(kept, source: str):
+    """Header, names, data and record lines through the ``csv`` module, naming the first bad cell."""
     reader = csv.reader(ln for _, ln in kept)
     rows, row_lines = [], []
     try:
@@ -551,8 +553,46 @@ def load_csv(path, *, required=(), finite: bool = True, text: str | None = None)
                 data[i, j] = float(cell)
             except ValueError:
                 raise FileFormatError(f"{where}, column '{names[j]}': not a number: {cell!r}", source=source) from None
-            if finite and not math.isfinite(data[i, j]):
-                raise FileFormatError(f"{where}, column '{names[j]}': value is {cell.strip()}", source=source)
+    return header, names, data, row_lines
+
+
+def load_csv(path, *, required=(), finite: bool = True, text: str | None = None) -> CsvTable:
+    """Load a numeric CSV file with a header row (``#`` lines are comments).
+
+    Parameters
+    ----------
+    path : path-like
+        File to read (or a label when ``text`` is given).
+    required : sequence of str
+        Columns that must be present.
+    finite : bool
+        Reject NaN/inf values (the error names row and column).
+    """
+    source = str(path)
+    if text is None:
+        text = _read_text(Path(path), source)
+    text = text.removeprefix("\ufeff")
+    # (file line number, text) of the lines that are neither blank nor comments
+    kept = [(n, ln) for n, ln in enumerate(text.splitlines(), 1) if ln.strip() and not ln.lstrip().startswith("#")]
+    if not kept:
+        raise FileFormatError("file has no header row", source=source)
+    fast = _fast_table(kept) if '"' not in text else None
+    if fast is not None:
+        names_cells, data = fast
+        row_lines = [n for n, _ in kept]  # without quotes a record is one line
+        header = [_split_header(c) for c in names_cells]
+        names = [h[0] for h in header]
+        if len(set(names)) != len(names):
+            raise FileFormatError(f"duplicate column names in header {names}", source=source)
+    else:
+        header, names, data, row_lines = _csv_table(kept, source)
+    if finite:
+        bad = np.argwhere(~np.isfinite(data))
+        if bad.size:
+            i, j = (int(k) for k in bad[0])  # row-major: the first bad cell in file order
+            cell = kept[i + 1][1].split(",")[j] if '"' not in text else repr(float(data[i, j]))
+            raise FileFormatError(f"row {i + 1} (line {row_lines[i + 1]}), column '{names[j]}': value is "
+                                  f"{cell.strip()}", source=source)
     missing = [r for r in required if r not in names]
     if missing:
         raise FileFormatError(f"missing column(s) {', '.join(missing)} (have: {', '.join(names)})", source=source)
