@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from robocal.camera import CameraModel, camera_from_document, read_camera_file
+from robocal.camera import CameraModel, camera_from_document, read_camera_file, read_image
 from robocal.errors import FileFormatError, InputError, RobocalError
 from robocal.io import Document
 
@@ -100,3 +100,44 @@ def test_the_focal_length_limit_lets_long_lenses_through():
     assert CameraModel(9.9e5, 9.9e5, 320, 240).fx == 9.9e5
     with pytest.raises(InputError, match=r"CameraModel\.fy must be < 1e\+06 px"):
         CameraModel(800, 2e6, 320, 240)
+
+
+def _png(tmp_path, name="img.png"):
+    img = (np.arange(40 * 30) % 251).astype(np.uint8).reshape(30, 40)
+    p = tmp_path / name
+    assert cv2.imwrite(str(p), img)
+    return p, img
+
+
+def test_read_image_reads_png_and_jpeg(tmp_path):
+    p, img = _png(tmp_path)
+    np.testing.assert_array_equal(read_image(p), img)  # PNG is lossless: exact
+    j = tmp_path / "img.jpg"
+    assert cv2.imwrite(str(j), img)
+    assert read_image(j).shape == img.shape
+    assert read_image(p, grey=False).shape == (30, 40, 3)
+
+
+@pytest.mark.parametrize("damage, message", [
+    (lambda b: b[: len(b) // 2], "cut short"),
+    (lambda b: b[:60] + bytes([b[60] ^ 0xFF]) + b[61:], "fails its CRC check"),
+    (lambda b: b"", "empty"),
+    (lambda b: b"GIF89a not really", "not an image OpenCV can decode"),
+])
+def test_read_image_names_a_damaged_file_before_decoding(tmp_path, capfd, damage, message):
+    p, _ = _png(tmp_path)
+    p.write_bytes(damage(p.read_bytes()))
+    with pytest.raises(FileFormatError, match=message) as info:
+        read_image(p)
+    assert str(info.value).startswith(str(p))
+    assert capfd.readouterr().err == ""  # libpng never got the file, so printed nothing
+
+
+def test_read_image_names_a_truncated_jpeg(tmp_path):
+    p = tmp_path / "img.jpg"
+    assert cv2.imwrite(str(p), np.full((30, 40), 128, np.uint8))
+    p.write_bytes(p.read_bytes()[:-100])
+    with pytest.raises(FileFormatError, match="no JPEG end-of-image marker"):
+        read_image(p)
+    with pytest.raises(FileFormatError, match="not found"):
+        read_image(tmp_path / "missing.png")

@@ -1,20 +1,23 @@
-"""Camera calibration files of other tools (OpenCV FileStorage YAML/XML, ROS, JSON) as a raw mapping.
+"""Camera calibration files of other tools (OpenCV FileStorage YAML/XML, ROS, JSON) as a raw mapping,
+and image files checked before they are decoded.
 
-The reader is shared by every rig that takes ``camera: {file: ...}``; the
-layouts inside the mapping are read and checked by
+The readers are shared by every rig that takes ``camera: {file: ...}`` or
+images; the layouts inside the camera mapping are read and checked by
 :func:`robocal.camera.camera_from_document`.
 """
 
 from __future__ import annotations
 
 import re
+import struct
+import zlib
 from pathlib import Path
 
 import numpy as np
 
 from robocal.errors import FileFormatError
 
-__all__ = ["read_camera_file"]
+__all__ = ["read_camera_file", "read_image"]
 
 # cv2.FileStorage writes "%YAML:1.0" (OpenCV 4) or "%YAML 1.2" + "---" (OpenCV 5) as
 # its first line; PyYAML refuses the first form, and neither carries information.
@@ -108,3 +111,79 @@ def read_camera_file(path) -> dict:
         raise FileFormatError(f"camera file must hold a mapping (camera_matrix, dist_coeffs, ... or fx, fy, ...) at "
                               f"the top level, got a {type(data).__name__}", source=src)
     return data
+
+
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def _png_problem(data: bytes) -> str | None:
+    """What is wrong with a PNG's chunk structure (length, CRC-32, IEND), or None.
+
+    libpng prints its complaints about a damaged file straight to the
+    process's stderr before OpenCV returns (a second line beside robocal's one
+    error line, which Python cannot catch), so a damaged file is named here,
+    from the chunk CRCs every PNG carries (PNG spec, section 5.3), and never
+    reaches the decoder.
+    """
+    pos = len(_PNG_SIGNATURE)
+    while pos + 12 <= len(data):
+        length, kind = struct.unpack(">I4s", data[pos:pos + 8])
+        end = pos + 12 + length
+        if end > len(data):
+            return f"cut short: chunk {kind.decode('latin-1')!r} at byte {pos} runs past the end of the file"
+        crc = struct.unpack(">I", data[end - 4:end])[0]
+        if zlib.crc32(data[pos + 4:end - 4]) != crc:
+            return f"damaged: chunk {kind.decode('latin-1')!r} at byte {pos} fails its CRC check"
+        if kind == b"IEND":
+            return None
+        pos = end
+    return "cut short: no IEND chunk"
+
+
+def _quiet_imdecode(cv2, data: bytes, flags: int):
+    """``cv2.imdecode`` with OpenCV's own log silenced for the call: a file it cannot
+    decode is reported by robocal in one line, not by a ``[ERROR:0@0.2] ...`` line too."""
+    log = getattr(getattr(cv2, "utils", None), "logging", None)
+    try:
+        level = log.getLogLevel()
+        log.setLogLevel(log.LOG_LEVEL_SILENT)
+    except AttributeError:  # a build without cv2.utils.logging: decode with its log as it is
+        log = None
+    try:
+        return cv2.imdecode(np.frombuffer(data, np.uint8), flags)
+    finally:
+        if log is not None:
+            log.setLogLevel(level)
+
+
+def read_image(path, *, grey: bool = True) -> np.ndarray:
+    """Read an image file as uint8 (grey ``(H, W)`` or BGR ``(H, W, 3)``), checked before decoding.
+
+    A missing, empty, truncated or damaged file (PNG chunk CRCs; a JPEG
+    without its end-of-image marker) is a one-line :class:`FileFormatError`
+    naming the file, and the file never reaches a decoder that would print its
+    own warnings to the terminal.
+    """
+    import cv2
+
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise FileFormatError("image file not found", source=str(path)) from None
+    except OSError as exc:
+        raise FileFormatError(f"cannot read image file ({exc.strerror or exc})", source=str(path)) from None
+    if not data:
+        raise FileFormatError("image file is empty", source=str(path))
+    problem = None
+    if data.startswith(_PNG_SIGNATURE):
+        problem = _png_problem(data)
+    elif data.startswith(b"\xff\xd8"):  # JPEG: a complete file ends with the EOI marker (some writers pad after it)
+        if b"\xff\xd9" not in data[-64:]:
+            problem = "cut short: no JPEG end-of-image marker"
+    if problem is not None:
+        raise FileFormatError(f"image file {problem}", source=str(path))
+    img = _quiet_imdecode(cv2, data, cv2.IMREAD_GRAYSCALE if grey else cv2.IMREAD_COLOR)
+    if img is None:
+        raise FileFormatError("not an image OpenCV can decode (PNG, JPEG, TIFF, BMP, ...)", source=str(path))
+    return img

@@ -12,12 +12,11 @@ dropped.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 
 from robocal.camera import detect_checkerboard, render_planar_target
-from robocal.errors import DetectionError, FileFormatError, InputError
+from robocal.errors import DetectionError, InputError
 from robocal.rigs.humanoid.model import FEET, HumanoidModel
 
 __all__ = ["render_view", "detect_views", "load_image", "homography_outliers", "HOMOGRAPHY_MIN_TOL",
@@ -39,16 +38,10 @@ def render_view(model: HumanoidModel, theta, foot: str, params, rng: np.random.G
 
 
 def load_image(path) -> np.ndarray:
-    """Read an image file as grey uint8; a missing or unreadable file is a :class:`FileFormatError`."""
-    import cv2
+    """Read an image file as grey uint8; a missing, damaged or undecodable file is a :class:`FileFormatError`."""
+    from robocal.camera import read_image
 
-    path = Path(path)
-    if not path.is_file():
-        raise FileFormatError(f"image file not found: {path}")
-    img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-    if img is None:
-        raise FileFormatError(f"cannot read image {path} (not an image OpenCV can decode)")
-    return img
+    return read_image(path)
 
 
 #: Defaults of :func:`detect_views` / :func:`homography_outliers`: a corner is bad beyond

@@ -72,7 +72,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from robocal.camera import CameraModel, MarkerRectangle, camera_from_document, read_camera_file
+from robocal.camera import CameraModel, MarkerRectangle, camera_from_document, read_camera_file, read_image
 from robocal.errors import FileFormatError, RobocalError
 from robocal.geometry import transform_from
 from robocal.io import Document, atomic_write_text, load_document
@@ -236,11 +236,10 @@ def load_input(path) -> MirrorInput:
             p = p if p.is_absolute() else path.parent / p
             if not p.exists():
                 raise e.error("image", f"file {p} does not exist")
-            import cv2
-
-            img = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
-            if img is None:
-                raise e.error("image", f"{p} is not a readable image")
+            try:
+                img = read_image(p)
+            except FileFormatError as exc:
+                raise e.error("image", exc.message if str(p) in exc.message else f"{p}: {exc.message}") from None
             try:
                 obs.append(detect_mirror_image(img, cam, tags, name=name, mirror_tags=mirror_tags, rectangle=rect))
             except RobocalError as exc:

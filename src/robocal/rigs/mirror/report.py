@@ -17,7 +17,7 @@ import numpy as np
 
 from robocal.camera import CameraModel, MarkerRectangle
 from robocal.geometry import euler_from_matrix, invert_transform, rotvec_from_matrix
-from robocal.errors import FileFormatError
+from robocal.errors import FileFormatError, RobocalError
 from robocal.io import CalibrationResult
 from robocal.report import Report, new_figure
 from robocal.rigs.mirror.calibrate import MirrorCalibration, MirrorObservation, residual_model, _layout
@@ -289,9 +289,12 @@ def build_report(result: CalibrationResult, *, title: str = "robocal mirror — 
             if not p.is_absolute() and base_dir is not None:
                 p = Path(base_dir) / p
             if p.exists():
-                import cv2
+                from robocal.camera import read_image
 
-                img = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
+                try:
+                    img = read_image(p)
+                except RobocalError:  # the report still draws the points, on grey
+                    img = None
             if img is None:
                 note = f" Image file not found or unreadable: {p} (points drawn on grey)."
         fig, ax = new_figure(size=(7.0, 5.4))
