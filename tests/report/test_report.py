@@ -29,3 +29,14 @@ def test_text_is_escaped(tmp_path):
     html = rep.to_html()
     assert "<script>" not in html.split("<style>")[0]
     assert "&lt;b&gt;&amp;" in html
+
+
+def test_wide_figures_and_tables_fit_the_column(tmp_path):
+    # A 1500 px cost-curve figure used to overflow the 1100 px column (issue 20):
+    # images scale down to the column and wide tables scroll inside it.
+    r = Report("wide")
+    fig, _ = new_figure(size=(15.0, 3.0))
+    r.section("s").figure(fig, "wide figure").table([{f"c{i}": i for i in range(30)}], [f"c{i}" for i in range(30)])
+    html = r.write(tmp_path / "r.html").read_text()
+    assert "figure img{max-width:100%;height:auto}" in html
+    assert "table{display:block;max-width:100%;overflow-x:auto}" in html

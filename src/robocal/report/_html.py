@@ -38,6 +38,8 @@ td:first-child,th:first-child{text-align:left}
 .ok{background:#eaf7ea;border-left:4px solid #3a3;padding:.4em .8em;margin:.3em 0}
 .fail{background:#fdeaea;border-left:4px solid #c33;padding:.4em .8em;margin:.3em 0}
 figure{margin:1em 0}figcaption{color:#555;font-size:.9em}
+figure img{max-width:100%;height:auto}
+table{display:block;max-width:100%;overflow-x:auto}
 pre{background:#f6f6f6;padding:.6em;overflow-x:auto;font-size:.85em}
 .meta{color:#666;font-size:.85em}
 """
