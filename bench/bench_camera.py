@@ -8,7 +8,6 @@ measured in the same run (a shared machine's absolute times vary).
 from __future__ import annotations
 
 import argparse
-import time
 
 import cv2
 import numpy as np
@@ -22,6 +21,7 @@ from robocal.camera import (
     solve_pnp,
 )
 from robocal.geometry import rotation_angle, rotvec_from_matrix, transform_from_rotvec
+from _timing import best_of  # bench/ is on sys.path when a script runs
 
 CAM = CameraModel(600.0, 605.0, 321.3, 238.7, (-0.28, 0.11, 8e-4, -6e-4, -0.02), 640, 480)
 BOARD = Checkerboard(6, 7, 0.025)
@@ -36,15 +36,6 @@ def poses(n, rng):
         if CAM.in_image(CAM.project_points(BOARD.outline(with_margin=True), T), margin=2).all():
             out.append(T)
     return out
-
-
-def best_of(fn, repeat=5):
-    best = np.inf
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
 
 
 def accuracy(n_poses, seed):
@@ -96,8 +87,8 @@ def covariance(seed, trials=2000, sigma=0.3):
 def speed(seed):
     rng = np.random.default_rng(seed)
     p = np.column_stack([rng.uniform(-0.3, 0.3, (100_000, 2)), rng.uniform(0.5, 1.5, 100_000)])
-    t_ours = best_of(lambda: CAM.project(p))
-    t_cv = best_of(lambda: cv2.projectPoints(p, np.zeros(3), np.zeros(3), CAM.K, CAM.dist))
+    t_ours = best_of(lambda: CAM.project(p), 5)
+    t_cv = best_of(lambda: cv2.projectPoints(p, np.zeros(3), np.zeros(3), CAM.K, CAM.dist), 5)
     print(f"\nproject 1e5 points: {t_ours * 1e3:.1f} ms vs cv2.projectPoints {t_cv * 1e3:.1f} ms "
           f"(ratio {t_ours / t_cv:.2f})")
     uv = CAM.project(p[:20_000])

@@ -16,23 +16,14 @@ from __future__ import annotations
 
 import argparse
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 import yaml
 
 from robocal.io import load_csv, load_document
+from _timing import best_of  # bench/ is on sys.path when a script runs
 from robocal.io._load import _csv_table
-
-
-def best_of(f, n=3):
-    times = []
-    for _ in range(n):
-        t0 = time.perf_counter()
-        f()
-        times.append(time.perf_counter() - t0)
-    return min(times)
 
 
 def main() -> None:

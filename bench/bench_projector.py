@@ -32,15 +32,7 @@ import robocal
 from robocal.rigs.projector.calibrate import calibrate, closed_form, nonlinear, seed_method
 from robocal.rigs.projector.path import joint_trajectory, plan_multi, sample_polyline, segments_blocked
 from robocal.rigs.projector.simulate import default_nominal, default_truth, seed_room_projectors, simulate_calibration
-
-
-def best_of(fn, repeat: int) -> float:
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return min(times)
+from _timing import best_of  # bench/ is on sys.path when a script runs
 
 
 def median_of(fn, repeat: int) -> float:
