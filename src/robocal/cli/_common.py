@@ -9,11 +9,9 @@ from __future__ import annotations
 import argparse
 import datetime as _dt
 import sys
-from collections.abc import Iterable
 from pathlib import Path
 
 from robocal.io import CalibrationResult, claim_folder, write_result
-from robocal.progress import progress  # noqa: F401 - re-exported for the rigs' CLI modules
 from robocal.report import Report
 
 __all__ = [

@@ -34,6 +34,11 @@ def _umask() -> int:
     return mask
 
 
+def _folder_error(exc: OSError, path: Path) -> OSError:
+    """The error names the folder the user chose, not the writer's temporary file."""
+    return OSError(exc.errno, f"cannot write {path.name} there ({exc.strerror or exc})", str(path.parent))
+
+
 def atomic_write_bytes(path, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically; creates parent directories."""
     path = Path(path)
@@ -46,8 +51,7 @@ def atomic_write_bytes(path, data: bytes) -> Path:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     except OSError as exc:
-        # the error names the folder the user chose, not the writer's temporary file
-        raise OSError(exc.errno, f"cannot write {path.name} there ({exc.strerror or exc})", str(path.parent)) from None
+        raise _folder_error(exc, path) from None
     try:
         # mkstemp creates the file 0600; a result file should get the permissions
         # any other new file gets (0666 minus the umask), or colleagues cannot read it
@@ -64,7 +68,7 @@ def atomic_write_bytes(path, data: bytes) -> Path:
         except FileNotFoundError:
             pass
         if isinstance(exc, OSError) and exc.filename == tmp:
-            raise OSError(exc.errno, f"cannot write {path.name} there ({exc.strerror or exc})", str(path.parent)) from None
+            raise _folder_error(exc, path) from None
         raise
     return path
 

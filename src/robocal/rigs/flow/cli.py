@@ -10,7 +10,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from robocal.cli import DemoContext, DemoOutcome, Rig
-from robocal.cli._common import RawHelp, add_accept_implausible_argument, add_out_argument, add_seed_argument, examples_epilog, prepare_out_dir, progress, write_run
+from robocal.cli._common import RawHelp, add_accept_implausible_argument, add_out_argument, add_seed_argument, examples_epilog, prepare_out_dir, write_run
+from robocal.progress import progress
 from robocal.errors import InputError
 from robocal.io import CalibrationResult, atomic_write_text
 from robocal.report import Report
