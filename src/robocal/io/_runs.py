@@ -248,6 +248,11 @@ def _survey(out: Path, same_command, *, force: bool, protected) -> tuple[set, se
     return theirs, foreign, what
 
 
+def _refuse_a_file(out: Path) -> None:
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out} is a file, expected a directory (new or existing)", source="--out")
+
+
 def preflight(out) -> None:
     """Refuse ``--out`` before the command does any work, as :func:`claim_folder` would at its start.
 
@@ -260,8 +265,7 @@ def preflight(out) -> None:
     if run is None or out is None:
         return
     out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"{out} is a file, expected a directory (new or existing)", source="--out")
+    _refuse_a_file(out)
     existing = next((p for p in (out, *out.parents) if p.exists()), None)
     if existing is not None and existing != out and not existing.is_dir():
         raise InputError(f"cannot create the directory {out} ({existing} is a file)", source="--out")
@@ -279,8 +283,7 @@ def claim_folder(out: Path, label: str, *, force: bool | None = None) -> Path:
     """
     run = active_run()
     out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"{out} is a file, expected a directory (new or existing)", source="--out")
+    _refuse_a_file(out)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
