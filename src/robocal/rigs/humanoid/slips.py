@@ -176,6 +176,17 @@ def joint_unit_slip(declared: str, apply: Callable[[float], float]) -> list[Slip
     return []
 
 
+def _images_mirrored(model: HumanoidModel, theta, feet, corners) -> Slip:
+    """The slip "images mirrored left-right": figure :func:`corner_distance` with the corners flipped back."""
+
+    def mirrored() -> float:
+        c2 = np.array(corners, copy=True)
+        c2[..., 0] = (model.camera.width - 1) - c2[..., 0]  # pixel centres at integers: column i <-> W - 1 - i
+        return corner_distance(model, theta, feet, c2, relabel=True)
+
+    return Slip("images_mirrored", "the images look mirrored left-right", "with the images flipped back", mirrored)
+
+
 def check_data(model: HumanoidModel, data, *, declared: dict | None = None, consistency_px: float = 60.0,
                accept_implausible: bool = False, implausible_answer: str | None = None) -> list[Diagnostic]:
     """The three checks of this module on detected ``data``; raise
@@ -203,7 +214,6 @@ def check_data(model: HumanoidModel, data, *, declared: dict | None = None, cons
     declared = {**DECLARED_SI, **(declared or {})}
     theta, feet, corners = np.asarray(data.theta), np.asarray(data.feet), np.asarray(data.corners)
     rows, cols = model.board.rows, model.board.cols
-    W = model.camera.width
     consistency_px = max(float(consistency_px), 60.0)
     out: list[Diagnostic] = []
 
@@ -222,11 +232,6 @@ def check_data(model: HumanoidModel, data, *, declared: dict | None = None, cons
         c2 = corners.reshape(len(corners), rows, cols, 2).transpose(0, 2, 1, 3).reshape(corners.shape)
         return corner_distance(m2, theta, feet, c2, relabel=True)
 
-    def mirrored() -> float:
-        c2 = corners.copy()
-        c2[..., 0] = (W - 1) - c2[..., 0]  # pixel centres at integers: column i <-> W - 1 - i
-        return corner_distance(model, theta, feet, c2, relabel=True)
-
     sign = handedness(corners, rows, cols)
     n_mirror, n_known = int(np.sum(sign < 0)), int(np.sum(sign != 0))
     if implausible_answer is None and n_known and n_mirror > n_known / 2:
@@ -238,8 +243,7 @@ def check_data(model: HumanoidModel, data, *, declared: dict | None = None, cons
             slips=[Slip("board_transposed", f"`board.rows` and `board.cols` look swapped ({rows} x {cols} "
                                             f"declared, the images show {cols} x {rows})",
                         "with them swapped", transposed),
-                   Slip("images_mirrored", "the images look mirrored left-right", "with the images flipped back",
-                        mirrored)])
+                   _images_mirrored(model, theta, feet, corners)])
         return out  # the further checks would only repeat the same slip
 
     pred = _predict(model, theta, feet)
@@ -282,12 +286,6 @@ def distance_slips(model: HumanoidModel, data, declared: dict | None = None) -> 
     projected once when this is called: ~15 ms each for 20 views, only on the failing path)."""
     declared = {**DECLARED_SI, **(declared or {})}
     theta, feet, corners = np.asarray(data.theta), np.asarray(data.feet), np.asarray(data.corners)
-    W = model.camera.width
-
-    def mirrored() -> float:
-        c2 = corners.copy()
-        c2[..., 0] = (W - 1) - c2[..., 0]
-        return corner_distance(model, theta, feet, c2, relabel=True)
 
     def centre_scaled(k: float) -> float:
         return corner_distance(with_board(model, centre=model.mounts[FEET[0]].centre * k), theta, feet,
@@ -322,8 +320,7 @@ def distance_slips(model: HumanoidModel, data, declared: dict | None = None) -> 
                      legs_swapped),
                 Slip("images_reversed", "`images` look listed in reverse order of the joint records",
                      "with the image list reversed", order_reversed),
-                Slip("images_mirrored", "the images look mirrored left-right",
-                     "with the images flipped back", mirrored)]
+                _images_mirrored(model, theta, feet, corners)]
              + ([Slip("joints_left_right_swapped", "the joint records' left and right leg columns look swapped "
                                                   "(joints.names order)", "with L* and R* swapped",
                       lambda: columns_swapped(lr))] if lr else []))
