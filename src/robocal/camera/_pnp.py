@@ -193,11 +193,12 @@ def _refine(camera, p, q, rvec, tvec):
 
     x0 = np.concatenate([rvec.ravel(), tvec.ravel()])
     try:
+        f0 = both(x0)[0]  # OpenCV's answer, the first evaluation of the solve too (cached)
         sol = least_squares(lambda x: both(x)[0], x0, jac=lambda x: both(x)[1], method="lm", x_scale="jac",
                             xtol=_POLISH_TOL, ftol=_POLISH_TOL, gtol=_POLISH_TOL, max_nfev=_POLISH_MAX_NFEV)
     except (DegenerateGeometryError, InputError, ValueError):
         return rvec, tvec  # a step put points behind the camera, or too few residuals: keep OpenCV's
-    if not np.all(np.isfinite(sol.x)) or not sol.cost <= 0.5 * both(x0)[0] @ both(x0)[0]:
+    if not np.all(np.isfinite(sol.x)) or not sol.cost <= 0.5 * f0 @ f0:
         return rvec, tvec
     return sol.x[:3].reshape(3, 1), sol.x[3:].reshape(3, 1)
 
