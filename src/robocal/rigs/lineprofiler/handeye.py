@@ -564,9 +564,10 @@ def judge_poses(T_base_gripper, T_cam_target, *, names=("T_base_gripper", "T_cam
         if trial.best is not None:
             also = [n for n, v in trial.tried if v is not None and n != trial.best.name
                     and v <= 1.1 * trial.best_value]
-            pick = trial.best if not also else _replace(
-                trial.best, describe=f"{trial.best.describe} (or, as well explained by these motions: "
-                                     f"{', '.join(also)})")
+            describe = trial.best.describe if not also else \
+                f"{trial.best.describe} (or, as well explained by these motions: {', '.join(also)})"
+            value = trial.best_value  # known: check_slips need not refit the closure to name it
+            pick = _replace(trial.best, describe=describe, evaluate=lambda: value)
             d = check_slips(what="rotation residual", residual=1e3 * rot, unit="mrad", plausible=False,
                             reason="", slips=[pick], accept=accept, source=source)
             out.append(d)
