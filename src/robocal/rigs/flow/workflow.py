@@ -122,9 +122,14 @@ def judge_run(spec: RunSpec, steps, config: FlowConfig, *, allow_missing: bool =
         _interp(spec.reference, t_ref, p_ref, steps.t)      # coverage, with the file named
         rescaled = refocused = None
         if not from_frames:
-            # the slips' rebuilds from the log's records (read again: only on an implausible run)
+            # the slips' rebuilds from the log's records (read again, once for all the slips: only on an
+            # implausible run)
+            records = []
+
             def rebuild(gyro=1.0, focal=spec.focal_px):
-                rec = read_flow_csv(spec.flow_log, spec.array.n, allow_missing=allow_missing)
+                if not records:
+                    records.append(read_flow_csv(spec.flow_log, spec.array.n, allow_missing=allow_missing))
+                rec = records[0]
                 return steps_from_records(_replace(rec, gyro=rec.gyro * gyro), focal, config, sigma_px=spec.sigma_px)
 
             def rescaled(k):
