@@ -1314,7 +1314,7 @@ def calibrate(points_W, *, theta=None, points_0=None, model: ProjectorModel | No
         # leaves 1 dof) the residual-scaled covariance is far too small, so the stated sigma is used as is.
         kw = dict(theta=th, points_0=None if th is not None else p0, model=model, estimate=estimate, sigma=sigma,
                   x0=ests["closed_form"], absolute_sigma=sigma is not None, joint_noise=jn)
-        nl = nonlinear(pw, **kw)
+        nl = free_fit = nonlinear(pw, **kw)
         for _ in range(2):  # hold what leaves its bounds, refit, check what is still free
             out = _bound_violations(nl, model, [e for e in estimate if e not in held], tilt_offset_limit)
             if not out:
@@ -1323,7 +1323,7 @@ def calibrate(points_W, *, theta=None, points_0=None, model: ProjectorModel | No
             nl = nonlinear(pw, hold=tuple(held), **kw)
         if held:
             lo, hi = _tilt_span(model, th, p0)
-            corr = _h_tilt_correlation(nonlinear(pw, **kw))
+            corr = _h_tilt_correlation(free_fit)  # the fit before anything was held
             why = (f"the points span {math.degrees(lo):.1f}-{math.degrees(hi):.1f} deg of tilt "
                    f"({math.degrees(hi - lo):.1f} deg" + (f", correlation of h and the tilt offset {corr:+.3f}"
                                                           if corr is not None else "")
