@@ -41,13 +41,16 @@ from dataclasses import dataclass
 from robocal.diagnostics import Diagnostic
 from robocal.errors import ImplausibleInputError, RobocalError
 
-__all__ = ["Slip", "SlipTrial", "check_slips", "try_slips", "IMPLAUSIBLE_CODE"]
+__all__ = ["Slip", "SlipTrial", "check_slips", "try_slips", "length_slips", "LENGTH_UNITS", "IMPLAUSIBLE_CODE"]
 
 #: warning code of an implausible answer accepted with ``--accept-implausible``
 IMPLAUSIBLE_CODE = "implausible_input"
 
 #: how much smaller the residual must get for a slip to count as the explanation
 DEFAULT_FACTOR = 5.0
+
+#: Length units a slip may confuse, in m.
+LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
 
 
 @dataclass(frozen=True)
@@ -178,3 +181,29 @@ def check_slips(*, what: str, residual: float, unit: str, plausible: bool, reaso
         ", or pass --accept-implausible to go on with it as given"
     raise ImplausibleInputError(f"{msg} ({hint})", source=source,
                                 slip=trial.best.name if trial.best is not None else None)
+
+
+def length_slips(field: str, declared: str | None, apply: Callable[[float], float], *,
+                 undeclared_factors: Sequence[float] = ()) -> list[Slip]:
+    """Slips of a length field read in ``declared``: the value was in another unit of :data:`LENGTH_UNITS`.
+
+    ``apply(k)`` returns the figure with the field multiplied by ``k``. Slip names use the last dotted
+    part of ``field`` (``"board.square"`` -> ``"square_mm_as_m"``). When ``declared`` is not one of
+    :data:`LENGTH_UNITS` (e.g. SI values passed to the library), one slip per factor of
+    ``undeclared_factors`` (none by default).
+    """
+    key = field.split(".")[-1]
+    if declared not in LENGTH_UNITS:
+        return [Slip(f"{key}_x{k:g}", f"`{field}` looks {max(k, 1 / k):g}x too {'small' if k > 1 else 'large'} "
+                                     f"(a unit slip)", f"with x{k:g}" if k > 1 else f"with /{1 / k:g}",
+                     lambda k=k: apply(k))
+                for k in undeclared_factors]
+    out = []
+    for true in LENGTH_UNITS:
+        if true == declared:
+            continue
+        k = LENGTH_UNITS[true] / LENGTH_UNITS[declared]
+        fix = f"with x{k:g}" if k >= 1 else f"with /{1 / k:g}"
+        out.append(Slip(f"{key}_{true}_as_{declared}", f"`{field}` looks like {true}, not {declared}", fix,
+                        lambda k=k: apply(k)))
+    return out

@@ -43,7 +43,7 @@ import numpy as np
 from robocal.camera import Checkerboard
 from robocal.diagnostics import Diagnostic
 from robocal.errors import InputError
-from robocal.plausibility import Slip, check_slips, try_slips
+from robocal.plausibility import LENGTH_UNITS, Slip, check_slips, length_slips, try_slips
 from robocal.rigs.humanoid.model import _BOARD_ROTATION, FEET, HumanoidModel
 
 __all__ = ["DECLARED_SI", "LENGTH_UNITS", "check_data", "distance_slips", "corner_distance", "size_ratio", "handedness",
@@ -51,8 +51,6 @@ __all__ = ["DECLARED_SI", "LENGTH_UNITS", "check_data", "distance_slips", "corne
 
 #: Units a data set's fields were read in (the loader's ``info["declared"]``); the library's default is SI.
 DECLARED_SI = {"board.square": "m", "board.centre": "m", "joints": "rad"}
-#: Length units a slip may confuse, in m.
-LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
 #: The board's apparent size may differ from the prediction by this factor before it is a slip:
 #: offsets of a few degrees change the camera-to-board distance by a few %, not 50 %.
 SIZE_LIMIT = 1.5
@@ -147,22 +145,6 @@ def handedness(corners, rows: int, cols: int) -> np.ndarray:
     b = g[:, -1, 0] - g[:, 0, 0]
     cross = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
     return np.where(np.isfinite(cross), np.sign(cross), 0.0)
-
-
-def length_slips(field: str, declared: str, apply: Callable[[float], float]) -> list[Slip]:
-    """Slips of a length field read in ``declared``: the value was in another unit of
-    :data:`LENGTH_UNITS`. ``apply(factor)`` returns the figure with the field multiplied by ``factor``."""
-    if declared not in LENGTH_UNITS:
-        return []
-    out = []
-    for true in LENGTH_UNITS:
-        if true == declared:
-            continue
-        k = LENGTH_UNITS[true] / LENGTH_UNITS[declared]
-        fix = f"with x{k:g}" if k >= 1 else f"with /{1 / k:g}"
-        out.append(Slip(f"{field.split('.')[-1]}_{true}_as_{declared}", f"`{field}` looks like {true}, not {declared}",
-                        fix, lambda k=k: apply(k)))
-    return out
 
 
 def joint_unit_slip(declared: str, apply: Callable[[float], float]) -> list[Slip]:

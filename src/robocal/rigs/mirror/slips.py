@@ -39,12 +39,9 @@ from dataclasses import replace
 import numpy as np
 
 from robocal.diagnostics import Diagnostic
-from robocal.plausibility import Slip, check_slips
+from robocal.plausibility import LENGTH_UNITS, Slip, check_slips, length_slips
 
 __all__ = ["LENGTH_UNITS", "check_body_span", "check_answer", "declared_units"]
-
-#: Length units a slip may confuse, in m.
-LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
 
 
 def declared_units(doc) -> dict:
@@ -65,22 +62,9 @@ def declared_units(doc) -> dict:
 
 
 def _length_slips(field: str, declared: str | None, apply) -> list[Slip]:
-    """Slips of a length field read in ``declared``: it was in another unit of :data:`LENGTH_UNITS`.
-    With no declared unit (the library, SI values) a factor of 10, 100 or 1000 either way."""
-    if declared not in LENGTH_UNITS:
-        return [Slip(f"{field}_x{k:g}", f"`{field}` looks {max(k, 1 / k):g}x too {'small' if k > 1 else 'large'} "
-                                       f"(a unit slip)", f"with x{k:g}" if k > 1 else f"with /{1 / k:g}",
-                     lambda k=k: apply(k))
-                for k in (10.0, 100.0, 1000.0, 0.1, 0.01, 0.001)]
-    out = []
-    for true, f in LENGTH_UNITS.items():
-        if true == declared:
-            continue
-        k = f / LENGTH_UNITS[declared]
-        fix = f"with x{k:g}" if k >= 1 else f"with /{1 / k:g}"
-        out.append(Slip(f"{field}_{true}_as_{declared}", f"`{field}` looks like {true}, not {declared}", fix,
-                        lambda k=k: apply(k)))
-    return out
+    """:func:`robocal.plausibility.length_slips`; with no declared unit (the library, SI values) a factor of
+    10, 100 or 1000 either way."""
+    return length_slips(field, declared, apply, undeclared_factors=(10.0, 100.0, 1000.0, 0.1, 0.01, 0.001))
 
 
 def _times(slip: Slip) -> str:
