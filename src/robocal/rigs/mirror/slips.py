@@ -107,7 +107,6 @@ def check_answer(camera, rectangle, body_points_r, observations, singles, *, sig
     declared = declared or {}
     P = np.asarray(body_points_r, dtype=float)
     out: list[Diagnostic] = []
-    obs0 = observations[0]
 
     def distance(T_r_c, pts) -> float:
         return float(np.min(np.linalg.norm(pts - np.asarray(T_r_c)[:3, 3], axis=1)))
