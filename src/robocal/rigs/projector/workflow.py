@@ -79,13 +79,14 @@ def calibration_result(run: CalibrationRun, *, inputs=(), truth: ProjectorModel 
                           "residual-scaled: no noise given, sigma estimated from the residuals"),
             "frames": "p_0 = R_0_W p_W + t_0_W (seed eq. 1); quaternion scalar-last"}
     if truth is not None:
+        err = truth_errors(best, truth)
         diag["truth"] = {"yaw": float(yaw_of(truth.R_0_W)), "t_0_W": truth.t_0_W, "h": truth.h,
                          "offsets": list(truth.offsets),
                          "yaw_error": best.yaw - float(yaw_of(truth.R_0_W)),
                          "t_error": best.t_0_W - truth.t_0_W,
-                         "errors": truth_errors(best, truth),
+                         "errors": err,
                          "errors_over_std": {k: (None if not isinstance(v, float) or not best.std.get(k) else
-                                                 v / best.std[k]) for k, v in truth_errors(best, truth).items()},
+                                                 v / best.std[k]) for k, v in err.items()},
                          "errors_by_method": {name: truth_errors(e, truth) for name, e in run.estimates.items()}}
     return CalibrationResult(rig="projector", method=run.primary, estimate=est, std=std, units=units,
                              residual_rms=best.rms, residual_unit="m", warnings=run.warnings,
