@@ -74,3 +74,17 @@ def test_require_memory_refuses_before_work_in_one_line():
     assert str(info.value).startswith("room.yaml: pairwise distances of 10^9 points needs")
     assert isinstance(info.value, MemoryError)
     assert format_bytes(1536) == "1.5 KiB"
+
+
+def test_a_finished_trial_is_judged_without_evaluating_again():
+    calls = []
+
+    def once():
+        calls.append(1)
+        return 0.4
+
+    trial = try_slips([Slip("s", "`s` is off", "with /1000", once)], 38.0, unit="px")
+    assert calls == [1]
+    with pytest.raises(ImplausibleInputError, match="with /1000 the residual drops from 38 to 0.4 px") as info:
+        check_slips(what="residual", residual=38.0, unit="px", plausible=False, reason="r", trial=trial)
+    assert calls == [1] and info.value.slip == "s"

@@ -130,7 +130,8 @@ def _fmt(x: float) -> str:
 
 def check_slips(*, what: str, residual: float, unit: str, plausible: bool, reason: str,
                 slips: Sequence[Slip] = (), accept: bool = False, source: str | None = None,
-                factor: float = DEFAULT_FACTOR, threshold: float | None = None) -> Diagnostic | None:
+                factor: float = DEFAULT_FACTOR, threshold: float | None = None,
+                trial: SlipTrial | None = None) -> Diagnostic | None:
     """Judge an answer; when implausible, name the slip that explains it.
 
     Parameters
@@ -153,6 +154,11 @@ def check_slips(*, what: str, residual: float, unit: str, plausible: bool, reaso
         File / field the slip is in, prefixed to the error.
     factor, threshold
         See :func:`try_slips`.
+    trial : SlipTrial, optional
+        The slips already tried (:func:`try_slips`), for a rig that looks at
+        the outcome before judging (e.g. to name a second slip that explains
+        the data as well); ``slips``, ``factor`` and ``threshold`` are then
+        not used and nothing is evaluated again.
 
     Returns
     -------
@@ -166,7 +172,8 @@ def check_slips(*, what: str, residual: float, unit: str, plausible: bool, reaso
     """
     if plausible:
         return None
-    trial = try_slips(slips, residual, unit=unit, factor=factor, threshold=threshold)
+    if trial is None:
+        trial = try_slips(slips, residual, unit=unit, factor=factor, threshold=threshold)
     u = f" {unit}" if unit else ""
     if trial.best is not None:
         msg = (f"{trial.best.describe}: {trial.best.fix} the {what} drops from "

@@ -336,7 +336,5 @@ def name_slip(model: HumanoidModel, data, *, declared: dict | None = None, consi
     trial = try_slips(slips, base, threshold=consistency_px)
     if trial.best is None:
         return
-    value = trial.best_value  # the slip's figure is known: no second projection to name it
     check_slips(what="median corner distance from the joint records' prediction", residual=base, unit="px",
-                plausible=False, threshold=consistency_px, reason="",
-                slips=[replace(trial.best, evaluate=lambda: value)])
+                plausible=False, reason="", trial=trial)

@@ -566,10 +566,9 @@ def judge_poses(T_base_gripper, T_cam_target, *, names=("T_base_gripper", "T_cam
                     and v <= 1.1 * trial.best_value]
             describe = trial.best.describe if not also else \
                 f"{trial.best.describe} (or, as well explained by these motions: {', '.join(also)})"
-            value = trial.best_value  # known: check_slips need not refit the closure to name it
-            pick = _replace(trial.best, describe=describe, evaluate=lambda: value)
+            named = _replace(trial, best=_replace(trial.best, describe=describe))
             d = check_slips(what="rotation residual", residual=1e3 * rot, unit="mrad", plausible=False,
-                            reason="", slips=[pick], accept=accept, source=source)
+                            reason="", trial=named, accept=accept, source=source)
             out.append(d)
             return out
     ok, reason = _translations_plausible(Tg, Tc, rot, trans, X)

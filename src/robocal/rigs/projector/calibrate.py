@@ -32,7 +32,7 @@ from __future__ import annotations
 import math
 import sys
 import warnings
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -1159,20 +1159,19 @@ def _slip_checks(pw, th, p0_given, model: ProjectorModel, sigma, joint_noise, *,
         slips.append(Slip("angles_swapped", "`points.joint_angles` columns look swapped (tilt, pan instead of pan, tilt)",
                           "with the columns swapped back", lambda: merit(pw_s, t=th_s[:, ::-1])))
     h_ok = H_PLAUSIBLE[0] <= model.H <= H_PLAUSIBLE[1]
+    trial = None
     if 0.5 < ratio < 2.0 and h_ok:
         trial = try_slips(slips, base, threshold=limit)
         if trial.best is None:
             # the scales agree: a poor fit is the consistency check's and outlier test's to report
             return None
-        # check_slips tries the slips again: hand it the figures just computed (each one is a refit)
-        slips = [replace(s, evaluate=lambda v=v: math.nan if v is None else v)
-                 for s, (_, v) in zip(slips, trial.tried)]
     reason = (f"projector.H = {model.H:.4g} m is outside the plausible {H_PLAUSIBLE[0]:g}-{H_PLAUSIBLE[1]:g} m"
               if not h_ok else
               f"the floor points do not fit the projector's spots: distances in {{0}} are {ratio:.3g} times those "
               f"in {{W}}, median residual {base:.3g} mm (plausible: <= {limit:.3g} mm)")
+    # (a trial already made is judged as it is: each of its figures was a refit)
     return check_slips(what="median residual", residual=base, unit="mm", plausible=False, reason=reason,
-                       slips=slips, accept=accept, source=source, threshold=limit)
+                       slips=slips, accept=accept, source=source, threshold=limit, trial=trial)
 
 
 def calibrate(points_W, *, theta=None, points_0=None, model: ProjectorModel | None = None,
