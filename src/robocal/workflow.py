@@ -1,0 +1,257 @@
+"""The rig contract: every rig is a :class:`Workflow` the core drives.
+
+A rig declares, in its ``cli`` module, what it can do as library functions
+(none of them parses arguments or writes the result file)::
+
+    WORKFLOW = Workflow(
+        name="mirror", help="...", description="...",
+        simulate="robocal.rigs.mirror.workflow:simulate_files",
+        load_input="robocal.rigs.mirror.workflow:load_input",
+        calibrate="robocal.rigs.mirror.workflow:calibrate_input",
+        to_result="robocal.rigs.mirror.workflow:to_result",
+        build_report="robocal.rigs.mirror.report:build_report",
+        demo="robocal.rigs.mirror.workflow:demo",
+        simulate_options=(Option("--placements", type=int, default=1, help="..."), ...),
+        calibrate_options=(Option("--no-refine", action="store_true", help="..."),),
+        commands=(Command("plan", ...),),          # the rig's extra commands
+    )
+
+and lists it in ``pyproject.toml`` under the entry-point group
+``robocal.rigs``. The core (:mod:`robocal.cli._workflow`) then builds
+``robocal <rig> simulate``, ``robocal <rig> calibrate``, ``robocal <rig>
+report`` and the rig-independent ``robocal report RESULT.json`` once for every
+rig: the output folder, the error's source file, atomic writing, the summary
+line and the exit status are the core's, the same for all rigs.
+
+The steps, with the keywords the core passes (a rig's function may take
+``**_`` for the ones it does not use):
+
+``simulate(out_dir, rng, *, progress, **simulate_options) -> list[Path]``
+    Write a simulated input (with its ground truth) into ``out_dir``; return
+    the files written. ``rng`` is the run's ``np.random.Generator``.
+``load_input(*paths, **input_options) -> input``
+    Read and validate the input file(s) named on the command line (one
+    ``INPUT`` unless ``input_arguments`` declares others).
+``calibrate(input, *, out_dir, progress, accept_implausible, **calibrate_options) -> calibration``
+    The estimate with its uncertainty and diagnostics.
+``to_result(calibration, input) -> CalibrationResult``
+    The result file's content (schema in ``docs/results.md``).
+``build_report(result, *, base_dir) -> Report``
+    The report, from the result alone (``base_dir``: the result's folder, for
+    files it names), so that ``robocal report`` rebuilds the same page.
+``summary(result) -> str``, optional
+    The lines printed after ``calibrate`` (default: the residual RMS).
+``demo(ctx: DemoContext) -> DemoOutcome``
+    ``robocal demo``'s part for this rig.
+
+A step is a callable or a ``"module:attribute"`` string resolved on first use,
+so that declaring a workflow imports none of the rig's numerical code (``robocal
+<rig> --help`` stays at ~0.2 s).
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Workflow", "Option", "Command", "DemoContext", "DemoOutcome", "STEPS", "resolve"]
+
+#: The steps a workflow may declare, in the order the core runs them.
+STEPS = ("simulate", "load_input", "calibrate", "to_result", "build_report", "summary", "demo")
+
+
+def resolve(step: Callable | str | None) -> Callable | None:
+    """The callable a step names: itself, or ``module:attr`` imported now."""
+    if step is None or callable(step):
+        return step
+    module, _, attr = str(step).partition(":")
+    if not attr:
+        raise ValueError(f"a workflow step must be a callable or 'module:attribute', got {step!r}")
+    obj = importlib.import_module(module)
+    for part in attr.split("."):
+        obj = getattr(obj, part)
+    return obj
+
+
+class Option:
+    """A command-line option or positional argument, declared: ``argparse.add_argument``'s arguments.
+
+    ``Option("--placements", type=int, default=1, help="...")`` reaches the
+    step as the keyword ``placements``. ``to`` names the step that receives
+    it: ``"calibrate"`` (default for calibrate options), ``"load_input"``, or
+    ``None`` for an option only the command itself reads (e.g. ``--seed``).
+    """
+
+    def __init__(self, *flags: str, to: str | None = "", **kwargs):
+        if not flags:
+            raise ValueError("an Option needs at least one flag or a positional name")
+        self.flags = tuple(flags)
+        self.to = to
+        self.kwargs = dict(kwargs)
+
+    @property
+    def dest(self) -> str:
+        if "dest" in self.kwargs:
+            return self.kwargs["dest"]
+        longs = [f for f in self.flags if f.startswith("--")]
+        name = (longs or self.flags)[0].lstrip("-")
+        return name.replace("-", "_")
+
+    def add_to(self, parser) -> None:
+        parser.add_argument(*self.flags, **self.kwargs)
+
+    def __repr__(self) -> str:
+        return f"Option({', '.join(map(repr, self.flags))}, to={self.to!r})"
+
+
+@dataclass(frozen=True)
+class Command:
+    """An extra command of a rig (besides ``simulate``, ``calibrate``, ``report``).
+
+    Attributes
+    ----------
+    name, help, description : str
+        ``robocal <rig> <name>``, its line in the rig's help, its own help text.
+    run : callable or "module:attr"
+        ``run(args) -> int``: the command's work (a library-level function in
+        the rig, taking the parsed arguments; it writes into ``args.out``
+        through :func:`robocal.cli.prepare_out_dir` when it has ``out``).
+    options : tuple of Option
+        Its arguments.
+    examples : tuple of str
+        Example command lines for ``--help``.
+    out : bool
+        Whether it writes files (adds ``--out DIR`` and ``--force``).
+    """
+
+    name: str
+    help: str
+    run: Callable | str
+    options: tuple = ()
+    description: str = ""
+    examples: tuple = ()
+    out: bool = True
+
+
+@dataclass
+class DemoContext:
+    """What ``robocal demo`` hands a rig.
+
+    Attributes
+    ----------
+    out_dir : Path
+        Folder the rig may write its own files into (``<demo out>/<rig>``).
+    rng : numpy.random.Generator
+        The only source of randomness the demo may use.
+    progress : bool
+        Whether progress bars may be shown.
+    """
+
+    out_dir: Path
+    rng: np.random.Generator
+    progress: bool = True
+
+
+@dataclass
+class DemoOutcome:
+    """What a rig's demo returns.
+
+    Attributes
+    ----------
+    summary : dict
+        A few headline figures for the demo's summary table, already formatted
+        with units (``{"rotation error": "0.011 deg"}``).
+    passed : bool
+        Whether the rig's own acceptance check held (e.g. estimate within
+        3 sigma of the simulated truth).
+    sections : list of Section
+        Report sections (plots, tables) for the demo's HTML report.
+    result : CalibrationResult, optional
+        The rig's main result, also written to ``<out_dir>/result.json``.
+    """
+
+    summary: dict[str, str]
+    passed: bool
+    sections: list = field(default_factory=list)
+    result: Any = None
+
+
+@dataclass(frozen=True)
+class Workflow:
+    """A rig, declared: its steps (see the module docstring) and its command-line options.
+
+    Attributes
+    ----------
+    name : str
+        ``robocal <name> ...``; also the ``rig`` field of its result files.
+    help, description : str
+        One line for ``robocal --help``; the text of ``robocal <name> --help``.
+    simulate, load_input, calibrate, to_result, build_report, summary, demo
+        The steps (callables or ``"module:attr"``); ``None`` where the rig has
+        no such step (its command is then not built).
+    simulate_options, calibrate_options : tuple of Option
+        The options of the two core-built commands.
+    input_arguments : tuple of Option
+        The positional inputs of ``calibrate`` (default: one ``input`` file),
+        handed to ``load_input`` in order.
+    simulate_help, calibrate_help, calibrate_description, simulate_description : str
+        Help texts of the core-built commands.
+    simulate_examples, calibrate_examples : tuple of str
+        Their example command lines.
+    commands : tuple of Command
+        The rig's extra commands.
+    simulated_inputs : tuple of str
+        The files (relative to the ``simulate`` folder) that ``calibrate``
+        takes, in the order of ``input_arguments``: what makes simulate ->
+        calibrate a round trip (``tests/test_rig_contract.py`` runs it).
+    quick_simulate : tuple of str
+        ``simulate`` options for a small, fast simulated run (a few seconds
+        end to end), used by the contract test and CI.
+    """
+
+    name: str
+    help: str
+    description: str = ""
+    simulate: Callable | str | None = None
+    load_input: Callable | str | None = None
+    calibrate: Callable | str | None = None
+    to_result: Callable | str | None = None
+    build_report: Callable | str | None = None
+    summary: Callable | str | None = None
+    demo: Callable | str | None = None
+    simulate_options: tuple = ()
+    calibrate_options: tuple = ()
+    input_arguments: tuple = ()
+    simulate_help: str = "write a simulated input (with its ground truth)"
+    simulate_description: str = ""
+    simulate_examples: tuple = ()
+    calibrate_help: str = "calibrate from an input file: result.json + report.html"
+    calibrate_description: str = ""
+    calibrate_examples: tuple = ()
+    commands: tuple = ()
+    simulated_inputs: tuple = ()
+    quick_simulate: tuple = ()
+
+    def __post_init__(self):
+        if (self.calibrate is None) != (self.load_input is None) or (self.calibrate is None) != (self.to_result is None):
+            raise ValueError(f"workflow {self.name!r}: calibrate, load_input and to_result come together")
+        names = [c.name for c in self.commands]
+        taken = {"simulate": self.simulate, "calibrate": self.calibrate, "report": self.build_report}
+        clash = [n for n in names if taken.get(n) is not None or names.count(n) > 1]
+        if clash:
+            raise ValueError(f"workflow {self.name!r}: command {clash[0]!r} is declared twice")
+
+    def step(self, name: str) -> Callable | None:
+        """The callable of step ``name`` (imported on first use), or None."""
+        if name not in STEPS:
+            raise ValueError(f"unknown step {name!r}; steps: {', '.join(STEPS)}")
+        return resolve(getattr(self, name))
+
+    @property
+    def inputs(self) -> tuple:
+        return self.input_arguments or (Option("input", type=Path, help="calibration input file (YAML/JSON)"),)
