@@ -38,7 +38,7 @@ def test_robocal_demo_runs_every_installed_rig(tmp_path):
         assert name in proc.stdout
         result = tmp_path / "demo" / name / "result.json"
         if result.exists():
-            assert json.loads(result.read_text())["schema"] == "robocal.result/1"
+            assert json.loads(result.read_text())["schema"] == "robocal.result/2"
 
 
 def test_every_rig_has_help_with_examples(tmp_path):

@@ -52,7 +52,7 @@ def test_demo_writes_report_and_results(tmp_path, capsys):
     assert run_demo(args, rigs) == 0
     assert (tmp_path / "demo" / "report.html").is_file()
     res = json.loads((tmp_path / "demo" / "toy" / "result.json").read_text())
-    assert res["schema"] == "robocal.result/1"
+    assert res["schema"] == "robocal.result/2"
     out = capsys.readouterr().out
     assert "toy" in out and "ok" in out
     # same seed, same numbers

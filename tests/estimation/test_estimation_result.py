@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from robocal.errors import InputError
-from robocal.estimation import LSQResult, Problem, solve
+from robocal.estimation import LSQResult, Problem, outlier_sigma, solve
 
 
 def _rich_result():
@@ -65,8 +65,22 @@ def test_queries():
     assert r.worst_observations(1)[0][:3] == (5, "reprojection", 5)
     assert list(r.outliers) == [5]
     assert r.obs_residuals(kind="normalized").shape == (30, 2)
-    assert r.outlier_threshold(1) == pytest.approx(9.0)
+    # the default threshold is Bonferroni-corrected for the 30 observations: 3.59 sigma
+    assert r.outlier_sigma == pytest.approx(outlier_sigma(30))
+    assert r.outlier_threshold(1) == pytest.approx(outlier_sigma(30) ** 2)
     with pytest.raises(InputError):
         r.value("nope")
     with pytest.raises(InputError):
         r.obs_residuals(kind="odd")
+
+
+def test_outlier_sigma_keeps_the_family_false_alarm_rate():
+    # Bonferroni: each of n observations tested at 1 % / n (two-sided Gaussian tail)
+    assert outlier_sigma(216) == pytest.approx(4.07, abs=0.005)
+    assert outlier_sigma(1000) == pytest.approx(4.42, abs=0.005)
+    assert outlier_sigma(1) == 3.0 and outlier_sigma(10) > 3.0  # never below 3 sigma
+    from scipy import stats
+    for n in (50, 216, 5000):
+        assert 2 * stats.norm.sf(outlier_sigma(n)) * n == pytest.approx(0.01, rel=1e-9)
+    with pytest.raises(ValueError):
+        outlier_sigma(10, family_p=1.5)

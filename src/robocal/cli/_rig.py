@@ -1,8 +1,10 @@
-"""The contract between the core CLI and a rig.
+"""Finding the rigs: the ``robocal.rigs`` entry-point group.
 
-A rig package exposes ``RIG = Rig(...)`` in its ``cli`` module and lists it in
-``pyproject.toml`` under ``[project.entry-points."robocal.rigs"]``; the core
-discovers rigs through that group and never imports one by name.
+A rig package exposes ``RIG = Workflow(...)`` (:mod:`robocal.workflow`, the
+contract) in its ``cli`` module and lists it in ``pyproject.toml`` under
+``[project.entry-points."robocal.rigs"]``; the core discovers rigs through
+that group and never imports one by name. :class:`Rig` (a parser hook plus a
+demo) is the older, undeclared form, kept while rigs move to the contract.
 
 Command convention, the same for every rig::
 
@@ -15,59 +17,12 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from importlib.metadata import entry_points
-from pathlib import Path
 
-import numpy as np
+from robocal.workflow import DemoContext, DemoOutcome, Workflow, resolve
 
-from robocal.io import CalibrationResult
-from robocal.report import Section
-
-__all__ = ["Rig", "DemoContext", "DemoOutcome", "discover_rigs", "registered_rig_names"]
-
-
-@dataclass
-class DemoContext:
-    """What ``robocal demo`` hands a rig.
-
-    Attributes
-    ----------
-    out_dir : Path
-        Folder the rig may write its own files into (``<demo out>/<rig>``).
-    rng : numpy.random.Generator
-        The only source of randomness the demo may use.
-    progress : bool
-        Whether progress bars may be shown.
-    """
-
-    out_dir: Path
-    rng: np.random.Generator
-    progress: bool = True
-
-
-@dataclass
-class DemoOutcome:
-    """What a rig's demo returns.
-
-    Attributes
-    ----------
-    summary : dict
-        A few headline figures for the demo's summary table, already formatted
-        with units (``{"rotation error": "0.011 deg"}``).
-    passed : bool
-        Whether the rig's own acceptance check held (e.g. estimate within
-        3 sigma of the simulated truth).
-    sections : list of Section
-        Report sections (plots, tables) for the demo's HTML report.
-    result : CalibrationResult, optional
-        The rig's main result, also written to ``<out_dir>/result.json``.
-    """
-
-    summary: dict[str, str]
-    passed: bool
-    sections: list[Section] = field(default_factory=list)
-    result: CalibrationResult | None = None
+__all__ = ["Rig", "Workflow", "DemoContext", "DemoOutcome", "discover_rigs", "registered_rig_names", "demo_of"]
 
 
 @dataclass(frozen=True)
@@ -95,6 +50,11 @@ class Rig:
     description: str
     add_commands: Callable[[argparse.ArgumentParser], None]
     demo: Callable[[DemoContext], DemoOutcome] | None = None
+
+
+def demo_of(rig: Rig | Workflow):
+    """The rig's demo callable (imported now for a workflow's ``"module:attr"``), or None."""
+    return resolve(rig.demo)
 
 
 def registered_rig_names() -> list[str]:
@@ -134,8 +94,8 @@ def discover_rigs(names: Iterable[str] | None = None) -> list[Rig]:
         except Exception as exc:  # noqa: BLE001 - any plugin failure is reported, not fatal
             _warn_broken(ep, exc)
             continue
-        if not isinstance(rig, Rig):
-            raise TypeError(f"entry point {ep.name} -> {ep.value} is not a robocal.cli.Rig")
+        if not isinstance(rig, (Rig, Workflow)):
+            raise TypeError(f"entry point {ep.name} -> {ep.value} is not a robocal.workflow.Workflow")
         rigs.append(rig)
     return rigs
 

@@ -24,10 +24,12 @@ import numpy as np
 
 import robocal
 from robocal.cli._common import FORCE_HELP, OneLineErrorParser, RawHelp, _seed, examples_epilog, prepare_out_dir
-from robocal.cli._rig import DemoContext, discover_rigs, registered_rig_names
+from robocal.cli._rig import DemoContext, demo_of, discover_rigs, registered_rig_names
+from robocal.cli._workflow import add_report_command, add_workflow_commands
 from robocal.errors import InputError, RobocalError
 from robocal.io import CommandRun, preflight, set_command_line, write_result
 from robocal.report import Report
+from robocal.workflow import Workflow
 
 __all__ = ["main", "build_parser", "run_demo"]
 
@@ -81,9 +83,15 @@ def build_parser(rigs=None) -> argparse.ArgumentParser:
     lst = sub.add_parser("rigs", help="list the installed rigs")
     lst.set_defaults(func=lambda a: _list_rigs(rigs))
 
+    # `robocal report` reads the rig from the result file: it loads every rig when it runs
+    add_report_command(sub, lambda: {w.name: w for w in discover_rigs() if isinstance(w, Workflow)})
+
     for rig in rigs:
         p = sub.add_parser(rig.name, help=rig.help, description=rig.description, formatter_class=RawHelp)
-        rig.add_commands(p)
+        if isinstance(rig, Workflow):
+            add_workflow_commands(p, rig)
+        else:
+            rig.add_commands(p)
         p.set_defaults(func=lambda a, p=p: (p.print_help(), 0)[1])
     return parser
 
@@ -117,7 +125,7 @@ def run_demo(args, rigs) -> int:
                           progress=not args.no_progress)
         ctx.out_dir.mkdir(parents=True, exist_ok=True)
         try:
-            outcome = rig.demo(ctx)
+            outcome = demo_of(rig)(ctx)
         except RobocalError as exc:
             failed += 1
             rows.append({"rig": rig.name, "status": "error", "time [s]": time.perf_counter() - t0, "figures": str(exc)})
@@ -229,7 +237,7 @@ def main(argv=None) -> int:
             return 0
         words = _command_words(argv)
         run = CommandRun(command=shlex.join(["robocal", *words]), command_line=shlex.join(["robocal", *argv]),
-                         rig=words[0] if words and words[0] not in ("demo", "rigs") else None,
+                         rig=words[0] if words and words[0] not in ("demo", "rigs", "report") else None,
                          force=bool(getattr(args, "force", False)), inputs=tuple(_input_files(args)))
         with run:
             preflight(getattr(args, "out", None))  # refuse a wrong --out before the work, not after it

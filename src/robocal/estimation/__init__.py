@@ -23,7 +23,8 @@ from robocal.estimation._problem import *  # noqa: F401,F403
 from robocal.estimation._result import *  # noqa: F401,F403
 from robocal.estimation._solve import *  # noqa: F401,F403
 from robocal.estimation._montecarlo import *  # noqa: F401,F403
-from robocal.estimation import _evaluate, _identifiability, _montecarlo, _problem, _result, _solve
+from robocal.estimation._truth import *  # noqa: F401,F403
+from robocal.estimation import _evaluate, _identifiability, _montecarlo, _problem, _result, _solve, _truth
 
 __all__ = [
     *_problem.__all__,
@@ -32,4 +33,5 @@ __all__ = [
     *_identifiability.__all__,
     *_montecarlo.__all__,
     *_evaluate.__all__,
+    *_truth.__all__,
 ]

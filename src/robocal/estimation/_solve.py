@@ -21,6 +21,7 @@ from robocal.errors import InputError, NotEnoughDataError, RobocalError
 from robocal.estimation._identifiability import analyze_jacobian
 from robocal.estimation._problem import Problem
 from robocal.estimation._result import STATUS_MESSAGES, LSQResult, outlier_threshold
+from robocal.estimation._result import outlier_sigma as bonferroni_sigma
 
 __all__ = ["solve", "Iteration", "robust_cost", "loss_derivatives", "METHODS", "LOSSES"]
 
@@ -185,6 +186,8 @@ def _check_options(method, loss, f_scale, outlier_sigma, rank_tol):
     if loss not in LOSSES:
         raise InputError(f"loss must be one of {', '.join(LOSSES)}, got {loss!r}")
     for name, v in (("f_scale", f_scale), ("outlier_sigma", outlier_sigma), ("rank_tol", rank_tol)):
+        if name == "outlier_sigma" and v is None:
+            continue
         if not (isinstance(v, (int, float, np.floating)) and np.isfinite(v) and v > 0):
             raise InputError(f"{name} must be a finite number > 0, got {v!r}")
 
@@ -204,7 +207,7 @@ def solve(
     diff_step=None,
     sparse: bool | None = None,
     absolute_sigma: bool = False,
-    outlier_sigma: float = 3.0,
+    outlier_sigma: float | None = None,
     rank_tol: float = 1e-6,
     weak_vif: float = 1e4,
     verbose: int = 0,
@@ -246,11 +249,14 @@ def solve(
         for the linear loss; for a robust loss the clipped estimate described
         under ``outlier_sigma`` (the outliers the loss discounted must not
         inflate the inliers' noise level).
-    outlier_sigma : float
+    outlier_sigma : float, optional
         Observations beyond this many sigma are named in an ``outliers``
-        warning. The sigma is the known noise with ``absolute_sigma``, else
-        the residual std re-estimated with iterative ``outlier_sigma``
-        clipping, so that gross outliers do not inflate it. An observation
+        warning. Default: :func:`outlier_sigma` of the number of
+        observations (Bonferroni, 1 % chance of any false alarm in a clean
+        calibration; the one default of every rig). The sigma is the known
+        noise with ``absolute_sigma``, else the residual std re-estimated with
+        iterative clipping at ``outlier_sigma`` (3 sigma by default), so that
+        gross outliers do not inflate it. An observation
         with ``d`` components is tested on its squared norm against the
         chi-square(d) quantile of the same tail probability.
     rank_tol, weak_vif : float
@@ -362,7 +368,13 @@ def _analyse(problem, ev, x, f, J, history, status, message, *, method, loss, f_
     # (with a robust loss) for the covariance.
     q = np.concatenate([np.sum(f[i.rows].reshape(i.n_obs, i.dim) ** 2, axis=1) for i in ev.term_info])
     dims = np.concatenate([np.full(i.n_obs, i.dim) for i in ev.term_info])
-    clipped = _clipped_variance(q, dims, m, ident.rank, outlier_sigma) if dof > 0 else float("nan")
+    # Clipping estimates the noise level (3 sigma keeps ~99.7 % of clean data);
+    # naming outliers is a test over every observation, so its default threshold
+    # grows with their number (see outlier_sigma).
+    clip_sigma = 3.0 if outlier_sigma is None else outlier_sigma
+    if outlier_sigma is None:
+        outlier_sigma = bonferroni_sigma(ev.n_obs)
+    clipped = _clipped_variance(q, dims, m, ident.rank, clip_sigma) if dof > 0 else float("nan")
     if absolute_sigma:
         s2 = 1.0
     elif dof <= 0:

@@ -1,4 +1,4 @@
-"""The result file shared by every rig (schema ``robocal.result/1``).
+"""The result file shared by every rig (schema ``robocal.result/2``; ``/1`` is still read).
 
 A result is a JSON (or YAML) mapping a user can load in any language::
 
@@ -10,6 +10,7 @@ A result is a JSON (or YAML) mapping a user can load in any language::
     command: "robocal projector calibrate room.yaml --out out"
     inputs: {room.yaml: <sha256>}   # content hashes of every input file
     estimate: {...}                 # named values, SI units (m, rad); matrices as nested lists
+    poses: {T_r_c: {parent: robot, child: camera, rotation_std: left}}   # every pose in `estimate`
     std: {...}                      # same keys; null where a value is not identifiable
     units: {...}                    # unit of each estimate key ("m", "rad", "1", ...)
     residual_rms: 0.0012            # in `residual_unit`
@@ -17,8 +18,17 @@ A result is a JSON (or YAML) mapping a user can load in any language::
     warnings: [{code, message, params, indices}, ...]
     diagnostics: {...}              # solver details: iterations, cost history, rank, ...
 
-Frames follow ``T_parent_child`` naming; rotations as 3x3 lists plus a
-scalar-last quaternion where useful (see ``docs/conventions.md``).
+Frames follow ``T_parent_child`` naming (see ``docs/conventions.md``). Every
+pose is written by :meth:`CalibrationResult.add_pose`, the one vocabulary of all
+rigs: ``T_r_c.rotation`` (3x3), ``T_r_c.rotvec`` (rotation vector, rad) and
+``T_r_c.translation`` (m) in ``estimate``; the standard deviations of the
+rotation (a small rotation vector, rad, on the side ``poses[name].rotation_std``
+names) and of the translation under ``T_r_c.rotvec`` and ``T_r_c.translation``
+in ``std``. :meth:`CalibrationResult.pose` reads one back as a 4x4 matrix.
+
+Schema history: ``robocal.result/2`` added ``poses`` (and the pose
+vocabulary); a ``/1`` file loads with ``poses`` found from its
+``X.rotation`` / ``X.translation`` key pairs.
 """
 
 from __future__ import annotations
@@ -38,10 +48,12 @@ from robocal.diagnostics import Diagnostic
 from robocal.errors import FileFormatError
 from robocal.io._atomic import atomic_write_text, sha256_file
 
-__all__ = ["SCHEMA", "CalibrationResult", "to_jsonable", "write_result", "load_result", "hash_inputs",
+__all__ = ["SCHEMA", "READABLE_SCHEMAS", "CalibrationResult", "PoseEstimate", "to_jsonable", "write_result", "load_result", "hash_inputs",
            "set_command_line"]
 
-SCHEMA = "robocal.result/1"
+SCHEMA = "robocal.result/2"
+#: Older schemas :func:`load_result` still reads.
+READABLE_SCHEMAS = ("robocal.result/1", SCHEMA)
 
 #: The command line of the running ``robocal`` CLI (set by its ``main``); results
 #: made through the Python API record "" rather than the host's ``sys.argv``
@@ -104,10 +116,67 @@ class CalibrationResult:
     warnings: list[Diagnostic] = field(default_factory=list)
     inputs: dict[str, str] = field(default_factory=dict)
     diagnostics: dict = field(default_factory=dict)
+    poses: dict = field(default_factory=dict)
     command: str = field(default_factory=lambda: _COMMAND_LINE)
     created: str = field(default_factory=_now)
     robocal_version: str = field(default_factory=lambda: __import__("robocal").__version__)
     schema: str = SCHEMA
+
+    def add_pose(self, name: str, T, *, std_rotation=None, std_translation=None, parent: str | None = None,
+                 child: str | None = None, rotation_std: str = "left") -> "CalibrationResult":
+        """Write the pose ``T`` (4x4, metres) under ``name`` in the shared vocabulary (module docstring).
+
+        Parameters
+        ----------
+        name : str
+            ``T_parent_child`` (``docs/conventions.md``), e.g. ``"T_r_c"``.
+        T : (4, 4) array_like
+            The transform; its rotation block must be a rotation.
+        std_rotation, std_translation : (3,) array_like, optional
+            Standard deviations of the rotation (a small rotation vector, rad)
+            and of the translation (m); left out (no key in ``std``) for a pose
+            that has none (an input, a derived frame). ``None`` entries mark
+            components the data do not determine.
+        parent, child : str, optional
+            The frames' names in words (``"robot"``, ``"camera"``).
+        rotation_std : {"left", "right"}
+            Side of the rotation perturbation: ``R = Exp(d) @ R_hat`` (left,
+            world side) or ``R = R_hat @ Exp(d)`` (right, body side).
+        """
+        from robocal.validation import check_transform
+        from scipy.spatial.transform import Rotation
+
+        T = check_transform(T, name=name)
+        if rotation_std not in ("left", "right"):
+            raise ValueError(f"rotation_std must be 'left' or 'right', got {rotation_std!r}")
+        self.estimate[f"{name}.rotation"] = T[:3, :3]
+        self.estimate[f"{name}.rotvec"] = Rotation.from_matrix(T[:3, :3]).as_rotvec()
+        self.estimate[f"{name}.translation"] = T[:3, 3]
+        self.units.update({f"{name}.rotation": "1", f"{name}.rotvec": "rad", f"{name}.translation": "m"})
+        if std_rotation is not None:
+            self.std[f"{name}.rotvec"] = _std3(std_rotation, f"{name} std_rotation")
+        if std_translation is not None:
+            self.std[f"{name}.translation"] = _std3(std_translation, f"{name} std_translation")
+        info = {"rotation_std": rotation_std}
+        if parent:
+            info["parent"] = parent
+        if child:
+            info["child"] = child
+        self.poses[name] = info
+        return self
+
+    def pose(self, name: str) -> "PoseEstimate":
+        """The pose ``name`` as a 4x4 matrix with its standard deviations (``None`` where it has none)."""
+        if name not in self.poses and f"{name}.rotation" not in self.estimate:
+            have = ", ".join(self.poses) or "none"
+            raise KeyError(f"no pose {name!r} in this {self.rig} result (poses: {have})")
+        T = np.eye(4)
+        T[:3, :3] = np.asarray(self.estimate[f"{name}.rotation"], dtype=float)
+        T[:3, 3] = np.asarray(self.estimate[f"{name}.translation"], dtype=float)
+        std_r, std_t = self.std.get(f"{name}.rotvec"), self.std.get(f"{name}.translation")
+        return PoseEstimate(T, None if std_r is None else _nan_for_none(std_r),
+                            None if std_t is None else _nan_for_none(std_t),
+                            self.poses.get(name, {}).get("rotation_std", "left"))
 
     def to_dict(self) -> dict:
         return to_jsonable(
@@ -120,6 +189,7 @@ class CalibrationResult:
                 "command": self.command,
                 "inputs": self.inputs,
                 "estimate": self.estimate,
+                "poses": self.poses,
                 "std": self.std,
                 "units": self.units,
                 "residual_rms": self.residual_rms,
@@ -131,9 +201,10 @@ class CalibrationResult:
 
     @classmethod
     def from_dict(cls, d: dict, *, source: str = "<result>") -> "CalibrationResult":
-        if not isinstance(d, dict) or d.get("schema") != SCHEMA:
+        if not isinstance(d, dict) or d.get("schema") not in READABLE_SCHEMAS:
             got = d.get("schema") if isinstance(d, dict) else type(d).__name__
-            raise FileFormatError(f"not a robocal result: schema must be {SCHEMA!r}, got {got!r}", source=source)
+            raise FileFormatError(f"not a robocal result: schema must be one of {', '.join(READABLE_SCHEMAS)}, "
+                                  f"got {got!r}", source=source)
         try:
             return cls(
                 rig=d["rig"],
@@ -146,12 +217,46 @@ class CalibrationResult:
                 warnings=[Diagnostic.from_dict(w) for w in d.get("warnings", [])],
                 inputs=d.get("inputs", {}),
                 diagnostics=d.get("diagnostics", {}),
+                poses=d["poses"] if "poses" in d else _poses_of_v1(d["estimate"]),
                 command=d.get("command", ""),
                 created=d.get("created", ""),
                 robocal_version=d.get("robocal_version", ""),
             )
         except KeyError as exc:
             raise FileFormatError(f"field {exc.args[0]!r} is missing", source=source) from None
+
+
+@dataclass(frozen=True)
+class PoseEstimate:
+    """One pose read from a result: ``T`` (4x4, m) and the std of its rotation (rad) and translation (m).
+
+    A std is ``None`` when the result has none for the pose; NaN marks a
+    component the data did not determine.
+    """
+
+    T: np.ndarray
+    std_rotation: np.ndarray | None
+    std_translation: np.ndarray | None
+    rotation_std: str = "left"
+
+
+def _std3(v, what: str):
+    arr = [None if x is None else float(x) for x in np.asarray(v, dtype=object).reshape(-1)]
+    if len(arr) != 3:
+        raise ValueError(f"{what}: expected 3 values, got {len(arr)}")
+    return [None if x is None or not math.isfinite(x) else x for x in arr]
+
+
+def _nan_for_none(v) -> np.ndarray:
+    return np.array([np.nan if x is None else float(x) for x in v])
+
+
+def _poses_of_v1(estimate) -> dict:
+    """The poses of a ``robocal.result/1`` file: its ``X.rotation`` + ``X.translation`` pairs."""
+    if not isinstance(estimate, dict):
+        return {}
+    names = [k[: -len(".rotation")] for k in estimate if str(k).endswith(".rotation")]
+    return {n: {"rotation_std": "left"} for n in names if f"{n}.translation" in estimate}
 
 
 def write_result(path, result: CalibrationResult) -> Path:

@@ -154,11 +154,24 @@ class Section:
         return self
 
     def parameters(self, estimate: dict, std: dict | None = None, units: dict | None = None) -> "Section":
-        """Parameter table: name, value, standard deviation, unit (flattening arrays)."""
+        """Parameter table: name, value, standard deviation, unit (flattening arrays).
+
+        A pose written in the result vocabulary (``X.rotation``, ``X.rotvec``,
+        ``X.translation``; ``robocal.io.CalibrationResult.add_pose``) is shown
+        as its translation in mm and rotation vector in deg, each with its std,
+        not as nine matrix entries of unit "1".
+        """
         std = std or {}
         units = units or {}
+        poses = {k[: -len(".rotation")] for k in estimate
+                 if k.endswith(".rotation") and np.shape(estimate[k]) == (3, 3) and f"{k[:-9]}.translation" in estimate}
         rows = []
         for name, val in estimate.items():
+            base, _, part = name.rpartition(".")
+            if base in poses and part in ("rotation", "rotvec", "translation"):
+                if part == "rotation":
+                    rows.extend(_pose_rows(base, estimate, std, units))
+                continue
             s = std.get(name)
             arr = np.asarray(val, dtype=object)
             if arr.ndim == 0 or arr.size == 1:
@@ -168,6 +181,35 @@ class Section:
                 for i, (v, si) in enumerate(zip(arr.reshape(-1), flat_s)):
                     rows.append({"parameter": f"{name}[{i}]", "value": v, "std": si, "unit": units.get(name, "")})
         return self.table(rows, ["parameter", "value", "std", "unit"])
+
+
+#: How a pose's parts are shown: SI in the file, mm and deg on the page.
+_DISPLAY = {"m": ("mm", 1e3), "rad": ("deg", 180.0 / math.pi)}
+
+
+def _scaled(v, unit: str):
+    shown, k = _DISPLAY.get(unit, (unit, 1.0))
+    if v is None:
+        return None, shown
+    return [None if x is None else float(x) * k for x in np.asarray(v, dtype=object).reshape(-1)], shown
+
+
+def _pose_rows(name: str, estimate: dict, std: dict, units: dict) -> list[dict]:
+    """Rows of one pose: translation x, y, z and rotation vector x, y, z with std, in mm and deg."""
+    rotvec = estimate.get(f"{name}.rotvec")
+    if rotvec is None:  # a robocal.result/1 file wrote the matrix only
+        from scipy.spatial.transform import Rotation
+
+        rotvec = Rotation.from_matrix(np.asarray(estimate[f"{name}.rotation"], dtype=float)).as_rotvec()
+    rows = []
+    for part, value, unit in (("translation", estimate[f"{name}.translation"], units.get(f"{name}.translation", "m")),
+                              ("rotvec", rotvec, "rad")):
+        vals, shown = _scaled(value, unit)
+        stds, _ = _scaled(std.get(f"{name}.{part}"), unit)
+        for i, axis in enumerate("xyz"):
+            rows.append({"parameter": f"{name} {'rotation vector' if part == 'rotvec' else 'translation'} {axis}",
+                         "value": vals[i], "std": None if stds is None else stds[i], "unit": shown})
+    return rows
 
 
 class Report:

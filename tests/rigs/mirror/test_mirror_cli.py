@@ -26,7 +26,7 @@ def test_simulate_calibrate_report(tmp_path, capsys):
     assert main(["mirror", "simulate", "--placements", "2", "--seed", "3", "--out", str(sim)]) == 0
     assert main(["mirror", "calibrate", str(sim / "mirror_input.yaml"), "--out", str(cal)]) == 0
     res = json.loads((cal / "result.json").read_text())
-    assert res["rig"] == "mirror" and res["schema"] == "robocal.result/1"
+    assert res["rig"] == "mirror" and res["schema"] == "robocal.result/2"
     T = np.array(res["estimate"]["T_r_c"])
     truth = np.array(res["diagnostics"]["truth_T_r_c"])
     std = np.array(res["std"]["t_r_c"])

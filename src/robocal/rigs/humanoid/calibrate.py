@@ -473,7 +473,7 @@ class HumanoidCalibration:
         return rows
 
     def to_result(self, *, inputs: dict | None = None, command: str | None = None) -> CalibrationResult:
-        """The shared result record (schema robocal.result/1)."""
+        """The shared result record (schema robocal.result/2)."""
         estimate, std, units = {}, {}, {}
         for lab, unit in zip(self.labels, self.model.parameter_units()):
             if lab not in self.free:

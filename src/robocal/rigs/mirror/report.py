@@ -1,7 +1,7 @@
 """Result record and HTML report of a mirror calibration.
 
 :func:`result_from_calibration` packs a :class:`MirrorCalibration` into the
-shared ``robocal.result/1`` schema, keeping in ``diagnostics`` everything
+shared ``robocal.result/2`` schema, keeping in ``diagnostics`` everything
 needed to redraw the report (camera, rectangle, body model, image points,
 per-image patent estimates and planar choices); :func:`build_report` draws
 from that record alone, so ``robocal mirror report result.json`` needs no

@@ -43,7 +43,7 @@ def truth_errors(est, truth: ProjectorModel) -> dict:
 
 
 def calibration_result(run: CalibrationRun, *, inputs=(), truth: ProjectorModel | None = None) -> CalibrationResult:
-    """The shared result record (schema robocal.result/1), SI units."""
+    """The shared result record (schema robocal.result/2), SI units."""
     best = run.best
     R = best.R_0_W
     est = {"R_0_W": R, "t_0_W": best.t_0_W, "yaw": best.yaw, "q_0_W": quaternion_from_matrix(R), "H": run.model.H}
