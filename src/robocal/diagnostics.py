@@ -16,7 +16,8 @@ __all__ = ["Diagnostic", "CODES"]
 CODES = {
     "rank_deficient": "the data do not determine some parameters (named in `params`)",
     "weakly_determined": "some parameters are determined only weakly (large standard deviation or condition number)",
-    "outliers": "residuals larger than 3 sigma (observation indices in `indices`)",
+    "outliers": "residuals beyond the outlier threshold (robocal.estimation.outlier_sigma: Bonferroni over the "
+                "observations, at least 3 sigma; observation indices in `indices`)",
     "degenerate_geometry": "the measurement geometry is close to degenerate",
     "inconsistent_data": "measurements disagree beyond their noise",
     "not_converged": "the solver stopped before convergence",
