@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 from robocal.errors import DegenerateGeometryError, InputError, NonFiniteError, NotEnoughDataError, RobocalError, ShapeError
 from robocal.geometry import (
     apply_transform,
-    householder_matrix,
+    householder_from_normal,
     matrix_from_rotvec,
     rigid_fit,
     rigid_fit_covariance,
@@ -94,7 +94,7 @@ def test_det_guard_returns_a_rotation_for_mirrored_data():
     # Mirrored targets: the unconstrained orthogonal optimum is a reflection.
     rng = np.random.default_rng(4)
     X = rng.normal(size=(20, 3))
-    Y = X @ householder_matrix([0.2, 0.9, -0.3]).T
+    Y = X @ householder_from_normal([0.2, 0.9, -0.3]).T
     U, _, Vt = np.linalg.svd((Y - Y.mean(0)).T @ (X - X.mean(0)))
     assert np.linalg.det(U @ Vt) < 0  # a naive Kabsch would return a reflection here
     fit = rigid_fit(X, Y)

@@ -11,21 +11,21 @@ from robocal.geometry import (
     apply_rotation,
     apply_transform,
     compose,
-    householder_matrix,
+    householder_from_normal,
     invert_transform,
     matrix_from_rotvec,
     pq_from_transform,
     reflect_frame,
     reflect_points,
-    reflection_transform,
+    reflection_from_plane,
     rotation_angle,
-    rotation_of,
+    rotation_from_transform,
     rotvec_translation_from_transform,
     skew,
     transform_from,
     transform_from_pq,
     transform_from_rotvec,
-    translation_of,
+    translation_from_transform,
 )
 
 SETTINGS = settings(max_examples=50, deadline=None)
@@ -76,7 +76,7 @@ def test_frame_convention_T_a_b_maps_b_points_into_a(seed):
     p_b = apply_transform(T_b_c, p_c)
     np.testing.assert_allclose(apply_transform(T_a_b, p_b), apply_transform(compose(T_a_b, T_b_c), p_c), atol=1e-12)
     np.testing.assert_allclose(apply_transform(invert_transform(T_b_c), p_b), p_c, atol=1e-12)
-    np.testing.assert_allclose(apply_rotation(rotation_of(T_a_b), p_c) + translation_of(T_a_b), apply_transform(T_a_b, p_c))
+    np.testing.assert_allclose(apply_rotation(rotation_from_transform(T_a_b), p_c) + translation_from_transform(T_a_b), apply_transform(T_a_b, p_c))
 
 
 @SETTINGS
@@ -106,7 +106,7 @@ def test_transform_from_broadcasts():
 @given(seeds, batch_shapes)
 def test_householder_is_an_involutive_reflection(seed, shape):
     n, _ = random_planes(seed, shape)
-    H = householder_matrix(3.7 * n)  # normalised inside
+    H = householder_from_normal(3.7 * n)  # normalised inside
     assert H.shape == shape + (3, 3)
     np.testing.assert_allclose(np.linalg.det(H), -1.0, atol=1e-12)
     np.testing.assert_allclose(H @ H, np.broadcast_to(np.eye(3), H.shape), atol=1e-12)
@@ -124,8 +124,8 @@ def test_reflect_points_mirror_in_the_plane(seed):
     np.testing.assert_allclose(mid @ n, d, atol=1e-12)  # midpoints on the plane
     np.testing.assert_allclose(np.cross(q - p, n), 0.0, atol=1e-12)  # displacement along the normal
     np.testing.assert_allclose(reflect_points(q, n, d), p, atol=1e-12)
-    np.testing.assert_allclose(apply_transform(reflection_transform(n, d), p), q, atol=1e-12)
-    M = reflection_transform(n, d)
+    np.testing.assert_allclose(apply_transform(reflection_from_plane(n, d), p), q, atol=1e-12)
+    M = reflection_from_plane(n, d)
     np.testing.assert_allclose(M @ M, np.eye(4), atol=1e-12)
     np.testing.assert_allclose(np.linalg.det(M[:3, :3]), -1.0)
 
@@ -141,7 +141,7 @@ def test_reflect_frame_is_right_handed_and_involutive(seed, axis):
     np.testing.assert_allclose(np.linalg.det(R), 1.0, atol=1e-12)  # right-handed
     np.testing.assert_allclose(M[:3, 3], reflect_points(T[:3, 3], n, d), atol=1e-12)  # origin mirrored
     # the flipped axis is the mirror image of -axis; the others are mirror images
-    H = householder_matrix(n)
+    H = householder_from_normal(n)
     for k in range(3):
         sign = -1.0 if k == axis else 1.0
         np.testing.assert_allclose(R[:, k], sign * H @ T[:3, k], atol=1e-12)
@@ -150,9 +150,9 @@ def test_reflect_frame_is_right_handed_and_involutive(seed, axis):
 
 def test_reflection_errors():
     with pytest.raises(DegenerateGeometryError, match="zero length"):
-        householder_matrix([0.0, 0.0, 0.0])
+        householder_from_normal([0.0, 0.0, 0.0])
     with pytest.raises(NonFiniteError):
-        householder_matrix([np.nan, 0.0, 1.0])
+        householder_from_normal([np.nan, 0.0, 1.0])
     with pytest.raises(NonFiniteError):
         reflect_points([[0.0, np.inf, 0.0]], [0, 0, 1], 0.0)
     with pytest.raises(NonFiniteError):

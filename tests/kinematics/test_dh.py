@@ -7,7 +7,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import array_shapes
 
 from robocal.errors import InputError, NonFiniteError, ShapeError
-from robocal.geometry import matrix_from_rotvec, rotx, rotz, transform_from
+from robocal.geometry import matrix_from_angle, matrix_from_rotvec, transform_from
 from robocal.kinematics import DHChain, DHLink
 
 SETTINGS = settings(max_examples=40, deadline=None)
@@ -58,8 +58,8 @@ def _elementary_product(lk, convention, q=0.0):
     """A_i from explicit elementary factors (independent of the closed form in _dh)."""
     theta = lk.theta + (q if lk.joint == "revolute" else 0.0)
     d = lk.d + (q if lk.joint == "prismatic" else 0.0)
-    Rx = transform_from(rotx(lk.alpha), np.zeros(3))
-    Rz = transform_from(rotz(theta), np.zeros(3))
+    Rx = transform_from(matrix_from_angle("x", lk.alpha), np.zeros(3))
+    Rz = transform_from(matrix_from_angle("z", theta), np.zeros(3))
     Tx = transform_from(np.eye(3), [lk.a, 0, 0])
     Tz = transform_from(np.eye(3), [0, 0, d])
     return Rx @ Tx @ Rz @ Tz if convention == "modified" else Rz @ Tz @ Tx @ Rx
@@ -240,7 +240,7 @@ def test_convention_and_frames_are_keyword_only():
         DHChain(links, "standard")
     with pytest.raises(TypeError):
         DHChain(links, "modified", np.eye(4))
-    std = DHChain(links, convention="standard", T_base=transform_from(rotz(0.3), [1.0, 0.0, 0.0]))
+    std = DHChain(links, convention="standard", T_base=transform_from(matrix_from_angle("z", 0.3), [1.0, 0.0, 0.0]))
     mod = DHChain(links, convention="modified")
     assert "standard" in repr(std) and "modified" in repr(DHChain(links))
     q = np.array([0.4, 0.02])

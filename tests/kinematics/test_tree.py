@@ -7,7 +7,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import array_shapes
 
 from robocal.errors import InputError, NonFiniteError, ShapeError
-from robocal.geometry import invert_transform, matrix_from_rotvec, rotx, transform_from
+from robocal.geometry import matrix_from_angle, invert_transform, matrix_from_rotvec, transform_from
 from robocal.kinematics import DHChain, Joint, KinematicTree, Mimic
 
 SETTINGS = settings(max_examples=30, deadline=None)
@@ -27,9 +27,9 @@ def test_tree_fk_equals_seed000_dh_chain_built_by_hand():
     # Seed 000 Table 1 as named joints: origin Rx(alpha) Tx(a) Tz(d), axis z, theta as the offset.
     d1, d2 = 0.3, 0.1
     tree = KinematicTree([
-        Joint("S1", "base", "link1", T(rotx(np.pi), (0, 0, 0)) @ T(t=(0, 0, d1)), offset=-np.pi / 2),
-        Joint("S2", "link1", "link2", T(rotx(-np.pi / 2))),
-        Joint("E", "link2", "laser", T(rotx(np.pi / 2)) @ T(t=(0, 0, d2)), type="fixed"),
+        Joint("S1", "base", "link1", T(matrix_from_angle("x", np.pi), (0, 0, 0)) @ T(t=(0, 0, d1)), offset=-np.pi / 2),
+        Joint("S2", "link1", "link2", T(matrix_from_angle("x", -np.pi / 2))),
+        Joint("E", "link2", "laser", T(matrix_from_angle("x", np.pi / 2)) @ T(t=(0, 0, d2)), type="fixed"),
     ])
     chain = DHChain.from_table([[np.pi, 0, -np.pi / 2, d1], [-np.pi / 2, 0, 0, 0], [np.pi / 2, 0, 0, d2]],
                                joint_types="RRF")

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from robocal.errors import FileFormatError
-from robocal.geometry import matrix_from_rotvec, rotx, roty, rotz, transform_from
+from robocal.geometry import matrix_from_angle, matrix_from_rotvec, transform_from
 from robocal.kinematics import DHChain, Joint, KinematicTree, Mimic, tree_from_urdf
 
 CAM = "CameraBottom_optical_frame"
@@ -30,7 +30,7 @@ def test_origin_rpy_is_fixed_axis_roll_pitch_yaw():
     tree = KinematicTree.from_urdf(urdf(
         f'<joint name="j" type="fixed"><parent link="a"/><child link="b"/>'
         f'<origin xyz="0.1 -0.2 0.3" rpy="{r} {p} {y}"/></joint>', links=("a", "b")))
-    expected = transform_from(rotz(y) @ roty(p) @ rotx(r), [0.1, -0.2, 0.3])
+    expected = transform_from(matrix_from_angle("z", y) @ matrix_from_angle("y", p) @ matrix_from_angle("x", r), [0.1, -0.2, 0.3])
     assert np.abs(tree.joint("j").origin - expected).max() < 1e-15
 
 

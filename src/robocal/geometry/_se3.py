@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from robocal._deprecation import deprecated_alias
 from robocal.geometry._so3 import (
     _tail,
     matrix_from_quaternion,
@@ -19,6 +20,9 @@ from robocal.validation import check_array
 
 __all__ = [
     "transform_from",
+    "transform_from_translation",
+    "rotation_from_transform",
+    "translation_from_transform",
     "rotation_of",
     "translation_of",
     "invert_transform",
@@ -45,20 +49,25 @@ def transform_from(R, t) -> np.ndarray:
     return T
 
 
-def translation_transform(t) -> np.ndarray:
+def transform_from_translation(t) -> np.ndarray:
     """Pure translation, (..., 3) -> (..., 4, 4)."""
     t = np.asarray(t, dtype=float)
     return transform_from(np.broadcast_to(np.eye(3), t.shape[:-1] + (3, 3)), t)
 
 
-def rotation_of(T) -> np.ndarray:
+def rotation_from_transform(T) -> np.ndarray:
     """Rotation block ``T[..., :3, :3]``."""
     return np.asarray(T)[..., :3, :3]
 
 
-def translation_of(T) -> np.ndarray:
+def translation_from_transform(T) -> np.ndarray:
     """Translation ``T[..., :3, 3]``."""
     return np.asarray(T)[..., :3, 3]
+
+
+translation_transform = deprecated_alias(transform_from_translation, "translation_transform")
+rotation_of = deprecated_alias(rotation_from_transform, "rotation_of")
+translation_of = deprecated_alias(translation_from_transform, "translation_of")
 
 
 def invert_transform(T) -> np.ndarray:

@@ -15,12 +15,14 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from robocal._deprecation import deprecated_alias
 from robocal.errors import DegenerateGeometryError, ShapeError
 from robocal.validation import check_array
 
 __all__ = [
     "skew",
     "unskew",
+    "matrix_from_angle",
     "rotx",
     "roty",
     "rotz",
@@ -107,19 +109,24 @@ def _elementary(angle, i: int, j: int) -> np.ndarray:
     return R
 
 
-def rotx(angle) -> np.ndarray:
-    """Rotation about x by ``angle`` (rad), shape ``angle.shape + (3, 3)``."""
-    return _elementary(angle, 1, 2)
+#: Axis name -> the (i, j) plane an elementary rotation turns.
+_AXES = {"x": (1, 2), "y": (2, 0), "z": (0, 1)}
 
 
-def roty(angle) -> np.ndarray:
-    """Rotation about y by ``angle`` (rad), shape ``angle.shape + (3, 3)``."""
-    return _elementary(angle, 2, 0)
+def matrix_from_angle(axis: str, angle) -> np.ndarray:
+    """Rotation about the coordinate ``axis`` (``"x"``, ``"y"`` or ``"z"``) by ``angle`` (rad).
+
+    Active, right-handed: ``matrix_from_angle("z", pi / 2) @ [1, 0, 0] == [0, 1, 0]``.
+    Shape ``angle.shape + (3, 3)``.
+    """
+    if axis not in _AXES:
+        raise ValueError(f"axis must be 'x', 'y' or 'z', got {axis!r}")
+    return _elementary(angle, *_AXES[axis])
 
 
-def rotz(angle) -> np.ndarray:
-    """Rotation about z by ``angle`` (rad), shape ``angle.shape + (3, 3)``."""
-    return _elementary(angle, 0, 1)
+rotx = deprecated_alias(lambda angle: matrix_from_angle("x", angle), "rotx", call="matrix_from_angle('x', angle)")
+roty = deprecated_alias(lambda angle: matrix_from_angle("y", angle), "roty", call="matrix_from_angle('y', angle)")
+rotz = deprecated_alias(lambda angle: matrix_from_angle("z", angle), "rotz", call="matrix_from_angle('z', angle)")
 
 
 def matrix_from_rotvec(rotvec) -> np.ndarray:
