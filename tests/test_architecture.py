@@ -50,3 +50,43 @@ def test_no_global_numpy_random_state():
             if bad in text:
                 offenders.append(f"{py.relative_to(SRC)}: {bad}")
     assert not offenders, offenders
+
+
+def test_library_code_never_imports_the_cli():
+    # progress bars come from robocal.progress, DemoOutcome from robocal.workflow
+    offenders = []
+    for py in SRC.rglob("*.py"):
+        rel = py.relative_to(SRC)
+        if rel.parts[0] == "cli" or py.name == "cli.py" or rel.parts == ("__main__.py",):
+            continue
+        bad = [m for m in _imports(py) if m == "robocal.cli" or m.startswith("robocal.cli.")]
+        if bad:
+            offenders.append(f"{rel} imports {bad}")
+    assert not offenders, offenders
+
+
+#: What a rig's cli.py (declarations only) may import.
+_CLI_ALLOWED = ("__future__", "argparse", "math", "pathlib", "robocal.workflow", "robocal.cli", "robocal.cli._common")
+
+
+def test_rig_cli_modules_are_declarations_only():
+    # no numerical library and no rig library at module level, no long functions: the
+    # work is in the rig's library modules, named by the Workflow's "module:attr" steps
+    offenders = []
+    for cli in RIGS.glob("*/cli.py"):
+        tree = ast.parse(cli.read_text(encoding="utf-8"))
+        for node in tree.body:
+            if isinstance(node, (ast.Import, ast.ImportFrom)):
+                mods = [a.name for a in node.names] if isinstance(node, ast.Import) else [node.module or ""]
+                offenders += [f"{cli.parent.name}/cli.py imports {m}" for m in mods if m not in _CLI_ALLOWED]
+            elif isinstance(node, ast.FunctionDef) and node.end_lineno - node.lineno > 15:
+                offenders.append(f"{cli.parent.name}/cli.py: {node.name} is {node.end_lineno - node.lineno} lines "
+                                 "(argument parsers only; move work into the rig's library)")
+    assert not offenders, offenders
+
+
+def test_no_module_over_600_lines():
+    # cohesive modules (issue 20): a file over ~600 lines mixes concerns; split it along its seams
+    long = {str(py.relative_to(SRC)): n for py in SRC.rglob("*.py")
+            if (n := len(py.read_text(encoding="utf-8").splitlines())) > 650}
+    assert not long, long
