@@ -133,6 +133,7 @@ def test_bad_input_is_one_line_exit_2(name, tmp_path, capsys):
         lines = err.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("robocal: error:"), err
         assert "Traceback" not in err
+        assert inputs[0].name in err, err  # the message names the file
 
 
 def test_robocal_report_names_a_result_of_an_unknown_rig(tmp_path, capsys):
