@@ -1,0 +1,206 @@
+"""Closed-form AX = XB solvers: Tsai-Lenz, Park-Martin, Horaud-Dornaika, Andreff, Daniilidis.
+
+``A_i X = X B_i`` for paired relative motions (:func:`.motions.relative_motions`);
+rotation first (each method its own parametrisation), then the translation by
+linear least squares with a rank check, except Daniilidis (dual quaternions,
+both together).
+
+References: R. Tsai, R. Lenz, IEEE T-RA 5(3), 1989. F. Park, B. Martin, IEEE
+T-RA 10(5), 1994. R. Horaud, F. Dornaika, IJRR 14(3), 1995. N. Andreff,
+R. Horaud, B. Espiau, 3DIM 1999. K. Daniilidis, IJRR 18(3), 1999.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from robocal.errors import DegenerateGeometryError, InputError, NotEnoughDataError, ShapeError
+from robocal.geometry import matrix_from_quaternion, project_to_rotation, rotvec_from_matrix, skew, transform_from
+from robocal.rigs.lineprofiler.handeye.motions import (MIN_AXIS_SPREAD, MIN_ROTATION, MotionCheck, _check_poses,
+                                                       check_motions)
+
+__all__ = ["AXXB_METHODS", "solve_ax_xb"]
+
+AXXB_METHODS = ("tsai", "park", "horaud", "andreff", "daniilidis")
+
+
+def _quat_from_rotvec(v):
+    """Scalar-first quaternions from rotation vectors, *without* sign canonicalisation."""
+    th = np.linalg.norm(v, axis=-1)
+    k = v / np.maximum(th, 1e-300)[..., None]
+    return np.concatenate([np.cos(th / 2)[..., None], np.sin(th / 2)[..., None] * k], axis=-1)
+
+
+def _aligned_rotvecs(RA, RB):
+    """Rotation vectors of A and B whose axes correspond (alpha_i ~ R_X beta_i).
+
+    Near a half-turn the axis sign of a rotation vector is arbitrary, so A's
+    and B's may disagree; every closed form below then breaks. A first Park
+    estimate from the motions below 0.8 pi fixes each sign: where
+    ``alpha . R0 beta < 0`` beta is replaced by the same rotation written as
+    ``(theta - 2 pi) k``.
+    """
+    alpha = rotvec_from_matrix(RA)
+    beta = rotvec_from_matrix(RB)
+    th = np.linalg.norm(beta, axis=-1)
+    safe = th < 0.8 * np.pi
+    use = safe if safe.sum() >= 2 else np.ones_like(safe)
+    R0 = _rot_park(alpha[use], beta[use])
+    flip = np.einsum("ni,ij,nj->n", alpha, R0, beta) < 0
+    beta[flip] = beta[flip] * ((th[flip] - 2 * np.pi) / np.maximum(th[flip], 1e-300))[:, None]
+    return alpha, beta
+
+
+def _rot_tsai(alpha, beta):
+    """Tsai-Lenz: modified Rodrigues vectors P = 2 sin(theta/2) k; skew(Pa+Pb) P' = Pb - Pa."""
+    Pa = 2 * _quat_from_rotvec(alpha)[:, 1:]
+    Pb = 2 * _quat_from_rotvec(beta)[:, 1:]
+    M = skew(Pa + Pb).reshape(-1, 3)
+    Pp, *_ = np.linalg.lstsq(M, (Pb - Pa).reshape(-1), rcond=None)
+    Px = 2 * Pp / np.sqrt(1 + Pp @ Pp)
+    n2 = Px @ Px
+    return (1 - n2 / 2) * np.eye(3) + 0.5 * (np.outer(Px, Px) + np.sqrt(4 - n2) * skew(Px))
+
+
+def _rot_park(alpha, beta):
+    """Park-Martin: M = sum beta_i alpha_i^T, R = (M^T M)^-1/2 M^T (log-map Procrustes)."""
+    M = beta.T @ alpha  # sum_i beta_i alpha_i^T
+    w, V = np.linalg.eigh(M.T @ M)
+    return project_to_rotation(V @ np.diag(1 / np.sqrt(np.maximum(w, 1e-300))) @ V.T @ M.T)
+
+
+def _qleft(q):
+    w, x, y, z = q
+    return np.array([[w, -x, -y, -z], [x, w, -z, y], [y, z, w, -x], [z, -y, x, w]])
+
+
+def _qright(q):
+    w, x, y, z = q
+    return np.array([[w, -x, -y, -z], [x, w, z, -y], [y, -z, w, x], [z, y, -x, w]])
+
+
+def _matrix_from_wxyz(q):
+    return matrix_from_quaternion(np.r_[q[1:], q[0]])
+
+
+def _rot_horaud(alpha, beta):
+    """Horaud-Dornaika: q_A q_X = q_X q_B, smallest eigenvector of sum (L(q_A) - R(q_B))^T (...)."""
+    S = np.zeros((4, 4))
+    for a, b in zip(_quat_from_rotvec(alpha), _quat_from_rotvec(beta)):
+        Mi = _qleft(a) - _qright(b)
+        S += Mi.T @ Mi
+    return _matrix_from_wxyz(np.linalg.eigh(S)[1][:, 0])
+
+
+def _rot_andreff(RA, RB):
+    """Andreff: (R_A (x) I - I (x) R_B^T) vec(R_X) = 0 (row-major vec), null vector -> SO(3)."""
+    K = np.concatenate([np.kron(a, np.eye(3)) - np.kron(np.eye(3), b.T) for a, b in zip(RA, RB)])
+    v = np.linalg.svd(K, full_matrices=False)[2][-1]
+    Rx = v.reshape(3, 3)
+    Rx *= np.sign(np.linalg.det(Rx)) / abs(np.linalg.det(Rx)) ** (1 / 3)
+    return project_to_rotation(Rx)
+
+
+def _translation(RA, tA, RB_tB_rot, Rx):
+    """(R_A - I) t_X = R_X t_B - t_A stacked, least squares with a rank check."""
+    tB = RB_tB_rot
+    M = (RA - np.eye(3)).reshape(-1, 3)
+    rhs = (np.einsum("ij,nj->ni", Rx, tB) - tA).reshape(-1)
+    s = np.linalg.svd(M, compute_uv=False)
+    if s[-1] < 1e-6 * s[0]:
+        v = np.linalg.svd(M, full_matrices=False)[2][-1]
+        raise DegenerateGeometryError(
+            f"the translation of X along {np.round(v, 3).tolist()} is undetermined (rotation axes parallel)")
+    t, *_ = np.linalg.lstsq(M, rhs, rcond=None)
+    return t
+
+
+def _daniilidis(A, B):
+    """Daniilidis: dual quaternions, SVD of the 6M x 8 system, two-vector null-space combination."""
+    alpha, beta = _aligned_rotvecs(A[:, :3, :3], B[:, :3, :3])
+
+    def dual(T, rv):
+        q = _quat_from_rotvec(rv)
+        t = np.concatenate([np.zeros((len(T), 1)), T[:, :3, 3]], axis=1)
+        qd = 0.5 * np.array([_qleft(ti) @ qi for ti, qi in zip(t, q)])
+        return q, qd
+
+    qa, qda = dual(A, alpha)
+    qb, qdb = dual(B, beta)
+    rows = []
+    for a, ad, b, bd in zip(qa, qda, qb, qdb):
+        S = np.zeros((6, 8))
+        S[:3, 0] = a[1:] - b[1:]
+        S[:3, 1:4] = skew(a[1:] + b[1:])
+        S[3:, 0] = ad[1:] - bd[1:]
+        S[3:, 1:4] = skew(ad[1:] + bd[1:])
+        S[3:, 4] = a[1:] - b[1:]
+        S[3:, 5:8] = skew(a[1:] + b[1:])
+        rows.append(S)
+    Vt = np.linalg.svd(np.concatenate(rows), full_matrices=False)[2]
+    u1, v1 = Vt[-2, :4], Vt[-2, 4:]
+    u2, v2 = Vt[-1, :4], Vt[-1, 4:]
+    a_, b_, c_ = u1 @ v1, u1 @ v2 + u2 @ v1, u2 @ v2
+    if abs(a_) < 1e-14:
+        roots = np.array([-c_ / b_]) if abs(b_) > 1e-14 else np.array([0.0])
+    else:
+        disc = b_ * b_ - 4 * a_ * c_
+        if disc < 0:
+            disc = 0.0  # noise only: the exact system has real roots
+        roots = (-b_ + np.array([1.0, -1.0]) * np.sqrt(disc)) / (2 * a_)
+    vals = roots**2 * (u1 @ u1) + 2 * roots * (u1 @ u2) + u2 @ u2
+    k = int(np.argmax(vals))
+    l2 = 1 / np.sqrt(vals[k])
+    l1 = roots[k] * l2
+    q = l1 * u1 + l2 * u2
+    qd = l1 * v1 + l2 * v2
+    R = _matrix_from_wxyz(q)
+    qc = q * np.array([1, -1, -1, -1])
+    t = 2 * (_qleft(qd) @ qc)[1:]
+    return R, t
+
+
+_ROT = {"tsai": _rot_tsai, "park": _rot_park, "horaud": _rot_horaud}
+
+
+def _check_method(method: str) -> str:
+    m = str(method).lower().replace("-", "").replace("_", "")
+    alias = {"tsailenz": "tsai", "parkmartin": "park", "horauddornaika": "horaud"}
+    m = alias.get(m, m)
+    if m not in AXXB_METHODS:
+        raise InputError(f"method must be one of {', '.join(AXXB_METHODS)}, got {method!r}")
+    return m
+
+
+def solve_ax_xb(A, B, method: str = "tsai", *, min_rotation: float = MIN_ROTATION,
+                min_axis_spread: float = MIN_AXIS_SPREAD) -> tuple[np.ndarray, MotionCheck]:
+    """Closed-form solution of ``A_i X = X B_i``.
+
+    Parameters
+    ----------
+    A, B : array_like, shape (M, 4, 4)
+        Paired relative motions (metres), M >= 2 with non-parallel rotation axes.
+    method : {'tsai', 'park', 'horaud', 'andreff', 'daniilidis'}
+
+    Returns
+    -------
+    X : ndarray, shape (4, 4)
+    check : MotionCheck
+    """
+    m = _check_method(method)
+    A = _check_poses(A, "A")
+    B = _check_poses(B, "B")
+    if len(A) != len(B):
+        raise ShapeError(f"A has {len(A)} motions but B has {len(B)}: counts must match")
+    if len(A) < 2:
+        raise NotEnoughDataError(f"AX = XB needs at least 2 motions, got {len(A)}")
+    chk = check_motions(A, B, min_rotation=min_rotation, min_axis_spread=min_axis_spread)
+    if m == "daniilidis":
+        R, t = _daniilidis(A, B)
+    else:
+        if m == "andreff":
+            R = _rot_andreff(A[:, :3, :3], B[:, :3, :3])
+        else:
+            R = _ROT[m](*_aligned_rotvecs(A[:, :3, :3], B[:, :3, :3]))
+        t = _translation(A[:, :3, :3], A[:, :3, 3], B[:, :3, 3], R)
+    return transform_from(R, t), chk

@@ -1,0 +1,120 @@
+"""Robot-world / hand-eye AX = ZB: Shah's closed form and the joint refinement of X and Z.
+
+``A_i X = Z B_i`` with ``A = T_cam_world``, ``B = T_gripper_base``,
+``X = T_world_base``, ``Z = T_cam_gripper``. Reference: M. Shah, "Solving the
+robot-world/hand-eye calibration problem using the Kronecker product",
+J. Mechanisms Robotics 5(3), 2013.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from robocal.errors import DegenerateGeometryError, NotEnoughDataError, ShapeError
+from robocal.estimation import Problem, solve
+from robocal.geometry import invert_transform, project_to_rotation, transform_from
+from robocal.rigs.lineprofiler.handeye.motions import (_LABELS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses,
+                                                       _pair_indices, _perturbed, _pose_residual, _sigmas,
+                                                       check_motions)
+from robocal.rigs.lineprofiler.handeye.plausibility import judge_poses
+
+__all__ = ["RobotWorldResult", "calibrate_robot_world"]
+
+
+@dataclass
+class RobotWorldResult:
+    """Outcome of an AX = ZB calibration: ``X = T_world_base``, ``Z = T_cam_gripper``.
+
+    ``cov`` (12, 12) orders X's ``(rx, ry, rz, tx, ty, tz)`` then Z's.
+    """
+
+    X: np.ndarray
+    Z: np.ndarray
+    method: str
+    cov: np.ndarray | None = None
+    std: dict = field(default_factory=dict)
+    rot_rms: float = float("nan")
+    trans_rms: float = float("nan")
+    warnings: list = field(default_factory=list)
+    lsq: object = None
+
+
+
+def _rw_rotation(RA, RB):
+    """Shah: (R_A (x) I) vec R_X - (I (x) R_B^T) vec R_Z = 0, null vector of the 9N x 18 system."""
+    K = np.concatenate([np.hstack([np.kron(a, np.eye(3)), -np.kron(np.eye(3), b.T)]) for a, b in zip(RA, RB)])
+    _, s, Vt = np.linalg.svd(K, full_matrices=False)
+    if s[-2] < 1e-6 * s[0]:
+        raise DegenerateGeometryError(
+            "AX = ZB: the rotations do not determine X and Z (null space of dimension > 1); "
+            "use poses whose relative rotations are about at least two different axes")
+    v = Vt[-1]
+    Rx, Rz = v[:9].reshape(3, 3), v[9:].reshape(3, 3)
+    d = np.linalg.det(Rx)
+    scale = np.sign(d) / abs(d) ** (1 / 3)
+    return project_to_rotation(Rx * scale), project_to_rotation(Rz * scale)
+
+
+
+def calibrate_robot_world(T_cam_world, T_gripper_base, *, refine: bool = True,
+                          min_rotation: float = MIN_ROTATION,
+                          min_axis_spread: float = MIN_AXIS_SPREAD, accept_implausible: bool = False,
+                          names=("T_base_gripper", "T_cam_world")) -> RobotWorldResult:
+    """Robot-world / hand-eye ``A_i X = Z B_i`` (Shah's closed form, optional refinement).
+
+    Parameters
+    ----------
+    T_cam_world : array_like, shape (N, 4, 4)
+        ``A``: the world (target) frame seen by the camera, metres.
+    T_gripper_base : array_like, shape (N, 4, 4)
+        ``B``: the inverse of the robot's forward kinematics.
+    accept_implausible, names
+        As in :func:`calibrate_hand_eye` (the lists are judged as ``T_base_gripper = B^-1`` and
+        ``T_cam_target = A``, by :func:`judge_poses`); ``names``: the robot's and the camera's files.
+
+    Returns
+    -------
+    RobotWorldResult
+        ``X = T_world_base``, ``Z = T_cam_gripper``.
+    """
+    TA = _check_poses(T_cam_world, "T_cam_world")
+    TB = _check_poses(T_gripper_base, "T_gripper_base")
+    if len(TA) != len(TB):
+        raise ShapeError(f"T_cam_world has {len(TA)} poses but T_gripper_base has {len(TB)}: counts must match")
+    if len(TA) < 3:
+        raise NotEnoughDataError(f"AX = ZB needs at least 3 poses, got {len(TA)}")
+    # excitation: relative motions of the gripper (B_j^-1 B_i is a gripper motion in its own frame)
+    i, j = np.array(_pair_indices(len(TB), "all")).T
+    chk = check_motions(TB[j] @ invert_transform(TB[i]), min_rotation=min_rotation,
+                        min_axis_spread=min_axis_spread, what="X and Z")
+    judged = judge_poses(invert_transform(TB), TA, names=names, accept=accept_implausible)
+    Rx, Rz = _rw_rotation(TA[:, :3, :3], TB[:, :3, :3])
+    M = np.concatenate([np.hstack([a, -np.eye(3)]) for a in TA[:, :3, :3]])
+    rhs = (np.einsum("ij,nj->ni", Rz, TB[:, :3, 3]) - TA[:, :3, 3]).reshape(-1)
+    sol, *_ = np.linalg.lstsq(M, rhs, rcond=None)
+    X0, Z0 = transform_from(Rx, sol[:3]), transform_from(Rz, sol[3:])
+    r0 = _pose_residual(TA @ X0, Z0 @ TB)
+    warnings = judged + list(chk.warnings)
+    out = RobotWorldResult(X=X0, Z=Z0, method="shah", rot_rms=float(np.sqrt(np.mean(r0[:, :3] ** 2))),
+                           trans_rms=float(np.sqrt(np.mean(r0[:, 3:] ** 2))), warnings=warnings)
+    if not refine:
+        return out
+    sr, st = _sigmas(r0)
+
+    def fun(p):
+        return _pose_residual(TA @ _perturbed(X0, p["X"]), _perturbed(Z0, p["Z"]) @ TB)
+
+    prob = Problem()
+    prob.add_block("X", np.r_[0, 0, 0, X0[:3, 3]], labels=[f"X.{k}" for k in _LABELS])
+    prob.add_block("Z", np.r_[0, 0, 0, Z0[:3, 3]], labels=[f"Z.{k}" for k in _LABELS])
+    prob.add_residuals(fun, name="closure", residual_dim=6, sigma=[sr] * 3 + [st] * 3)
+    res = solve(prob, method="lm")
+    X, Z = _perturbed(X0, res.params["X"]), _perturbed(Z0, res.params["Z"])
+    r = _pose_residual(TA @ X, Z @ TB)
+    std = {f"X.{k}": res.std.get(f"X.{k}") for k in _LABELS} | {f"Z.{k}": res.std.get(f"Z.{k}") for k in _LABELS}
+    return RobotWorldResult(X=X, Z=Z, method="shah+refine", cov=res.cov, std=std,
+                            rot_rms=float(np.sqrt(np.mean(r[:, :3] ** 2))),
+                            trans_rms=float(np.sqrt(np.mean(r[:, 3:] ** 2))), warnings=warnings + list(res.warnings),
+                            lsq=res)

@@ -1,0 +1,154 @@
+"""AX = XB refined: X and the fixed target Y by least squares on every pose, with their covariance.
+
+The closed form (:mod:`.axxb`) starts a :class:`robocal.estimation.Problem` on
+the per-pose closure ``T_base_gripper[i] X T_cam_target[i] = Y`` (rotation and
+translation residuals weighted by the closed form's RMS), solved by
+:func:`robocal.estimation.solve`; :func:`invert_with_covariance` carries a
+pose's covariance through its inverse (first order).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from robocal.estimation import Problem, solve
+from robocal.geometry import invert_transform, project_to_rotation, skew, transform_from
+from robocal.rigs.lineprofiler.handeye.axxb import _check_method, solve_ax_xb
+from robocal.rigs.lineprofiler.handeye.motions import (_LABELS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses,
+                                                       _perturbed, _pose_residual, _sigmas, relative_motions)
+from robocal.rigs.lineprofiler.handeye.plausibility import judge_poses
+from robocal.validation import check_array, check_transform
+
+__all__ = ["HandEyeResult", "calibrate_hand_eye", "invert_with_covariance"]
+
+
+@dataclass
+class HandEyeResult:
+    """Outcome of an AX = XB calibration.
+
+    Attributes
+    ----------
+    X : ndarray, shape (4, 4)
+        ``T_gripper_cam`` (metres).
+    method : str
+        Closed-form solver used (``+refine`` when refined).
+    Y : ndarray, shape (4, 4) or None
+        ``T_base_target`` when absolute poses were given.
+    cov : ndarray, shape (6, 6) or None
+        Covariance of ``(rx, ry, rz, tx, ty, tz)`` of X (left rotation-vector
+        perturbation in rad, translation in m); only after refinement.
+    std : dict
+        ``{"rx": .., ..., "tz": ..}`` (None where not identifiable).
+    rot_rms, trans_rms : float
+        RMS of the rotation (rad) and translation (m) residuals.
+    n_motions : int
+    warnings : list of Diagnostic
+    lsq : LSQResult or None
+    """
+
+    X: np.ndarray
+    method: str
+    Y: np.ndarray | None = None
+    cov: np.ndarray | None = None
+    std: dict = field(default_factory=dict)
+    rot_rms: float = float("nan")
+    trans_rms: float = float("nan")
+    n_motions: int = 0
+    warnings: list = field(default_factory=list)
+    lsq: object = None
+
+
+
+def _std_dict(res, prefix: str) -> dict:
+    return {k: res.std.get(f"{prefix}.{k}") for k in _LABELS}
+
+
+def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, refine: bool = True,
+                       pairs: str = "all", min_rotation: float = MIN_ROTATION,
+                       min_axis_spread: float = MIN_AXIS_SPREAD, accept_implausible: bool = False,
+                       names=("T_base_gripper", "T_cam_target")) -> HandEyeResult:
+    """Eye-in-hand calibration ``X = T_gripper_cam`` from absolute poses.
+
+    Parameters
+    ----------
+    T_base_gripper : array_like, shape (N, 4, 4)
+        Robot poses (forward kinematics), metres.
+    T_cam_target : array_like, shape (N, 4, 4)
+        Poses of a fixed target measured by the sensor, metres.
+    method : str
+        Closed-form solver, see :data:`AXXB_METHODS`.
+    refine : bool
+        Refine X and ``Y = T_base_target`` jointly by least squares on the
+        per-pose closure ``T_base_gripper[i] X T_cam_target[i] = Y``
+        (rotation and translation residuals weighted by their RMS after the
+        closed form), which gives the covariance of X.
+    pairs : {'all', 'consecutive'}
+        Relative motions used by the closed form ('all': every pair up to 200 poses, beyond that
+        the pairs ``(i, i + 2^k)``, see :data:`MAX_ALL_PAIRS`).
+    accept_implausible : bool
+        Go on (with an ``implausible_input`` warning) when :func:`judge_poses` finds the lists
+        implausible; by default that raises :class:`~robocal.errors.ImplausibleInputError`.
+    names : (str, str)
+        The two lists' files, for the plausibility message.
+
+    Returns
+    -------
+    HandEyeResult
+    """
+    Tg = _check_poses(T_base_gripper, "T_base_gripper")
+    Tc = _check_poses(T_cam_target, "T_cam_target")
+    A, B = relative_motions(Tg, Tc, pairs=pairs)
+    m = _check_method(method)
+    X0, chk = solve_ax_xb(A, B, m, min_rotation=min_rotation, min_axis_spread=min_axis_spread)
+    warnings = judge_poses(Tg, Tc, names=names, accept=accept_implausible) + list(chk.warnings)
+    Yall = Tg @ X0 @ Tc
+    Y0 = transform_from(project_to_rotation(np.mean(Yall[:, :3, :3], axis=0)), Yall[:, :3, 3].mean(axis=0))
+    r0 = _pose_residual(Yall, Y0[None])
+    out = HandEyeResult(X=X0, method=m, Y=Y0, rot_rms=float(np.sqrt(np.mean(r0[:, :3] ** 2))),
+                        trans_rms=float(np.sqrt(np.mean(r0[:, 3:] ** 2))), n_motions=len(A), warnings=warnings)
+    if not refine:
+        return out
+    sr, st = _sigmas(r0)
+
+    def fun(p):
+        X = _perturbed(X0, np.r_[p["X"][:3], p["X"][3:]])
+        Y = _perturbed(Y0, p["Y"])
+        return _pose_residual(Tg @ X @ Tc, Y[None])
+
+    prob = Problem()
+    prob.add_block("X", np.r_[0, 0, 0, X0[:3, 3]], labels=[f"X.{k}" for k in _LABELS],
+                   unit=["rad"] * 3 + ["m"] * 3)
+    prob.add_block("Y", np.r_[0, 0, 0, Y0[:3, 3]], labels=[f"Y.{k}" for k in _LABELS],
+                   unit=["rad"] * 3 + ["m"] * 3)
+    prob.add_residuals(fun, name="closure", residual_dim=6, sigma=[sr] * 3 + [st] * 3)
+    res = solve(prob, method="lm")
+    X = _perturbed(X0, res.params["X"])
+    Y = _perturbed(Y0, res.params["Y"])
+    r = _pose_residual(Tg @ X @ Tc, Y[None])
+    idx = [res.free_labels.index(f"X.{k}") for k in _LABELS]
+    return HandEyeResult(X=X, method=f"{m}+refine", Y=Y, cov=res.cov[np.ix_(idx, idx)], std=_std_dict(res, "X"),
+                         rot_rms=float(np.sqrt(np.mean(r[:, :3] ** 2))),
+                         trans_rms=float(np.sqrt(np.mean(r[:, 3:] ** 2))), n_motions=len(A),
+                         warnings=warnings + list(res.warnings), lsq=res)
+
+
+
+def invert_with_covariance(T, cov):
+    """``T^-1`` and its covariance (6, 6), first order, from ``cov`` (6, 6) of ``T``.
+
+    Both covariances are over ``(rx, ry, rz, tx, ty, tz)``: the rotation vector
+    of ``R_perturbed R^T`` (rad) and the translation (m), the convention of
+    :class:`RobotWorldResult` and :class:`HandEyeResult`. With ``T = (R, t)``
+    and ``T^-1 = (R^T, -R^T t)``: ``d omega_inv = -R^T d omega``,
+    ``d t_inv = -R^T [t]x d omega - R^T d t``.
+    """
+    T = check_transform(T, "T")
+    cov = check_array(cov, "cov", shape=(6, 6))
+    R, t = T[:3, :3], T[:3, 3]
+    G = np.zeros((6, 6))
+    G[:3, :3] = -R.T
+    G[3:, :3] = -R.T @ skew(t)
+    G[3:, 3:] = -R.T
+    return invert_transform(T), G @ cov @ G.T
