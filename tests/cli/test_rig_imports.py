@@ -59,7 +59,11 @@ def test_every_subcommand_help_builds_without_the_rig_library(rig):
 import argparse, json, sys
 import {pkg}.cli as cli
 p = argparse.ArgumentParser(prog="robocal {rig}")
-cli.RIG.add_commands(p)
+if hasattr(cli.RIG, "add_commands"):
+    cli.RIG.add_commands(p)
+else:  # a declared Workflow: the core builds its commands
+    from robocal.cli._workflow import add_workflow_commands
+    add_workflow_commands(p, cli.RIG)
 p.format_help()
 for a in p._actions:
     if isinstance(getattr(a, "choices", None), dict):

@@ -171,6 +171,11 @@ class ArrayCalibration:
         Windows used per sensor.
     lsq : LSQResult
     warnings : list of Diagnostic
+    window : float or None
+        The window length, s.
+    array_file : str or None
+        The file the calibrated array was written to (relative to the result's
+        folder), when it was (``robocal flow calibrate``).
     """
 
     array: SensorArray
@@ -187,6 +192,8 @@ class ArrayCalibration:
     systematic_source: str = "constant"
     array_debiased: SensorArray | None = None
     bias_table: np.ndarray | None = None
+    window: float | None = None
+    array_file: str | None = None
 
     def total_std(self) -> dict:
         """``hypot(std, systematic)`` per parameter (None where undetermined)."""
@@ -361,4 +368,4 @@ def calibrate_array(steps: SensorSteps, t_ref, poses_ref, nominal: SensorArray, 
     return ArrayCalibration(array=arr, std=std, residual_rms=float(res.rms), n_windows=n_win, lsq=res,
                             warnings=warnings, std_model=std_model, std_jackknife=std_jk, systematic=systematic,
                             undetermined=undetermined, systematic_source=source, array_debiased=arr_deb,
-                            bias_table=table, window_times={nm: t_win[keep[i]] for i, nm in enumerate(nominal.names)})
+                            bias_table=table, window=float(window), window_times={nm: t_win[keep[i]] for i, nm in enumerate(nominal.names)})

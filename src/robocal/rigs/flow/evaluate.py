@@ -197,6 +197,18 @@ class TrajectoryErrors:
                 "rpe": {str(k): v for k, v in self.rpe.items()}, "rpe_headline_m": self.rpe_headline,
                 "rpe_note": self.rpe_note, "align_method": self.align_method}
 
+    @classmethod
+    def from_dict(cls, d: dict) -> "TrajectoryErrors":
+        """The errors as :meth:`to_dict` wrote them (a result file's; ``aligned`` is not stored: empty)."""
+        def num(v):
+            return np.nan if v is None else v
+
+        rpe = {float(k): {n: num(x) for n, x in v.items()} for k, v in (d.get("rpe") or {}).items()}
+        head = d.get("rpe_headline_m")
+        return cls(num(d["ate_rmse_m"]), num(d["final_position_error_m"]), num(d["final_heading_error_rad"]), rpe,
+                   np.empty((0, 3)), d.get("align_method", ""), num(d["distance_m"]),
+                   None if head is None else float(head), d.get("rpe_note") or "")
+
 
 def evaluate_trajectory(est, ref, *, lengths=RPE_LENGTHS) -> TrajectoryErrors:
     """ATE (after alignment), RPE per distance and the raw end-point error of ``est`` vs ``ref`` (both (N, 3)).

@@ -1,7 +1,11 @@
-"""End-to-end workflows behind the CLI: simulate -> files, odometry, calibration, evaluation.
+"""The flow rig's workflow: simulate -> files, odometry, calibration, evaluation, as library functions.
 
-Each returns plain result objects (and a :class:`~robocal.io.CalibrationResult`
-plus report sections) so everything the CLI does can be done from Python.
+Each returns plain result objects and a :class:`~robocal.io.CalibrationResult`
+(whose report :mod:`robocal.rigs.flow.report` builds from it alone), so
+everything the commands do can be done from Python. The steps of the rig's
+:class:`~robocal.workflow.Workflow` (``robocal flow calibrate``) are
+:func:`calibrate_input`, :func:`calibration_result` and :func:`summary`; the
+run functions of the other commands are in :mod:`robocal.rigs.flow.commands`.
 """
 
 from __future__ import annotations
@@ -12,40 +16,49 @@ import numpy as np
 import yaml
 
 from robocal.diagnostics import Diagnostic
+from robocal.errors import InputError
 from robocal.io import CalibrationResult, atomic_write_text, hash_inputs
-from robocal.report import Report, new_figure
 from robocal.rigs.flow.calibrate import array_estimate, calibrate_array, interpolate_poses
-from robocal.rigs.flow.evaluate import evaluate_trajectory, plot_trajectories
+from robocal.rigs.flow.evaluate import evaluate_trajectory
 from robocal.rigs.flow.kernel import FlowConfig, compute_flow_sequence, speed_limit
 from robocal.rigs.flow.log import RunSpec, load_steps, read_poses_csv, write_flow_csv, write_poses_csv
 from robocal.rigs.flow.model import SensorArray, seed_array
 from robocal.rigs.flow.odometry import Odometry, dead_reckon
-from robocal.rigs.flow.simulate import SimConfig, SimRun, simulate_run
+from robocal.rigs.flow.report import compare_text, display, plot_series, systematic_note  # noqa: F401 (re-exported)
+from robocal.rigs.flow.simulate import SimConfig, SimRun
 
-__all__ = ["write_simulation", "judge_run", "odometry_run", "calibration_run", "evaluation_run", "array_yaml", "mounted_array"]
+__all__ = ["write_simulation", "judge_run", "odometry_run", "calibration_run", "evaluation_run", "array_yaml",
+           "mounted_array", "calibrate_input", "calibration_result", "odometry_result", "evaluation_result",
+           "summary", "trajectory_curves", "frames_table", "read_reference", "KERNEL_OPTIONS", "flow_config",
+           "check_kernel_options"]
 
-
-def _read_poses(path):
-    """:func:`read_poses_csv`, read once per file version: the plausibility check, the calibration and
-    the evaluation all need the reference (1.5 s per 10^5 rows in the core CSV loader)."""
-    p = Path(path)
-    st = p.stat()
-    key = (str(p.resolve()), st.st_mtime_ns, st.st_size)
-    if _POSES_CACHE.get("key") != key:
-        _POSES_CACHE.clear()
-        _POSES_CACHE.update(key=key, value=read_poses_csv(p))
-    t, poses = _POSES_CACHE["value"]
-    return t.copy(), poses.copy()
+#: The kernel's options (``--subpixel`` ...): they act on raw frames only.
+KERNEL_OPTIONS = ("subpixel", "refine", "search", "aggregate")
 
 
-_POSES_CACHE: dict = {}
+def flow_config(options: dict, spec: RunSpec | None = None) -> FlowConfig:
+    """The kernel configuration of the given options (None: the default), the run's window, ``debias``."""
+    d = FlowConfig()
+    kw = {k: options[k] if options.get(k) is not None else getattr(d, k) for k in KERNEL_OPTIONS}
+    if spec is not None:
+        kw["window"] = spec.window
+    kw["debias"] = bool(options.get("debias", False))
+    return FlowConfig(**kw)
 
-#: most points a figure line gets: a 10^6-row log's velocity figure took minutes to draw in full
-_PLOT_POINTS = 5000
+
+def check_kernel_options(options: dict, spec: RunSpec) -> None:
+    """Kernel options act on raw frames only: on a flow log they would be silently ignored."""
+    given = [f"--{k}" for k in KERNEL_OPTIONS if options.get(k) is not None]
+    if given and spec.frames is None:
+        raise InputError(f"{spec.path}: {', '.join(given)} {'acts' if len(given) == 1 else 'act'} on raw frames, but "
+                         f"this run gives only a flow log ('flow_log: {spec.flow_log.name}', flow computed by the "
+                         "sensors); drop the option(s) or add 'frames'")
 
 
-def _every(n: int) -> int:
-    return max(1, -(-n // _PLOT_POINTS))
+def read_reference(spec: RunSpec):
+    """The run's reference trajectory ``(t, poses)``, or None when it names none (read once per command:
+    1.5 s per 10^5 rows in the core CSV loader)."""
+    return None if spec.reference is None else read_poses_csv(spec.reference)
 
 
 def mounted_array() -> SensorArray:
@@ -105,10 +118,11 @@ def write_simulation(run: SimRun, out_dir, *, frames: bool = True, flow_config: 
 
 
 def judge_run(spec: RunSpec, steps, config: FlowConfig, *, allow_missing: bool = False,
-              accept_implausible: bool = False) -> list:
+              accept_implausible: bool = False, reference=None) -> list:
     """The run's plausibility (:mod:`robocal.rigs.flow.plausibility`): against its reference when it has
     one, else its heights against the optics. Raises :class:`~robocal.errors.ImplausibleInputError`
-    naming the likely slip; with ``accept_implausible`` returns the ``implausible_input`` warning."""
+    naming the likely slip; with ``accept_implausible`` returns the ``implausible_input`` warning.
+    ``reference``: the run's ``(t, poses)`` when already read (:func:`read_reference`)."""
     from dataclasses import replace as _replace
 
     from robocal.rigs.flow.log import read_flow_csv, steps_from_records
@@ -118,7 +132,7 @@ def judge_run(spec: RunSpec, steps, config: FlowConfig, *, allow_missing: bool =
     height_from = (spec.frames if from_frames else spec.flow_log).name
     src = str(spec.path)
     if spec.reference is not None:
-        t_ref, p_ref = _read_poses(spec.reference)
+        t_ref, p_ref = reference if reference is not None else read_reference(spec)
         _interp(spec.reference, t_ref, p_ref, steps.t)      # coverage, with the file named
         rescaled = refocused = None
         if not from_frames:
@@ -150,15 +164,17 @@ def judge_run(spec: RunSpec, steps, config: FlowConfig, *, allow_missing: bool =
 
 def odometry_run(spec: RunSpec, *, config: FlowConfig | None = None, array: SensorArray | None = None,
                  allow_missing: bool = False, robust: bool = True, method: str = "exact", progress=None,
-                 accept_implausible: bool = False):
+                 accept_implausible: bool = False, reference=None):
     """Dead reckoning of a logged run; returns (Odometry, flows or None, steps).
 
     The run is judged first (:func:`judge_run`): an implausible one raises
     :class:`~robocal.errors.ImplausibleInputError` unless ``accept_implausible``.
+    ``reference``: the run's ``(t, poses)`` when already read.
     """
     config = config or FlowConfig(window=spec.window)
     steps, flows = load_steps(spec, config, allow_missing=allow_missing, progress=progress)
-    judged = judge_run(spec, steps, config, allow_missing=allow_missing, accept_implausible=accept_implausible)
+    judged = judge_run(spec, steps, config, allow_missing=allow_missing, accept_implausible=accept_implausible,
+                       reference=reference)
     od = dead_reckon(steps, array or spec.array, robust=robust, method=method)
     od.warnings[:0] = judged
     if flows is not None:
@@ -173,66 +189,24 @@ def odometry_run(spec: RunSpec, *, config: FlowConfig | None = None, array: Sens
     return od, flows, steps
 
 
-def _traj_section(report: Report, title: str, curves: dict, errors: dict) -> None:
-    sec = report.section(title)
-    fig, ax = new_figure(size=(6.0, 5.0))
-    k = _every(max(len(c) for c in curves.values()))
-    plot_trajectories({n: np.concatenate([c[::k], c[-1:]]) for n, c in ((n, np.asarray(c)) for n, c in curves.items())},
-                      ax=ax, title="true / flow odometry / wheel odometry (cf. seed Fig. 4)")
-    sec.figure(fig, "Trajectories in the world frame; dots mark the end.")
-    rows = []
-    first = next(iter(errors.values()), None)
-    label = first.rpe_label() if first is not None else "RPE@0.5m"
-    seg = f"{first.rpe_headline:g} m" if first is not None and first.rpe_headline is not None else "0.5 m"
-    for name, ev in errors.items():
-        r1 = ev.headline_rpe()
-        rows.append({"trajectory": name, "ATE [mm]": ev.ate_rmse * 1e3, "final error [mm]": ev.final_error * 1e3,
-                     "final heading [deg]": np.degrees(ev.heading_error_final),
-                     f"{label} [%]": r1["trans_per_m"] * 100, "RPE rot [deg/m]": np.degrees(r1["rot_per_m"])})
-    sec.table(rows, digits=4, caption="ATE: RMS position error after least-squares rigid 2D alignment (Umeyama); "
-              f"RPE: RMS over all segment starts of the relative pose error over {seg} of travelled path "
-              "(translation error per metre of path, rotation error per metre; other lengths, mean and median in "
-              "result.json).")
-    for note in dict.fromkeys(ev.rpe_note for ev in errors.values() if ev.rpe_note):
-        sec.text(f"Note: {note}.")
-    cal, nom = errors.get("flow odometry (calibrated)"), errors.get("flow odometry")
-    if cal is not None and nom is not None:
-        sec.text(compare_text(nom, cal))
-
-
-def compare_text(nom, cal) -> str:
-    """One line: calibrated vs nominal array in ATE and the headline RPE (0.5 m), saying which got worse."""
-    def word(a, b):
-        return "better" if b < a else "WORSE" if b > a else "same"
-
-    rn, rc = nom.headline_rpe(), cal.headline_rpe()
-    tn, tc = rn["trans_per_m"], rc["trans_per_m"]
-    on, oc = np.degrees(rn["rot_per_m"]), np.degrees(rc["rot_per_m"])
-    ate = (f"calibrated vs nominal array: ATE {nom.ate_rmse * 1e3:.1f} -> {cal.ate_rmse * 1e3:.1f} mm "
-           f"({word(nom.ate_rmse, cal.ate_rmse)})")
-    if not (rn["n"] and rc["n"]):
-        return ate + "; no RPE (the reference path is too short)"
-    return (ate + f"; {nom.rpe_label()} {tn * 100:.2f} -> {tc * 100:.2f} % ({word(tn, tc)}), "
-            f"{on:.2f} -> {oc:.2f} deg/m ({word(on, oc)})")
-
-
 def _interp(path, t_ref, p_ref, t):
     """:func:`interpolate_poses` with errors naming the file."""
-    from robocal.errors import InputError
-
     try:
         return interpolate_poses(t_ref, p_ref, t)
     except InputError as exc:
         raise InputError(f"{path}: {exc}") from None
 
 
-def evaluation_run(spec: RunSpec, od: Odometry, *, calibrated: Odometry | None = None):
-    """Errors of flow odometry (and wheel odometry, when logged) against the run's reference."""
-    if spec.reference is None:
-        from robocal.errors import InputError
+def evaluation_run(spec: RunSpec, od: Odometry, *, calibrated: Odometry | None = None, reference=None):
+    """Errors of flow odometry (and wheel odometry, when logged) against the run's reference.
 
+    Returns ``(curves, errors)``: named ``(N, 3)`` trajectories at the odometry's
+    times and named :class:`~robocal.rigs.flow.evaluate.TrajectoryErrors`.
+    ``reference``: the run's ``(t, poses)`` when already read.
+    """
+    if spec.reference is None:
         raise InputError(f"{spec.path}: evaluation needs a 'reference' trajectory file")
-    t_ref, p_ref = _read_poses(spec.reference)
+    t_ref, p_ref = reference if reference is not None else read_reference(spec)
     ref = _interp(spec.reference, t_ref, p_ref, od.t)
     curves = {"true": ref, "flow odometry": od.poses}
     errors = {"flow odometry": evaluate_trajectory(od.poses, ref)}
@@ -247,47 +221,126 @@ def evaluation_run(spec: RunSpec, od: Odometry, *, calibrated: Odometry | None =
     return curves, errors
 
 
+def trajectory_curves(spec: RunSpec, od: Odometry) -> dict:
+    """The trajectories of a run without a reference: flow odometry, and wheel odometry when logged."""
+    curves = {"flow odometry": od.poses}
+    if spec.wheel is not None:
+        t_w, p_w = read_poses_csv(spec.wheel)
+        curves["wheel odometry"] = _interp(spec.wheel, t_w, p_w, od.t)
+    return curves
+
+
 def calibration_run(spec: RunSpec, *, config: FlowConfig | None = None, window: float = 0.1, loss: str = "linear",
                     progress=None, accept_implausible: bool = False):
     """Array calibration from a logged run with a reference trajectory (judged first, see :func:`judge_run`)."""
-    from robocal.errors import InputError
-
     if spec.reference is None:
         raise InputError(f"{spec.path}: calibration needs a 'reference' trajectory file (t, x, y, theta)")
     config = config or FlowConfig(window=spec.window)
     nominal = spec.array.copy(scale=np.ones(spec.array.n))
     steps, flows = load_steps(spec, config, progress=progress)
-    t_ref, p_ref = _read_poses(spec.reference)
+    reference = t_ref, p_ref = read_reference(spec)
     _interp(spec.reference, t_ref, p_ref, steps.t)          # coverage, with the file named
-    judged = judge_run(spec, steps, config, accept_implausible=accept_implausible)
+    judged = judge_run(spec, steps, config, accept_implausible=accept_implausible, reference=reference)
     cal = calibrate_array(steps, t_ref, p_ref, nominal, window=window, loss=loss)
     cal.warnings[:0] = judged
     return cal, steps
 
 
+#: The file ``calibrate`` writes beside result.json: the calibrated array as a ``run.yaml`` sensor list.
+ARRAY_FILE = "array_calibrated.yaml"
+
+
+def calibrate_input(spec: RunSpec, *, out_dir=None, progress: bool = False, accept_implausible: bool = False,
+                    window: float = 0.1, loss: str = "linear", no_progress: bool = False, **kernel_options):
+    """``robocal flow calibrate``'s calibrate step: :func:`calibration_run` on a loaded ``run.yaml``.
+
+    ``kernel_options``: ``subpixel``, ``refine``, ``search``, ``aggregate``
+    (raw frames only; None = default) and ``debias``. With ``out_dir``, the
+    calibrated array is also written there as :data:`ARRAY_FILE` (lengths mm,
+    angles deg, the run's camera block). Returns the
+    :class:`~robocal.rigs.flow.calibrate.ArrayCalibration` with ``spec`` and
+    ``window`` attached for :func:`calibration_result`.
+    """
+    from robocal.progress import progress as bar
+
+    if not np.isfinite(window) or window <= 0:
+        raise InputError(f"--window must be > 0 s, got {window}")
+    check_kernel_options(kernel_options, spec)
+    show = progress and not no_progress
+    # a stage bar on a terminal for long runs (10^6 log rows: minutes, mostly reading)
+    stages = iter(bar(range(2), desc="flow calibrate: read, judge, fit; report", total=2, enabled=show))
+    next(stages, None)
+    cal, _ = calibration_run(spec, config=flow_config(kernel_options, spec), window=window, loss=loss,
+                             progress=lambda it, desc: bar(it, desc=desc, enabled=show),
+                             accept_implausible=accept_implausible)
+    next(stages, None)
+    if out_dir is not None:
+        cam = {"focal_px": spec.focal_px, "window": spec.window}
+        if spec.rate is not None:
+            cam["rate"] = {"value": spec.rate, "unit": "Hz"}
+        extra = {"undetermined_kept_nominal": list(cal.undetermined)} if cal.undetermined else None
+        atomic_write_text(Path(out_dir) / ARRAY_FILE, array_yaml(cal.array, cam, extra))
+        cal.array_file = ARRAY_FILE
+    return cal
+
+
 def calibration_result(cal, spec: RunSpec | None = None, *, method: str = "windowed-lsq") -> CalibrationResult:
     """The shared result schema: ``std`` is the statistical std (segment jackknife, see
     :func:`~robocal.rigs.flow.calibrate.calibrate_array`); the kernel systematic, their
-    combination and the parameters kept at nominal are in ``diagnostics``."""
+    combination, the parameters kept at nominal, the window residuals and the solver's
+    record are in ``diagnostics`` (what :func:`robocal.rigs.flow.report.calibration_report` draws)."""
     keys = cal.estimate_dict()
+    windows = {nm: {"t": cal.window_times[nm], "residual": cal.lsq.obs_residuals(nm)} for nm in cal.array.names}
+    diag = {"undetermined_kept_nominal": list(cal.undetermined),
+            "std_systematic_kernel": {k: cal.systematic.get(k) for k in keys},
+            "std_systematic_kernel_source": cal.systematic_source,
+            "kernel_debiased": cal.array_debiased is not None and cal.array_debiased is cal.array,
+            "estimate_kernel_debiased": (None if cal.array_debiased is None else array_estimate(cal.array_debiased)),
+            "std_total": cal.total_std(),
+            "std_model_white_noise": {k: cal.std_model.get(k) for k in keys},
+            "std_jackknife": {k: cal.std_jackknife.get(k) for k in keys},
+            "windows_per_sensor": cal.n_windows.tolist(), "iterations": cal.lsq.iterations,
+            "condition_number": cal.lsq.condition_number, "cost_history": cal.lsq.cost_history,
+            "window_s": cal.window, "window_residuals": windows, "solver": cal.lsq.to_dict()}
+    if cal.array_file:
+        diag["array_file"] = cal.array_file
     return CalibrationResult(
         rig="flow", method=method, estimate=keys,
         std={k: cal.std.get(k) for k in keys}, units=cal.units(),
         residual_rms=cal.residual_rms, residual_unit="m", warnings=list(cal.warnings),
-        inputs=hash_inputs(spec.inputs()) if spec is not None else {},
-        diagnostics={"undetermined_kept_nominal": list(cal.undetermined),
-                     "std_systematic_kernel": {k: cal.systematic.get(k) for k in keys},
-                     "std_systematic_kernel_source": cal.systematic_source,
-                     "estimate_kernel_debiased": (None if cal.array_debiased is None else array_estimate(cal.array_debiased)),
-                     "std_total": cal.total_std(),
-                     "std_model_white_noise": {k: cal.std_model.get(k) for k in keys},
-                     "std_jackknife": {k: cal.std_jackknife.get(k) for k in keys},
-                     "windows_per_sensor": cal.n_windows.tolist(), "iterations": cal.lsq.iterations,
-                     "condition_number": cal.lsq.condition_number, "cost_history": cal.lsq.cost_history},
-    )
+        inputs=hash_inputs(spec.inputs()) if spec is not None else {}, diagnostics=diag)
 
 
-def odometry_result(od: Odometry, spec: RunSpec, errors: dict | None = None) -> CalibrationResult:
+def summary(result: CalibrationResult) -> str:
+    """The lines ``robocal flow calibrate`` prints: each parameter with its statistical and kernel std."""
+    d = result.diagnostics
+    und = set(d.get("undetermined_kept_nominal") or ())
+    sysk = d.get("std_systematic_kernel") or {}
+    lines = [f"wrote {d['array_file']} (beside result.json)"] if d.get("array_file") else []
+    lines.append(f"  {'parameter':14s} {'value':>10s} {'unit':5s} +/- statistical  +/- kernel systematic")
+    for k, v in result.estimate.items():
+        conv, u = display(result.units[k])
+        if k in und:
+            lines.append(f"  {k:14s} {conv(v):10.4f} {u:5s} not determined by this drive (kept nominal)")
+        else:
+            lines.append(f"  {k:14s} {conv(v):10.4f} {u:5s} +/- {conv(result.std[k]):<12.4f} +/- {conv(sysk[k]):.4f}")
+    how = systematic_note(d.get("std_systematic_kernel_source", "constant"), bool(d.get("kernel_debiased")))
+    lines.append(f"  kernel systematic: {how}")
+    return "\n".join(lines)
+
+
+def frames_table(od: Odometry) -> list:
+    """Per sensor: frames without a valid flow, by reason, and steps left out as outliers."""
+    n_steps = len(od.twists)
+    return [{"sensor": nm, "frames without flow": c, "of": n_steps,
+             "reasons": ", ".join(f"{r} {k}" for r, k in od.frames["invalid_by_reason"][nm].items()) or "-",
+             "left out as outlier": int(od.rejected[i].sum())}
+            for i, (nm, c) in enumerate(od.frames["invalid_frames"].items())]
+
+
+def odometry_result(od: Odometry, spec: RunSpec, errors: dict | None = None, *, curves: dict | None = None,
+                    steps=None) -> CalibrationResult:
+    """``robocal flow odometry``'s result; with ``curves`` and ``steps`` also what its report draws."""
     est = {"final_pose": od.poses[-1], "distance": od.summary()["distance_m"],
            "mean_speed": float(np.mean(np.linalg.norm(od.velocity[:, :2], axis=1)))}
     units = {"final_pose": "m, m, rad", "distance": "m", "mean_speed": "m/s"}
@@ -298,35 +351,21 @@ def odometry_result(od: Odometry, spec: RunSpec, errors: dict | None = None) -> 
         if fo is not None:
             est["ate_rmse"] = fo.ate_rmse
             units["ate_rmse"] = "m"
+    diag["frames_without_flow"] = frames_table(od)
+    diag["plots"] = plot_series(od, steps, spec.array.names, curves)
     return CalibrationResult(rig="flow", method="multi-sensor-lsq", estimate=est, units=units,
                              std={"final_pose": None}, warnings=list(od.warnings),
                              inputs=hash_inputs(spec.inputs()), diagnostics=diag)
 
 
-def velocity_figure(od: Odometry):
-    fig, axs = new_figure(3, 1, size=(6.4, 5.5), sharex=True)
-    k = _every(len(od.t) - 1)                                # drawn every k-th interval on long runs
-    tm = (0.5 * (od.t[1:] + od.t[:-1]))[::k]
-    for a, lab in enumerate(("vx [m/s]", "vy [m/s]", "omega [rad/s]")):
-        v, s = od.velocity[::k, a], od.velocity_std[::k, a]
-        axs[a].plot(tm, v, lw=0.6)
-        axs[a].fill_between(tm, v - 3 * s, v + 3 * s, alpha=0.3, lw=0)
-        axs[a].set_ylabel(lab)
-    axs[-1].set_xlabel("t [s]")
-    fig.suptitle("robot velocity from the array, +/-3 sigma band from the geometry")
-    return fig
-
-
-def quality_figure(steps, names):
-    fig, ax = new_figure(size=(6.4, 3.0))
-    k = _every(len(steps.t) - 1)
-    tm = steps.t[1:][::k]
-    for i, nm in enumerate(names):
-        ax.plot(tm, steps.quality[i][::k], lw=0.7, label=nm)
-    ax.set_xlabel("t [s]")
-    ax.set_ylabel("quality (0..255)")
-    ax.legend(fontsize=8)
-    return fig
+def evaluation_result(od: Odometry, spec: RunSpec, curves: dict, errors: dict,
+                      calibrated: Odometry | None = None) -> CalibrationResult:
+    """``robocal flow evaluate``'s result: ATE per trajectory, the full errors and the plotted curves."""
+    warnings = list(od.warnings) + ([w for w in calibrated.warnings if w not in od.warnings] if calibrated else [])
+    diag = {"evaluation": {k: v.to_dict() for k, v in errors.items()}, "plots": plot_series(curves=curves)}
+    return CalibrationResult(rig="flow", method="ate-rpe", estimate={f"{k} ATE": v.ate_rmse for k, v in errors.items()},
+                             units={f"{k} ATE": "m" for k in errors}, warnings=warnings,
+                             inputs=hash_inputs(spec.inputs()), diagnostics=diag)
 
 
 def speed_ceiling(config: FlowConfig, height: float, rate: float, focal_px: float) -> float:

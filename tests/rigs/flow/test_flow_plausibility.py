@@ -2,7 +2,7 @@
 
 Every case edits a copy of a shipped example the way a user slips (a unit, swapped columns) and runs
 the CLI in-process; ``--accept-implausible`` then writes the result with an ``implausible_input``
-warning. The correct examples are judged plausible by the same code in tests/rigs/flow/test_cli.py.
+warning. The correct examples are judged plausible by the same code in tests/rigs/flow/test_flow_cli.py.
 """
 
 import json
