@@ -66,7 +66,9 @@ def test_failed_edge_fit_is_a_named_warning(monkeypatch):
     o = R.detect_mirror_image(img, cam, tags)
     assert not [w for w in o.warnings if w.code == "low_quality"]  # clean render: every fit succeeds
     # a fit that fails gives its input back: make every fit fail
-    monkeypatch.setattr(R, "refine_tag_corners",
+    from robocal.rigs.mirror import detect
+
+    monkeypatch.setattr(detect, "refine_tag_corners",
                         lambda image, corners, camera=None, cells=6: np.asarray(corners, float))
     o = R.detect_mirror_image(img, cam, tags)
     low = [w for w in o.warnings if w.code == "low_quality"]

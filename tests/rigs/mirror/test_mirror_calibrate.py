@@ -256,7 +256,7 @@ def test_points_behind_the_camera(setup, monkeypatch):
     # calibration: a PnP that can only explain the data with points behind the camera
     import importlib
 
-    mod = importlib.import_module("robocal.rigs.mirror.calibrate")
+    mod = importlib.import_module("robocal.rigs.mirror.single")  # calibrate_single's module
     from robocal.errors import ConvergenceError
 
     def behind(*a, **k):
@@ -384,7 +384,7 @@ def _ambiguous_placements(seed):
 def test_consensus_switch_keeps_residuals_and_warnings_with_the_new_pose():
     import importlib
 
-    mod = importlib.import_module("robocal.rigs.mirror.calibrate")
+    mod = importlib.import_module("robocal.rigs.mirror.consistency")
     # image 0: ambiguous alone, switched 0 -> 1 by the others. (Seed 102 was OpenCV 4 stopping its LM on
     # the second IPPE pose short of a minimum; robocal now refines to convergence and its poses merge.)
     cam, scene, obs = _ambiguous_placements(15)
@@ -473,7 +473,7 @@ def test_behind_the_camera_message_says_it_once(setup, monkeypatch):
     from robocal.errors import ConvergenceError
 
     cam, scene, o = _obs(setup)
-    mod = importlib.import_module("robocal.rigs.mirror.calibrate")
+    mod = importlib.import_module("robocal.rigs.mirror.single")  # calibrate_single's module
     core = "PnP pose puts points behind the camera (indices [0, 1]); check the correspondences"
 
     def behind(*a, **k):

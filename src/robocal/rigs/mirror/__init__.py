@@ -5,11 +5,16 @@ the camera sees the reflection of feature points on the robot body gives the
 camera pose in the robot frame. See ``docs/rigs/mirror.md``.
 
 Modules: :mod:`.model` (frames, the patent's chain, the Householder form),
-:mod:`.scene` (the published example), :mod:`.calibrate` (single-image method,
-planar-ambiguity choice, joint refinement), :mod:`.checks` (camera, rectangle,
-handedness and marker-fit checks of a user's inputs), :mod:`.crossratio`,
-:mod:`.simulate`, :mod:`.render` (images, ArUco path), :mod:`.montecarlo`,
-:mod:`.files`, :mod:`.report`, :mod:`.workflow`, :mod:`.cli`.
+:mod:`.scene` (the published example), :mod:`.observation` (what an image
+gives, validated), :mod:`.single` (the patent's single-image method and the
+planar-ambiguity choice), :mod:`.joint` (the joint problem over K placements),
+:mod:`.consistency` (agreement of the images, outliers named),
+:mod:`.calibrate` (the API: :func:`calibrate`), :mod:`.checks` (camera,
+rectangle, handedness and marker-fit checks of a user's inputs),
+:mod:`.slips`, :mod:`.crossratio`, :mod:`.simulate`, :mod:`.tags`,
+:mod:`.render` (rendered images), :mod:`.detect` (the ArUco path),
+:mod:`.montecarlo`, :mod:`.files`, :mod:`.report`, :mod:`.workflow` (the
+rig's steps for :mod:`robocal.workflow`), :mod:`.cli` (the declaration).
 
 The names in ``__all__`` are imported from their submodule on first access
 (PEP 562): importing the package, e.g. for ``robocal mirror --help`` through
@@ -25,8 +30,10 @@ from robocal._lazy import lazy_exports
 
 #: exported name -> submodule defining it (a test checks both)
 _EXPORTS = {
-    **dict.fromkeys(("MirrorCalibration", "MirrorObservation", "PlanarChoice", "SingleImageResult", "calibrate",
-                     "calibrate_single", "choose_planar_solution", "predicted_covariance"), "calibrate"),
+    **dict.fromkeys(("MirrorCalibration", "calibrate"), "calibrate"),
+    "MirrorObservation": "observation",
+    **dict.fromkeys(("PlanarChoice", "SingleImageResult", "calibrate_single", "choose_planar_solution"), "single"),
+    "predicted_covariance": "joint",
     "diagonal_points": "crossratio",
     **dict.fromkeys(("F_X", "T_M_OM", "MirrorScene", "PatentSteps", "householder_compose", "mirror_plane",
                      "patent_compose", "ri_from_r_points", "virtual_transform"), "model"),

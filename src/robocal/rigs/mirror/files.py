@@ -76,15 +76,9 @@ from robocal.camera import CameraModel, MarkerRectangle, camera_from_document, r
 from robocal.errors import FileFormatError, RobocalError
 from robocal.geometry import transform_from
 from robocal.io import Document, atomic_write_text, load_document
-from robocal.rigs.mirror.calibrate import MirrorObservation
-from robocal.rigs.mirror.render import (
-    _R_R_TAG_FRONT,
-    ARUCO_DICT,
-    BodyTags,
-    MirrorTags,
-    detect_mirror_image,
-    tag_rotation,
-)
+from robocal.rigs.mirror.observation import MirrorObservation
+from robocal.rigs.mirror.detect import detect_mirror_image
+from robocal.rigs.mirror.tags import _R_R_TAG_FRONT, ARUCO_DICT, BodyTags, MirrorTags, tag_rotation
 
 __all__ = ["MirrorInput", "load_input", "write_input", "load_camera", "read_camera_file"]
 

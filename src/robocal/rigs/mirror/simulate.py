@@ -13,7 +13,7 @@ import numpy as np
 
 from robocal.camera import CameraModel
 from robocal.errors import DegenerateGeometryError, NotEnoughDataError
-from robocal.rigs.mirror.calibrate import MirrorObservation
+from robocal.rigs.mirror.observation import MirrorObservation
 from robocal.rigs.mirror.model import MirrorScene
 from robocal.rigs.mirror.scene import DEFAULT_INTRINSICS, perturbed_placements, published_scene
 

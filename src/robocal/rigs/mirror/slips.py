@@ -79,7 +79,7 @@ def _extent(P) -> float:
 
 def check_body_span(body_points_r, *, declared: dict | None = None, accept: bool = False) -> list[Diagnostic]:
     """Check 1 of the module doc: raise (or warn with ``accept``) when the body points' span is implausible."""
-    from robocal.rigs.mirror.calibrate import BODY_EXTENT_RANGE_M
+    from robocal.rigs.mirror.single import BODY_EXTENT_RANGE_M
 
     lo, hi = BODY_EXTENT_RANGE_M
     typical = float(np.sqrt(lo * hi))  # 0.45 m: the middle of the range on a log scale
@@ -102,7 +102,7 @@ def check_answer(camera, rectangle, body_points_r, observations, singles, *, sig
                  declared: dict | None = None, accept: bool = False) -> list[Diagnostic]:
     """Checks 2 and 3 of the module doc on the single-image estimates ``singles`` (one per observation)."""
     from robocal.camera import MarkerRectangle
-    from robocal.rigs.mirror.calibrate import CAMERA_BODY_MAX_M, calibrate_single
+    from robocal.rigs.mirror.single import CAMERA_BODY_MAX_M, calibrate_single
 
     declared = declared or {}
     P = np.asarray(body_points_r, dtype=float)
