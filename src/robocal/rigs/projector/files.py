@@ -49,7 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from robocal.errors import FileFormatError, RobocalError, SingularConfigurationError
-from robocal.geometry import rotz
+from robocal.geometry import matrix_from_angle
 from robocal.io import Document, load_csv, load_document, load_result
 from robocal.rigs.projector.model import HORIZON_TOL, ProjectorModel
 
@@ -102,7 +102,7 @@ def projector_from_doc(doc: Document, *, extrinsics: bool = False) -> ProjectorM
                 raise doc.error("result", f"not a projector result (missing/invalid {exc})") from None
         else:
             if "yaw" in doc:
-                kw["R_0_W"] = rotz(doc.float("yaw", kind="angle"))
+                kw["R_0_W"] = matrix_from_angle("z", doc.float("yaw", kind="angle"))
             elif "R_0_W" in doc:
                 kw["R_0_W"] = doc.array("R_0_W", shape=(3, 3))
             kw["t_0_W"] = doc.array("t_0_W", kind="length", shape=(3,))

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from robocal.errors import InputError, NotEnoughDataError
-from robocal.geometry import rotz
+from robocal.geometry import matrix_from_angle
 from robocal.rigs.projector.model import ProjectorModel
 from robocal.rigs.projector.published import SEED_A_T, SEED_B_R, SEED_B_T, SEED_H
 
@@ -25,7 +25,8 @@ def default_truth(name: str = "A") -> ProjectorModel:
     """Projector A of the seed's room: H = 2.90 m, yaw 2.40 deg, t = (2.40, -0.90, -2.90) m,
     with a pan-tilt head of d1 = 0.12 m, d2 = 0.05 m and a small tilt zero offset (0.3 deg)."""
     return ProjectorModel(H=SEED_H, d1=0.12, d2=0.05, offsets=(0.0, math.radians(0.3)),
-                          tilt_limit=math.radians(75.0), R_0_W=rotz(math.radians(2.4047)), t_0_W=SEED_A_T, name=name)
+                          tilt_limit=math.radians(75.0), R_0_W=matrix_from_angle("z", math.radians(2.4047)),
+                          t_0_W=SEED_A_T, name=name)
 
 
 def default_nominal(truth: ProjectorModel) -> ProjectorModel:
@@ -37,9 +38,9 @@ def default_nominal(truth: ProjectorModel) -> ProjectorModel:
 def seed_room_projectors() -> list[ProjectorModel]:
     """Projectors A and B with the seed's published extrinsics (ideal heads)."""
     a = ProjectorModel(H=SEED_H, d1=0.12, d2=0.05, tilt_limit=math.radians(75.0),
-                       R_0_W=rotz(math.radians(2.4047)), t_0_W=SEED_A_T, name="A")
+                       R_0_W=matrix_from_angle("z", math.radians(2.4047)), t_0_W=SEED_A_T, name="A")
     yaw_b = math.atan2(SEED_B_R[1, 0], SEED_B_R[0, 0])
-    b = ProjectorModel(H=SEED_H, d1=0.12, d2=0.05, tilt_limit=math.radians(75.0), R_0_W=rotz(yaw_b),
+    b = ProjectorModel(H=SEED_H, d1=0.12, d2=0.05, tilt_limit=math.radians(75.0), R_0_W=matrix_from_angle("z", yaw_b),
                        t_0_W=SEED_B_T, name="B")
     return [a, b]
 
