@@ -1,11 +1,17 @@
-"""Rig ``flow``: dead reckoning from several downward optical-flow sensors (seed 003).
+"""Rig ``flow``: dead reckoning from several downward optical-flow sensors (Li, Guan and Chu 2017).
 
-Modules: :mod:`.kernel` (SAD block matching, sub-pixel, gyro compensation,
-metric flow; numba), :mod:`.model` (the array, SE(2) helpers),
-:mod:`.odometry` (the seed's ``A u = b``, robust fusion, integration),
-:mod:`.simulate` (real-photo ground, sensor cameras, gyro, height, wheels),
-:mod:`.calibrate` (array calibration), :mod:`.evaluate` (ATE, RPE, plots),
-:mod:`.log` (file formats), :mod:`.workflow` and :mod:`.cli`.
+Modules: :mod:`.kernel` (SAD block matching, sub-pixel, the per-sensor flow
+API) over :mod:`.kernel_config` (``FlowConfig``, no numba),
+:mod:`.kernel_compiled` (the numba loops) and :mod:`.kernel_metric` (gyro
+compensation, metric flow); :mod:`.kernel_bias` (the kernel's sub-pixel bias),
+:mod:`.model` (the array, SE(2) helpers), :mod:`.odometry` (the seed's
+``A u = b``, robust fusion, integration), :mod:`.simulate` (real-photo ground,
+sensor cameras, gyro, height, wheels), :mod:`.calibrate` (array calibration),
+:mod:`.evaluate` (ATE, RPE, plots), :mod:`.log` (file formats),
+:mod:`.mavlink` / :mod:`.mavlink_convert` (MAVLink logs), :mod:`.plausibility`,
+:mod:`.workflow` (the steps), :mod:`.report` (reports from a result),
+:mod:`.commands` (the extra commands), :mod:`.demo` and :mod:`.cli` (the
+declaration).
 
 The names in ``__all__`` are imported from their submodule on first access
 (PEP 562): importing the package, e.g. for ``robocal flow --help`` through
