@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import yaml
 
-from robocal.cli import DemoContext
+from robocal.workflow import DemoContext
 from robocal.cli.main import main
 from robocal.kinematics import KinematicTree
 from robocal.rigs.humanoid.cli import RIG
@@ -36,13 +36,16 @@ def test_calibrate_example_and_report(tmp_path, capsys):
     assert "joint_offsets" in (out / "offsets.yaml").read_text()
     text = capsys.readouterr().out
     assert "LM iterations: " in text and " from zero + " in text and "warning" not in text
-    assert "simulation truth in run.yaml: 21 parameters, worst |error|/std " in text
+    assert "simulation truth: NEES " in text and "over 21 parameters" in text and ": consistent with" in text
+    assert "also written beside the result: offsets.yaml, nao_h25_legs_head_calibrated.urdf" in text
+    assert d["diagnostics"]["truth_check"]["passed"] and d["diagnostics"]["truth_check"]["dof"] == 21
     # the rebuilt report has what the first one had: tables, histograms, per-view RMS, overlays
     assert main(["humanoid", "report", str(out / "result.json"), "--out", str(tmp_path / "rep")]) == 0
     first, again = ((p / "report.html").read_text() for p in (out, tmp_path / "rep"))
     for html in (first, again):
-        assert html.count("<img") == 6  # histogram + cost, per-view RMS, 4 overlays
-        for title in ("Per-joint offsets and camera correction", "Residuals", "Reprojection overlays"):
+        assert html.count("<img") == 7  # histograms, cost of both passes, per-view RMS, 4 overlays
+        for title in ("Simulation truth", "Per-joint offsets and camera correction", "Solver", "Residuals",
+                      "Reprojection overlays"):
             assert f"<h2>{title}</h2>" in html
     assert "grey canvas" not in again
     # without the image files the overlays are still drawn, on a grey canvas, and the page says so
@@ -50,7 +53,7 @@ def test_calibrate_example_and_report(tmp_path, capsys):
         str(EXAMPLE.parent.resolve()), str(tmp_path / "nowhere")))
     assert main(["humanoid", "report", str(tmp_path / "moved.json"), "--out", str(tmp_path / "rep2")]) == 0
     moved = (tmp_path / "rep2" / "report.html").read_text()
-    assert moved.count("<img") == 6 and moved.count("(image file not available: grey canvas)</figcaption>") == 4
+    assert moved.count("<img") == 7 and moved.count("(image file not available: grey canvas)</figcaption>") == 4
 
 
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
@@ -124,9 +127,13 @@ def test_plan_command(tmp_path, capsys):
 
 
 def test_demo_passes(tmp_path):
-    outcome = RIG.demo(DemoContext(out_dir=tmp_path, rng=np.random.default_rng(2026), progress=False))
+    outcome = RIG.step("demo")(DemoContext(out_dir=tmp_path, rng=np.random.default_rng(2026), progress=False))
     assert outcome.passed, outcome.summary
-    assert "RMS x/y" in outcome.summary and (tmp_path / "result.json").is_file()
+    assert "RMS x/y" in outcome.summary and "NEES" in outcome.summary
+    assert outcome.result.diagnostics["truth_check"]["passed"]
+    # its images are saved beside its report, so the result's report rebuilds with them
+    assert (tmp_path / "offsets.yaml").is_file() and (tmp_path / "report.html").is_file()
+    assert all(Path(p).is_file() for p in outcome.result.diagnostics["images"])
 
 
 def test_help_lists_examples(capsys):

@@ -158,8 +158,10 @@ def test_consistency_thresholds_are_parameters(example, model, corner_data, caps
     # the CLI's defaults are the library's
     import argparse
 
+    from robocal.cli._workflow import add_workflow_commands
+
     parser = argparse.ArgumentParser()
-    RIG.add_commands(parser)
+    add_workflow_commands(parser, RIG)
     args = parser.parse_args(["calibrate", "x.yaml"])
     assert (args.consistency_px, args.consistency_ratio) == (NOMINAL_MIN_PX, NOMINAL_RATIO)
 

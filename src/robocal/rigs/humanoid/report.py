@@ -6,9 +6,11 @@
 * ``<robot>_calibrated.urdf`` -- the URDF with the offsets and the camera
   correction folded into the joint origins, limits shifted by the offsets (use
   it with raw sensor angles), and a provenance comment;
-* ``report.html`` -- reprojection overlays of a few views, residual
-  histograms, per-view RMS, parameter table with uncertainties, the
-  identifiability analysis and every warning.
+* ``report.html`` -- built from the result alone (:func:`build_report`), so
+  ``robocal report result.json`` rebuilds the same page: summary, parameter
+  and offset tables, the simulation truth check, identifiability, the solver
+  record and its two LM passes, residual histograms, per-view RMS and
+  reprojection overlays of a few views.
 
 Plot functions are pure: they take ``ax=None`` and return the axes.
 """
@@ -20,22 +22,23 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from robocal.io import CalibrationResult, atomic_write_text
-from robocal.report import Report, new_figure
-from robocal.rigs.humanoid.calibrate import HumanoidCalibration, _by_view_text
+from robocal.io import CalibrationResult, atomic_write_text, hash_inputs, write_result
+from robocal.report import (Report, new_figure, plot_cost, plot_residual_histogram, solver_section,
+                            truth_section)
+from robocal.rigs.humanoid.calibration import HumanoidCalibration, parameter_rows, rank_text, rejection_text
 
 __all__ = [
     "overlay_image",
     "draw_overlay",
     "overlay_picks",
-    "plot_residual_histograms",
     "plot_view_rms",
-    "plot_cost",
     "offsets_document",
+    "write_offsets",
     "build_report",
-    "report_from_result",
     "write_outputs",
 ]
+
+TITLE = "NAO leg and camera calibration"
 
 
 def overlay_image(cal: HumanoidCalibration, view: int, *, magnify: float = 20.0) -> np.ndarray:
@@ -82,22 +85,6 @@ def _pt(p):
     return (int(round(float(p[0]))), int(round(float(p[1]))))
 
 
-def plot_residual_histograms(residuals, ax=None):
-    """Histograms of the x and y corner residuals [px] on one axes; returns the axes."""
-    if ax is None:
-        _, ax = new_figure()
-    r = np.asarray(residuals, float).reshape(-1, 2)
-    r = r[np.all(np.isfinite(r), axis=1)]  # corners removed at detection have none
-    lim = max(float(np.max(np.abs(r), initial=0.0)), 1e-6)
-    bins = np.linspace(-lim, lim, 41)
-    ax.hist(r[:, 0], bins=bins, alpha=0.6, label=f"x (RMS {np.sqrt(np.mean(r[:, 0] ** 2)):.3f} px)")
-    ax.hist(r[:, 1], bins=bins, alpha=0.6, label=f"y (RMS {np.sqrt(np.mean(r[:, 1] ** 2)):.3f} px)")
-    ax.set_xlabel("residual (predicted - detected) [px]")
-    ax.set_ylabel("corners")
-    ax.legend()
-    return ax
-
-
 def plot_view_rms(names, feet, rms, ax=None):
     """Bar chart of per-view residual RMS [px], coloured by foot; returns the axes."""
     if ax is None:
@@ -112,22 +99,6 @@ def plot_view_rms(names, feet, rms, ax=None):
     ax.set_xticklabels([names[i] for i in ticks], rotation=90, fontsize=7)
     ax.set_ylabel("RMS [px]")
     ax.set_title("per-view residual RMS (blue: left board, orange: right board)")
-    return ax
-
-
-def plot_cost(history, ax=None, *, first=None):
-    """Cost at each accepted LM iterate (log scale); ``first``: the pass from zero before it.
-    Returns the axes."""
-    if ax is None:
-        _, ax = new_figure(size=(5.0, 3.0))
-    k0 = 0
-    if first is not None and len(first):
-        ax.semilogy(np.arange(len(first)), first, "o-", label="pass 1: from zero, 0.3 px assumed")
-        k0 = len(first) - 1
-    ax.semilogy(k0 + np.arange(len(history)), history, "s-", label="pass 2: measured corner noise")
-    ax.set_xlabel("LM iteration")
-    ax.set_ylabel("cost (whitened residuals)")
-    ax.legend()
     return ax
 
 
@@ -161,194 +132,164 @@ def _mm(v):
     return None if v is None else round(float(v) * 1e3, 6)
 
 
-def build_report(cal: HumanoidCalibration, *, title: str = "NAO leg and camera calibration", truth=None,
-                 n_overlays: int = 4, extra_sections=()) -> Report:
-    """The HTML report of one calibration (optionally with the simulation truth)."""
-    rep = Report(title, subtitle=f"{cal.data.n_views} views, {len(cal.free)} parameters, seed 001 method")
-    lsq = cal.lsq
-    s = rep.section("Summary")
-    s.table([
-        {"quantity": "views used", "value": cal.data.n_views},
-        {"quantity": "residual RMS x [px]", "value": float(cal.rms_xy[0])},
-        {"quantity": "residual RMS y [px]", "value": float(cal.rms_xy[1])},
-        {"quantity": "corner noise used [px]", "value": cal.corner_sigma},
-        {"quantity": "joint resolution [deg]", "value": float(np.degrees(cal.joint_resolution))},
-        {"quantity": "residual variance / model", "value": float(lsq.residual_variance)},
-        {"quantity": "LM iterations (from zero)", "value": cal.first_iterations},
-        {"quantity": "LM iterations (measured corner noise)", "value": lsq.iterations if cal.two_pass else "—"},
-        {"quantity": "Jacobian rank", "value": "{} of {}".format(*cal.jacobian_rank)},
-        {"quantity": "condition number (scaled)", "value": float(lsq.condition_number)},
-        {"quantity": "outlier corners (> 3 sigma)", "value": len(cal.outlier_corners)},
-        {"quantity": "corners removed at detection", "value": len(cal.missing_corners)},
-        {"quantity": "corners removed (--reject-outliers)",
-         "value": cal.n_rejected if cal.rejected_corners or cal.rejected_views else "—"},
-    ])
-    if cal.rejected_corners or cal.rejected_views:
-        s.text("Outliers rejected and the calibration re-solved once without them: " + cal.rejection_text()
-               + " (view name, corner index in the board's object-point order, row by row). RMS values and "
-               "histograms are over the corners used.", cls="warn")
-    s.text("Standard deviations are sampling errors under the noise model (corner noise plus joint "
-           "quantisation), scaled by the residual variance; they say nothing about model error.")
-    s.diagnostics(cal.warnings)
-    for msg in cal.messages:
-        s.text(msg, cls="warn")
-    p = rep.section("Parameters")
-    p.table(cal.parameter_rows(truth), caption="estimate and 1-sigma uncertainty; '—' = not identifiable")
-    o = rep.section("Per-joint offsets and camera correction")
-    o.table([{k: v for k, v in r.items() if k != "offset [rad]"} for r in cal.offsets_table()])
-    doc = offsets_document(cal)["camera_correction"]
-    o.table([{"correction": k, "value": v} for k, v in doc.items() if k != "frame"],
-            caption=f"camera mounting correction in {doc['frame']}")
-    i = rep.section("Identifiability")
-    i.text(cal.rank_text() + " (column-scaled Jacobian).")
-    if cal.unidentifiable:
-        i.text("Not determined by these poses (no value reported): " + ", ".join(cal.unidentifiable)
-               + f". To fix the null space, {', '.join(cal.held)} was held at its start value and the "
-               "others were estimated; the determined parameters do not depend on that choice.", cls="warn")
-    i.table([{"parameter a": a, "parameter b": b, "correlation": c} for a, b, c in cal.correlations[:8]],
-            caption="strongest correlations")
-    r = rep.section("Residuals")
-    fig, ax = new_figure(1, 2, size=(11, 3.6))
-    plot_residual_histograms(cal.used_residuals, ax=ax[0])
-    plot_cost(lsq.cost_history, ax=ax[1], first=cal.first_cost_history)
-    r.figure(fig, "corner residual histograms; cost per LM iterate")
-    fig, ax = new_figure(size=(9, 3.2))
-    plot_view_rms(cal.data.names, cal.data.feet, cal.view_rms, ax=ax)
-    r.figure(fig, "per-view residual RMS")
-    r.table([{"view": nm, "foot": f, "RMS [px]": float(v)} for nm, f, v in
-             zip(cal.data.names, cal.data.feet, cal.view_rms)])
-    ov = rep.section("Reprojection overlays")
-    for v in overlay_picks(cal.data.feet, cal.view_rms, n_overlays):
-        ov.image(overlay_image(cal, v), f"{cal.data.names[v]} ({cal.data.feet[v]} board, RMS "
-                                        f"{cal.view_rms[v]:.3f} px): green detected, red reprojected, "
-                                        f"yellow residual x20")
-    for sec in extra_sections:
-        rep.sections.append(sec)
-    return rep
+def build_report(result: CalibrationResult, *, base_dir=None, title: str = TITLE, n_overlays: int = 4) -> Report:
+    """The HTML report of one calibration, from its result record alone.
 
-
-def report_from_result(result: CalibrationResult, *, title: str = "NAO leg and camera calibration",
-                       n_overlays: int = 4) -> Report:
-    """A report rebuilt from a saved ``result.json``: summary, parameter and offset tables,
-    identifiability, residual histograms, cost and per-view RMS plots, and reprojection overlays
-    of the views whose image files still exist (a grey canvas otherwise, said in the caption).
-    A result written before the corners and residuals were saved gets the tables and the
-    per-view RMS only."""
+    Summary, parameter table (with the simulated truth and the NEES check when the result has
+    them), per-joint offsets and camera correction, identifiability, the solver record with the
+    cost of both LM passes, residual histograms and per-view RMS, and reprojection overlays of the
+    ``n_overlays`` views :func:`overlay_picks` chooses, drawn on the image files named in the
+    result (on a grey canvas, said in the caption, when a file is gone). ``base_dir``: the
+    result's folder; image paths in the result are absolute, so it is not needed.
+    """
     d = result.diagnostics
-    rep = Report(title, subtitle=f"from {result.command or 'a saved result'} ({result.created})")
-    s = rep.section("Summary")
+    rep = Report(title, subtitle=f"{d.get('n_views')} views, {len(result.estimate)} parameters, seed 001 method")
     nm = d.get("noise_model") or {}
-    rank = d.get("rank"), d.get("n_free")
+    s = rep.section("Summary")
     s.table([
         {"quantity": "views used", "value": d.get("n_views")},
         {"quantity": "residual RMS x [px]", "value": d.get("rms_x_px")},
         {"quantity": "residual RMS y [px]", "value": d.get("rms_y_px")},
         {"quantity": "corner noise used [px]", "value": nm.get("corner_sigma_px")},
+        {"quantity": "joint resolution [deg]", "value": _deg(nm.get("joint_resolution_rad"))},
         {"quantity": "residual variance / model", "value": nm.get("residual_variance_ratio")},
         {"quantity": "LM iterations (from zero)", "value": d.get("iterations")},
         {"quantity": "LM iterations (measured corner noise)",
          "value": d.get("iterations_reweighted_pass") if d.get("corner_sigma_measured") else "—"},
-        {"quantity": "Jacobian rank", "value": f"{rank[0]} of {rank[1]}"},
+        {"quantity": "Jacobian rank", "value": f"{d.get('rank')} of {d.get('n_free')}"},
         {"quantity": "condition number (scaled)", "value": d.get("condition_number")},
-        {"quantity": "outlier corners (> 3 sigma)", "value": len(d.get("outlier_corners") or [])},
+        {"quantity": f"outlier corners (> {d.get('outlier_sigma', 3.0):.3g} sigma)",
+         "value": len(d.get("outlier_corners") or [])},
         {"quantity": "corners removed at detection", "value": len(d.get("missing_corners") or [])},
         {"quantity": "corners removed (--reject-outliers)",
-         "value": len(d["rejected_corners"]) if d.get("rejected_corners") or d.get("rejected_views") else "—"},
+         "value": d.get("n_corners_rejected") if d.get("rejected_corners") or d.get("rejected_views") else "—"},
     ])
     if d.get("rejected_corners") or d.get("rejected_views"):
-        s.text("Outliers rejected and the calibration re-solved once without them: "
-               + _by_view_text(d.get("rejected_corners") or [], sep=" ")
-               + (f"; whole views {d['rejected_views']}" if d.get("rejected_views") else "")
-               + " (view name, corner index in the board's object-point order, row by row).", cls="warn")
+        s.text("Outliers rejected and the calibration re-solved once without them: " + rejection_text(d)
+               + " (view name, corner index in the board's object-point order, row by row). RMS values and "
+               "histograms are over the corners used.", cls="warn")
+    s.text("Standard deviations are sampling errors under the noise model (corner noise plus joint "
+           "quantisation), scaled by the residual variance; they say nothing about model error.")
     s.diagnostics(result.warnings)
     for msg in d.get("messages") or []:
         s.text(msg, cls="warn")
-    rows = []
-    for k, v in result.estimate.items():
-        unit = result.units.get(k)
-        f = np.degrees(1.0) if unit == "rad" else 1e3
-        sd = result.std.get(k)
-        rows.append({"parameter": k, "value": None if v is None else v * f,
-                     "std": None if sd is None else sd * f, "unit": "deg" if unit == "rad" else "mm"})
-    rep.section("Parameters").table(rows, caption="estimate and 1-sigma uncertainty; '—' = not identifiable")
+    if d.get("truth_check"):
+        truth_section(rep.section("Simulation truth"), d["truth_check"])
+    rep.section("Parameters").table(parameter_rows(result),
+                                    caption="estimate and 1-sigma uncertainty; '—' = not identifiable")
     if d.get("offsets_table"):
         o = rep.section("Per-joint offsets and camera correction")
         o.table(d["offsets_table"])
         cam = d.get("camera_correction") or {}
-        o.table([{"correction": k, "value": None if v is None else v * (np.degrees(1.0) if k in
-                  ("roll", "pitch", "yaw") else 1e3), "unit": "deg" if k in ("roll", "pitch", "yaw") else "mm"}
-                 for k, v in cam.items()], caption="camera mounting correction")
+        o.table([{"correction": k, "value": _deg(v) if k in ("roll", "pitch", "yaw") else _mm(v),
+                  "unit": "deg" if k in ("roll", "pitch", "yaw") else "mm"} for k, v in cam.items()],
+                caption=f"camera mounting correction in {d.get('camera_frame', 'the camera frame')}")
     i = rep.section("Identifiability")
-    i.text(f"Jacobian rank {rank[0]} of {rank[1]} free parameters; condition number "
-           f"{d.get('condition_number', float('nan')):.3g}.")
+    i.text(rank_text(d) + " (column-scaled Jacobian).")
     if d.get("unidentifiable"):
         i.text("Not determined by these poses (no value reported): " + ", ".join(d["unidentifiable"])
-               + (f"; gauge held: {', '.join(d['gauge_held'])}" if d.get("gauge_held") else ""), cls="warn")
+               + f". To fix the null space, {', '.join(d.get('gauge_held') or [])} was held at its start value "
+               "and the others were estimated; the determined parameters do not depend on that choice.",
+               cls="warn")
     corr = d.get("correlations") or []
-    if corr:
-        i.table([{"parameter a": a, "parameter b": b, "correlation": c} for a, b, c in corr],
-                caption="strongest correlations")
+    i.table([{"parameter a": a, "parameter b": b, "correlation": c} for a, b, c in corr[:8]],
+            caption="strongest correlations")
+    _solver_section(rep.section("Solver"), d)
+    _residual_section(rep.section("Residuals"), d)
+    _overlay_section(rep, d, n_overlays)
+    return rep
+
+
+def _solver_section(sec, d: dict) -> None:
+    """The solver's table (of the final pass) and the cost of every LM pass on one plot."""
+    record = dict(d.get("solver") or {})
+    solver_section(sec, record, caption="the final LM pass")
+    passes = {}
+    if d.get("corner_sigma_measured") and d.get("cost_history_first_pass"):
+        passes["pass 1: from zero, 0.3 px assumed"] = _floats(d["cost_history_first_pass"])
+        passes["pass 2: measured corner noise"] = _floats(d.get("cost_history") or [])
+    else:
+        passes["LM from zero" if not d.get("reject_outliers") else "final pass"] = _floats(d.get("cost_history") or [])
+    ax = plot_cost(passes)
+    sec.figure(ax.figure, "cost per accepted LM step (whitened residuals, log scale)")
+
+
+def _residual_section(sec, d: dict) -> None:
     views = d.get("views") or []
-    resid = np.asarray(d["residuals_px"], float) if d.get("residuals_px") else None
-    sec = rep.section("Residuals")
-    if resid is not None and resid.size:
-        fig, ax = new_figure(1, 2, size=(11, 3.6))
-        used = resid
-        if (d.get("rejected_corners") or d.get("rejected_views")) and views:
-            names = [v["name"] for v in views]
-            keep = np.ones(resid.shape[:2], bool)
-            for v, c in d.get("rejected_corners") or []:
-                keep[names.index(v), c] = False
-            for v in d.get("rejected_views") or []:
-                keep[names.index(v)] = False
-            used = resid[keep]
-        plot_residual_histograms(used, ax=ax[0])
-        hist = d.get("cost_history") or []
-        first = d.get("cost_history_first_pass")
-        plot_cost(np.asarray(hist, float), ax=ax[1],
-                  first=np.asarray(first, float) if first and d.get("corner_sigma_measured") else None)
-        sec.figure(fig, "corner residual histograms; cost per LM iterate")
+    if d.get("residuals_px"):
+        resid = np.asarray(_floats(d["residuals_px"]), float)
+        used = resid[_kept(d, resid.shape[:2])]
+        fig, ax = new_figure(1, 2, size=(10, 3.4))
+        for k, axis in enumerate("xy"):
+            rms = float(np.sqrt(np.mean(used[:, k] ** 2))) if used.size else float("nan")
+            plot_residual_histogram(used[:, k], ax=ax[k], sigma=rms, unit="px",
+                                    label=f"{axis}: {used.shape[0]} corners, RMS {rms:.3f} px")
+            ax[k].set_xlabel(f"{axis} residual (predicted - detected) [px]")
+        sec.figure(fig, "corner residual histograms of the corners used, with the Gaussian of their RMS")
     if views:
         fig, ax = new_figure(size=(9, 3.2))
         plot_view_rms([v["name"] for v in views], [v["foot"] for v in views], [v["rms_px"] for v in views], ax=ax)
         sec.figure(fig, "per-view residual RMS")
         sec.table([{"view": v["name"], "foot": v["foot"], "RMS [px]": v["rms_px"]} for v in views])
-    if resid is not None and d.get("corners_px") and views:
-        det = np.asarray(d["corners_px"], float)
-        images = d.get("images") or [None] * len(views)
-        size = tuple(d.get("image_size") or (int(np.nanmax(det[..., 0])) + 40, int(np.nanmax(det[..., 1])) + 40))
-        ov = rep.section("Reprojection overlays")
-        for v in overlay_picks([x["foot"] for x in views], [x["rms_px"] for x in views], n_overlays):
-            img = images[v] if images[v] and Path(images[v]).is_file() else None
-            if img is not None:
-                from robocal.rigs.humanoid.detect import load_image
 
-                img = load_image(img)
-            note = "" if img is not None else " (image file not available: grey canvas)"
-            ov.image(draw_overlay(img, det[v], det[v] + resid[v], size),
-                     f"{views[v]['name']} ({views[v]['foot']} board, RMS {views[v]['rms_px']:.3f} px): green "
-                     f"detected, red reprojected, yellow residual x20{note}")
-    return rep
+
+def _overlay_section(rep: Report, d: dict, n_overlays: int) -> None:
+    views = d.get("views") or []
+    if not (d.get("residuals_px") and d.get("corners_px") and views):
+        return
+    from robocal.rigs.humanoid.detect import load_image
+
+    resid = np.asarray(_floats(d["residuals_px"]), float)
+    det = np.asarray(_floats(d["corners_px"]), float)
+    images = d.get("images") or [None] * len(views)
+    size = tuple(d.get("image_size") or (int(np.nanmax(det[..., 0])) + 40, int(np.nanmax(det[..., 1])) + 40))
+    ov = rep.section("Reprojection overlays")
+    for v in overlay_picks([x["foot"] for x in views], [x["rms_px"] for x in views], n_overlays):
+        img = load_image(images[v]) if images[v] and Path(images[v]).is_file() else None
+        note = "" if img is not None else " (image file not available: grey canvas)"
+        ov.image(draw_overlay(img, det[v], det[v] + resid[v], size),
+                 f"{views[v]['name']} ({views[v]['foot']} board, RMS {views[v]['rms_px']:.3f} px): green "
+                 f"detected, red reprojected, yellow residual x20{note}")
+
+
+def _kept(d: dict, shape) -> np.ndarray:
+    """Corners (V, N) used in the final solve: present ones less those ``reject_outliers`` removed."""
+    keep = np.ones(shape, bool)
+    names = [v["name"] for v in d.get("views") or []]
+    for v, c in d.get("rejected_corners") or []:
+        keep[names.index(v), c] = False
+    for v in d.get("rejected_views") or []:
+        keep[names.index(v)] = False
+    return keep
+
+
+def _floats(x):
+    """A nested list from a result file with ``None`` (JSON's NaN) as NaN."""
+    if isinstance(x, (list, tuple)):
+        return [_floats(v) for v in x]
+    return np.nan if x is None else x
+
+
+def write_offsets(cal: HumanoidCalibration, out_dir, *, inputs: dict | None = None) -> list[Path]:
+    """Write ``offsets.yaml`` and ``<robot>_calibrated.urdf`` into ``out_dir`` (atomically); ``inputs``
+    ``{path: sha256}`` for the URDF's provenance comment. Returns the two paths."""
+    out_dir = Path(out_dir)
+    paths = [atomic_write_text(out_dir / "offsets.yaml",
+                               yaml.safe_dump(offsets_document(cal), sort_keys=False, width=200))]
+    urdf = out_dir / f"{cal.model.tree.name}_calibrated.urdf"
+    cal.write_urdf(urdf, inputs=inputs)
+    paths.append(urdf)
+    return paths
 
 
 def write_outputs(cal: HumanoidCalibration, out_dir, *, inputs=(), command: str | None = None, truth=None,
-                  report: Report | None = None, quiet: bool = False) -> list[Path]:
-    """Write result.json, report.html, offsets.yaml and the corrected URDF into ``out_dir``."""
-    from robocal.cli import write_run
-    from robocal.io import hash_inputs
-
+                  report: Report | None = None) -> list[Path]:
+    """Write result.json, report.html, offsets.yaml and the corrected URDF into ``out_dir`` (the
+    calibrate command's files, for a calibration made from Python). Returns the paths."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     hashes = hash_inputs(inputs)
-    result = cal.to_result(inputs=hashes, command=command)
-    rep = report if report is not None else build_report(cal, truth=truth)
-    paths = list(write_run(out_dir, result, rep, quiet=quiet))
-    paths.append(atomic_write_text(out_dir / "offsets.yaml",
-                                   yaml.safe_dump(offsets_document(cal), sort_keys=False, width=200)))
-    urdf = out_dir / f"{cal.model.tree.name}_calibrated.urdf"
-    cal.write_urdf(urdf, inputs=hashes)
-    paths.append(urdf)
-    if not quiet:
-        for p in paths[-2:]:
-            print(f"wrote {p}")
-    return paths
+    result = cal.to_result(inputs=hashes, command=command, truth=truth)
+    rep = report if report is not None else build_report(result, base_dir=out_dir)
+    paths = [write_result(out_dir / "result.json", result), rep.write(out_dir / "report.html")]
+    return paths + write_offsets(cal, out_dir, inputs=hashes)
