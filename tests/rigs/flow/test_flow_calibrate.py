@@ -4,7 +4,9 @@ import numpy as np
 import pytest
 
 from robocal.errors import InputError, NotEnoughDataError
+from robocal.estimation import truth_check
 from robocal.rigs.flow.calibrate import KERNEL_SYSTEMATIC, calibrate_array, interpolate_poses
+from robocal.rigs.flow.demo import mounting_errors
 from robocal.rigs.flow.evaluate import evaluate_trajectory
 from robocal.rigs.flow.kernel import FlowConfig
 from robocal.rigs.flow.log import steps_from_frames
@@ -128,18 +130,23 @@ def test_bad_reference():
         calibrate_array(_steps(t[:41], _disp(TRUE, poses[:41])), t[:41], poses[:41], seed_array())
 
 
-def _assert_within_total_std(cal, truth, k=3.0):
-    """|calibrated - true| < k * hypot(statistical std, kernel systematic) for every parameter."""
+def _assert_within_total_std(cal, truth):
+    """The calibrated mounting agrees with the truth within its total std (statistical and kernel
+    systematic in quadrature), by NEES over the determined parameters (false-alarm rate 1e-3)."""
+    err, std = mounting_errors(cal, truth)
+    check = truth_check(list(err.values()), list(std.values()), names=list(err))
+    assert check.passed, str(check)
+    return check
+
+
+def test_truth_check_names_a_mounting_off_by_many_std(rendered_101):
+    # the check above can fail: a truth 10 total std away in one parameter is refused, and named
+    st, run, sim, truth, cal = rendered_101
     tot = cal.total_std()
-    z = {}
-    for i, nm in enumerate(truth.names):
-        for p in ("R", "psi", "phi", "scale"):
-            e = getattr(cal.array, p)[i] - getattr(truth, p)[i]
-            if p in ("psi", "phi"):
-                e = np.angle(np.exp(1j * e))
-            z[f"{nm}.{p}"] = e / tot[f"{nm}.{p}"]
-    assert max(abs(v) for v in z.values()) < k, z
-    return z
+    off = truth.copy(R=truth.R + np.array([0.0, 0.0, 10 * tot["s270.R"]]))
+    err, std = mounting_errors(cal, off)
+    check = truth_check(list(err.values()), list(std.values()), names=list(err))
+    assert not check.passed and check.worst[0] == "s270.R"
 
 
 @pytest.fixture(scope="module")

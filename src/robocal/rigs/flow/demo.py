@@ -17,20 +17,21 @@ from robocal.workflow import DemoContext, DemoOutcome
 __all__ = ["demo", "mounting_errors"]
 
 
-def mounting_errors(cal, true, height_scale) -> tuple[dict, dict]:
-    """Calibrated minus simulated mounting (m, rad, 1) and the total std, for the determined parameters.
+def mounting_errors(cal, truth) -> tuple[dict, dict]:
+    """Calibrated minus true mounting (m, rad, 1) and the total std, for the determined parameters.
 
-    The effective scale a calibration can find is ``1 / height_scale`` (the
-    simulated height reading is ``height_scale`` times the true height).
+    ``truth``: the simulated :class:`~robocal.rigs.flow.model.SensorArray` with
+    the scale a calibration can find, ``1 / height_scale`` (the simulated
+    height reading is ``height_scale`` times the true height). Feed both to
+    :func:`robocal.estimation.truth_check`.
     """
     from robocal.geometry import wrap_angle
 
-    hs = np.asarray(height_scale, dtype=float)
     tot = cal.total_std()
     err, std = {}, {}
-    for i, nm in enumerate(true.names):
-        e = {"R": cal.array.R[i] - true.R[i], "psi": wrap_angle(cal.array.psi[i] - true.psi[i]),
-             "phi": wrap_angle(cal.array.phi[i] - true.phi[i]), "scale": cal.array.scale[i] - 1.0 / hs[i]}
+    for i, nm in enumerate(truth.names):
+        e = {"R": cal.array.R[i] - truth.R[i], "psi": wrap_angle(cal.array.psi[i] - truth.psi[i]),
+             "phi": wrap_angle(cal.array.phi[i] - truth.phi[i]), "scale": cal.array.scale[i] - truth.scale[i]}
         for p, v in e.items():
             k = f"{nm}.{p}"
             if tot.get(k) is not None:
@@ -109,7 +110,7 @@ def demo(ctx: DemoContext) -> DemoOutcome:
               "and the flow kernel's systematic in quadrature")
     # the truth check over every determined parameter, with the total std (the kernel's systematic is
     # part of what the calibration states as its uncertainty)
-    err, std = mounting_errors(cal, true, hs)
+    err, std = mounting_errors(cal, true.copy(scale=1.0 / hs))
     check = truth_check(list(err.values()), list(std.values()), names=list(err))
     sec.text(f"Truth check: {check}.")
     res.diagnostics["truth_check"] = check.to_dict()
