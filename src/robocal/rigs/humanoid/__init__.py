@@ -5,12 +5,20 @@
 * :mod:`.simulate` -- true offsets, visible poses, quantised readings, rendered images;
 * :mod:`.detect` -- rendering one view, detecting the corners of every view;
 * :mod:`.dataset` -- the data-set file (camera, boards, images, joint records);
-* :mod:`.calibrate` -- LM over the seed's 21 parameters with uncertainty,
-  identifiability and outliers;
+* :mod:`.problem` -- parameter sets, the per-view noise model, the gauge, the
+  least-squares problem;
+* :mod:`.consistency` -- option and data checks before the solve, plausibility
+  warnings after it (:mod:`.slips` names the likely slip);
+* :mod:`.calibrate` -- LM over the seed's 21 parameters in two passes, corner
+  outliers and their rejection (re-exports the names of the two above);
+* :mod:`.calibration` -- :class:`HumanoidCalibration`: offset tables, corrected
+  URDF, the result record and the summary printed from it;
 * :mod:`.montecarlo` -- Monte Carlo check of the reported uncertainty, repeatability;
 * :mod:`.plan` -- greedy D-optimal pose planning;
-* :mod:`.report` -- offsets table, corrected URDF, HTML report;
-* :mod:`.cli` -- ``robocal humanoid simulate | calibrate | plan | report``.
+* :mod:`.report` -- offsets file, corrected URDF, the HTML report built from a result;
+* :mod:`.workflow` -- the rig contract's steps (simulate, load, calibrate, result,
+  summary, demo); :mod:`.commands` -- ``plan``;
+* :mod:`.cli` -- the declaration of ``robocal humanoid simulate | calibrate | plan | report``.
 
 The names in ``__all__`` are imported from their submodule on first access
 (PEP 562): importing the package, e.g. for ``robocal humanoid --help`` through
