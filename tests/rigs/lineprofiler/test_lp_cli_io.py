@@ -6,12 +6,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from robocal.cli import DemoContext
 from robocal.cli.main import main
 from robocal.errors import FileFormatError, InputError, ShapeError
 from robocal.geometry import matrix_from_rotvec, transform_from
 from robocal.rigs.lineprofiler.calibrate import calibrate_file
 from robocal.rigs.lineprofiler.cli import HANDEYE, RIG
+from robocal.workflow import DemoContext
+from robocal.io import load_result
 from robocal.rigs.lineprofiler.io import (
     interpolate_poses,
     load_block_faces_csv,
@@ -57,7 +58,7 @@ def test_handeye_example(tmp_path):
     assert main(["handeye", "calibrate", str(EX / "gripper_poses.csv"), str(EX / "target_poses.csv"),
                  "--method", "park", "--out", str(tmp_path)]) == 0
     res = json.loads((tmp_path / "result.json").read_text())
-    assert np.allclose(np.array(res["estimate"]["T_gripper_cam"])[:3, 3], [0.035, 0.06, 0.12], atol=2e-3)
+    assert np.allclose(res["estimate"]["T_gripper_cam.translation"], [0.035, 0.06, 0.12], atol=2e-3)
 
 
 def test_cli_bad_input_is_one_line(tmp_path, capsys):
@@ -130,7 +131,7 @@ def test_slerp_interpolation_between_streams(tmp_path):
 
 def test_rigs_registered_and_demo(tmp_path):
     assert RIG.name == "lineprofiler" and HANDEYE.name == "handeye"
-    out = RIG.demo(DemoContext(tmp_path, np.random.default_rng(2026), progress=False))
+    out = RIG.step("demo")(DemoContext(tmp_path, np.random.default_rng(2026), progress=False))
     assert out.passed, out.summary
     assert "undetermined" in out.summary
 
@@ -186,11 +187,11 @@ def test_handeye_robot_world_example(tmp_path, capsys):
                  "--out", str(tmp_path)]) == 0
     res = json.loads((tmp_path / "result.json").read_text())
     assert res["method"] == "robot-world shah+refine"
-    T = np.array(res["estimate"]["T_gripper_cam"])
+    result = load_result(tmp_path / "result.json")
+    T = result.pose("T_gripper_cam").T
     assert np.allclose(T[:3, 3], [0.035, 0.06, 0.12], atol=2e-3)  # 0.2 mm / 1 mrad pose noise, 16 poses
     assert all(v is not None and 0 < v < 3e-3 for v in res["std"]["T_cam_gripper.translation"])
-    assert np.allclose(np.array(res["estimate"]["T_base_target"]) @ np.array(res["estimate"]["T_target_base"]),
-                       np.eye(4), atol=1e-12)
+    assert np.allclose(result.pose("T_base_target").T @ result.pose("T_target_base").T, np.eye(4), atol=1e-12)
     # the inverses carry their std too (first order through the inverse), and the CLI prints it
     st = np.array(res["std"]["T_gripper_cam.translation"])
     assert np.all((st > 0) & (st < 3e-3)) and len(res["std"]["T_gripper_cam.rotvec"]) == 3

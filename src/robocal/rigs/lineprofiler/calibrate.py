@@ -40,10 +40,9 @@ from pathlib import Path
 import numpy as np
 
 from robocal.errors import FileFormatError, InputError
-from robocal.io import CalibrationResult, hash_inputs, load_document
+from robocal.io import hash_inputs, load_document
 from robocal.kinematics import DHChain
 from robocal.progress import progress
-from robocal.report import Report, new_figure
 from robocal.resources import require_memory
 from robocal.rigs.lineprofiler.fpdp import FPDPResult, fpdp_calibrate
 from robocal.rigs.lineprofiler.io import (
@@ -53,12 +52,12 @@ from robocal.rigs.lineprofiler.io import (
     load_profiles_csv,
     load_tracker_csv,
 )
-from robocal.rigs.lineprofiler.mct import _X_LABELS, ENCODER_SIGMA, MCTResult, mct_calibrate
+from robocal.rigs.lineprofiler.mct import ENCODER_SIGMA, MCTResult, mct_calibrate
 from robocal.rigs.lineprofiler.model import p1r2p3_chain
 from robocal.rigs.lineprofiler.refine import RefineResult, refine_sphere
 
-__all__ = ["PoseTable", "load_arm", "calibrate_file", "calibrate_sphere", "load_mct_file", "result_from",
-           "report_from"]
+__all__ = ["PoseTable", "SphereInput", "MCTInput", "load_arm", "load_input", "calibrate_input", "calibrate_file",
+           "calibrate_sphere", "load_mct_file", "result_from", "to_result"]
 
 
 class PoseTable:
@@ -337,10 +336,48 @@ def refine_memory(n_points: int, n_profiles: int, dof: int = 0) -> float:
     return base + 4.0 * 8.0 * n_points * cols + 8.0 * cols * cols
 
 
-def calibrate_file(path, *, accept_implausible: bool = False) -> tuple[SphereCalibration | MCTCalibration, dict]:
-    """Calibrate from an input YAML (FPDP + refinement, or ``method: mct``); returns it and the input hashes.
+@dataclass
+class SphereInput:
+    """A ``method: fpdp`` input, read and checked: joint readings (or pose indices with a
+    :class:`PoseTable`), profiles (m), the arm, the sphere radius (m), the side ``sign``, the joints'
+    read-out noise (m / rad, or None), names for messages, and every file read (for the hashes)."""
 
-    ``accept_implausible``: go on (with a warning) when the sphere radius is implausible for the profiles.
+    q: np.ndarray
+    profiles: list
+    chain: object
+    sphere_radius: float
+    sign: object
+    joint_sigma: np.ndarray | None
+    names: dict
+    files: list
+
+
+@dataclass
+class MCTInput:
+    """A ``method: mct`` input, read and checked (see :func:`load_mct_file`); ``files`` every file read."""
+
+    data: object
+    chain: DHChain
+    tracker_sigma: float | None
+    height_sigma: float
+    dh_sigma: tuple
+    encoder_sigma: float
+    judge_files: dict
+    source: str
+    files: list
+
+
+def _stages(desc: str, n: int, enabled: bool = True):
+    """A stage bar on a terminal: ``tick()`` starts the next of ``n`` stages."""
+    it = iter(progress(range(n), desc=desc, total=n, enabled=enabled))
+    return lambda: next(it, None)
+
+
+def load_input(path) -> SphereInput | MCTInput:
+    """Read and check a ``calibrate`` input YAML (module docstring) and every file it names.
+
+    Errors name the file (and field or row). For FPDP the refinement's memory is checked here,
+    before any work (:func:`refine_memory`).
     """
     doc = load_document(path)
     chain = load_arm(doc)
@@ -348,20 +385,16 @@ def calibrate_file(path, *, accept_implausible: bool = False) -> tuple[SphereCal
     if method == "mct":
         data, files, t_sigma, h_sigma, dh_sigma, enc_sigma = load_mct_file(doc, chain)
         tr = doc.sub("tracker")
-        judged = judge_mct(data, files={"line": Path(tr.str("line")).name, "arc": Path(tr.str("arc")).name},
-                           accept=accept_implausible, source=str(path))
-        res = mct_calibrate(data, chain, tracker_sigma=t_sigma, height_sigma=h_sigma, dh_sigma=dh_sigma,
-                            encoder_sigma=enc_sigma)
-        if judged is not None:
-            res.warnings.insert(0, judged)
-        return MCTCalibration(res, data, chain), hash_inputs([path, *files])
+        return MCTInput(data, chain, t_sigma, h_sigma, dh_sigma, enc_sigma,
+                        judge_files={"line": Path(tr.str("line")).name, "arc": Path(tr.str("arc")).name},
+                        source=str(path), files=[Path(path), *files])
     R = doc.float("sphere_radius", kind="length", positive=True)
     prof_path = doc.path("profiles")
     # 10^6 profile points take minutes (read ~45 %, FPDP + refinement the rest): a stage bar on a terminal
-    stages = iter(progress(range(2), desc="lineprofiler: read profiles, then fit", total=2))
-    next(stages, None)
+    tick = _stages("lineprofiler: read profiles", 1)
+    tick()
     profiles, q, t = load_profiles_csv(prof_path, dof=chain.dof, joint_types=chain.joint_types)
-    files = [path, prof_path]
+    files = [Path(path), prof_path]
     if "robot_poses" in doc:
         pose_path = doc.path("robot_poses")
         files.append(pose_path)
@@ -392,153 +425,51 @@ def calibrate_file(path, *, accept_implausible: bool = False) -> tuple[SphereCal
     require_memory(refine_memory(n_points, len(profiles), chain.dof if joint_sigma is not None else 0),
                    f"the refinement of {n_points:,} profile points in {len(profiles):,} profiles"
                    + (" with joint_sigma" if joint_sigma is not None else ""), source=str(prof_path))
-    next(stages, None)
-    cal = calibrate_sphere(q, profiles, chain, R, sign=sign, joint_sigma=joint_sigma,
-                           accept_implausible=accept_implausible,
-                           names={"radius_from": f"`sphere_radius` ({R * 1e3:.4g} mm as read)",
-                                  "profiles_from": Path(prof_path).name, "source": str(path)})
-    next(stages, None)
-    return cal, hash_inputs(files)
+    tick()
+    return SphereInput(q, profiles, chain, R, sign, joint_sigma,
+                       names={"radius_from": f"`sphere_radius` ({R * 1e3:.4g} mm as read)",
+                              "profiles_from": Path(prof_path).name, "source": str(path)},
+                       files=files)
 
 
-def result_from(cal: SphereCalibration | MCTCalibration, inputs=None) -> CalibrationResult:
-    if isinstance(cal, MCTCalibration):
-        return _mct_result(cal, inputs)
-    f, g = cal.fpdp, cal.refined
-    und = set(g.undetermined)
-    t = [None if f"X.t{c}" in und else float(g.X[i, 3]) for i, c in enumerate("xyz")]
-    est = {"T_E_L.rotation": g.X[:3, :3].tolist(), "T_E_L.translation": t,
-           "sphere_centre": [None if f"Q.{c}" in und else float(g.Q[i]) for i, c in enumerate("xyz")],
-           "fpdp.translation": [None if f"X.t{c}" in und else float(f.X[i, 3]) for i, c in enumerate("xyz")],
-           "fpdp.rotation": f.X[:3, :3].tolist()}
-    std = {"T_E_L.rotvec": [g.std[f"X.r{c}"] for c in "xyz"], "T_E_L.translation": [g.std[f"X.t{c}"] for c in "xyz"],
-           "sphere_centre": [g.std[f"Q.{c}"] for c in "xyz"]}
-    return CalibrationResult(
-        rig="lineprofiler", method="fpdp+geometric", estimate=est, std=std,
-        units={"T_E_L.rotation": "1", "T_E_L.translation": "m", "sphere_centre": "m", "T_E_L.rotvec": "rad",
-               "fpdp.translation": "m", "fpdp.rotation": "1"},
-        residual_rms=g.rms, residual_unit="m", warnings=list(f.warnings) + list(g.warnings), inputs=inputs or {},
-        diagnostics={"frames": "T_E_L: laser frame L -> end-effector frame E (hand-eye X)",
-                     "undetermined": sorted(und), "fpdp_rank": f.rank, "fpdp_unknowns": f.n_unknowns,
-                     "fpdp_rms_m": f.rms, "n_profiles_used": int(len(f.used)), "n_points": g.n_points,
-                     "noise_sigma_m": g.sigma, "signs": f.signs.tolist(),
-                     "joint_noise_modelled": g.dq is not None,
-                     **({"joint_corrections": g.dq.tolist(),
-                         "joint_corrections_unit": "per joint: m (prismatic) or rad (revolute), per used profile"}
-                        if g.dq is not None else {})})
+def calibrate_input(inp: SphereInput | MCTInput, *, accept_implausible: bool = False, progress: bool = True,
+                    **_) -> SphereCalibration | MCTCalibration:
+    """Calibrate a loaded input: FPDP + geometric refinement (:func:`calibrate_sphere`) or MCT.
+
+    ``accept_implausible``: go on (with an ``implausible_input`` warning) when the sphere radius or the
+    tracker readings are implausible for the data (:func:`judge_sphere`, :func:`judge_mct`).
+    """
+    if isinstance(inp, MCTInput):
+        judged = judge_mct(inp.data, files=inp.judge_files, accept=accept_implausible, source=inp.source)
+        res = mct_calibrate(inp.data, inp.chain, tracker_sigma=inp.tracker_sigma, height_sigma=inp.height_sigma,
+                            dh_sigma=inp.dh_sigma, encoder_sigma=inp.encoder_sigma)
+        if judged is not None:
+            res.warnings.insert(0, judged)
+        return MCTCalibration(res, inp.data, inp.chain)
+    tick = _stages("lineprofiler: FPDP + refinement", 1, enabled=progress)
+    tick()
+    cal = calibrate_sphere(inp.q, inp.profiles, inp.chain, inp.sphere_radius, sign=inp.sign,
+                           joint_sigma=inp.joint_sigma, accept_implausible=accept_implausible, names=inp.names)
+    tick()
+    return cal
 
 
-def _finite_or_none(v):
-    return [float(x) if np.isfinite(x) else None for x in np.asarray(v, float).ravel()]
+def calibrate_file(path, *, accept_implausible: bool = False) -> tuple[SphereCalibration | MCTCalibration, dict]:
+    """Calibrate from an input YAML (FPDP + refinement, or ``method: mct``); returns it and the input hashes.
+
+    :func:`load_input` then :func:`calibrate_input`.
+    """
+    inp = load_input(path)
+    return calibrate_input(inp, accept_implausible=accept_implausible), hash_inputs(inp.files)
 
 
-def _mct_result(cal: MCTCalibration, inputs=None) -> CalibrationResult:
-    r = cal.mct
-    std = {"T_E_L.rotvec": _finite_or_none(r.X_std[:3]), "T_E_L.translation": _finite_or_none(r.X_std[3:])}
-    undetermined = [lab for lab, v in zip(_X_LABELS, r.X_std) if not np.isfinite(v)]
-    terms = {k: {"T_E_L.rotvec": _finite_or_none(v[:3]), "T_E_L.translation": _finite_or_none(v[3:])}
-             for k, v in r.cov_terms.items()}
-    return CalibrationResult(
-        rig="lineprofiler", method="mct", estimate={"T_E_L.rotation": r.X[:3, :3].tolist(),
-                                                    "T_E_L.translation": r.X[:3, 3].tolist(),
-                                                    "T_T_L": r.T_T_L.tolist(), "T_T_E": r.T_T_E.tolist(),
-                                                    "T_T_B": r.T_T_B.tolist(), "T_L_B": r.T_L_B.tolist(),
-                                                    "P3_direction_L": r.u_L.tolist()},
-        std=std, units={"T_E_L.rotation": "1", "T_E_L.translation": "m", "T_E_L.rotvec": "rad", "T_T_L": "m",
-                        "T_T_E": "m", "T_T_B": "m", "T_L_B": "m", "P3_direction_L": "1"},
-        residual_rms=r.scan_rms, residual_unit="m", warnings=list(r.warnings), inputs=inputs or {},
-        diagnostics={"frames": "T_E_L: laser frame L -> end-effector frame E (hand-eye X); T: laser tracker; "
-                               "B: block corner; all at the scan's reference pose",
-                     "undetermined": undetermined,
-                     "covariance": {"labels": list(_X_LABELS),
-                                    "rotation": "rotation vector of R_perturbed R^T (rad)",
-                                    "matrix": [_finite_or_none(row) for row in r.X_cov],
-                                    "std_by_source": terms},
-                     "tracker_sigma_m": r.tracker_sigma, "height_sigma_m": r.height_sigma,
-                     "arm_dh_sigma": {"length_m": r.dh_sigma[0], "angle_rad": r.dh_sigma[1]},
-                     "encoder_sigma_m": r.encoder_sigma,
-                     "fit_rms_m": {"arc": r.arc_rms, "line": r.line_rms, "block_faces": r.block_rms,
-                                   "block_scan": r.scan_rms},
-                     "n_scan_points": r.n_scan_points})
+def result_from(cal: SphereCalibration | MCTCalibration, inputs=None):
+    """The result file's content (:func:`robocal.rigs.lineprofiler.result.result_from`)."""
+    from robocal.rigs.lineprofiler.result import result_from as _result_from
+
+    return _result_from(cal, inputs)
 
 
-def _mct_report(result: CalibrationResult, cal: MCTCalibration | None, extra_sections) -> Report:
-    rep = Report("lineprofiler: hand-eye calibration of a line laser", subtitle="MCT (seed 004 §3)")
-    s = rep.section("Estimate")
-    und = result.diagnostics.get("undetermined", [])
-    s.status(not und, "every component has a standard deviation" if not und else
-             f"no standard deviation for {', '.join(und)}")
-    s.parameters({k: result.estimate[k] for k in ("T_E_L.rotation", "T_E_L.translation")}, result.std,
-                 result.units)
-    rs = result.std.get("T_E_L.rotvec") or [None] * 3
-    s.table([{"axis of E": ax, "std [mrad]": None if v is None else 1e3 * v, "std [deg]": None if v is None
-              else np.rad2deg(v)} for ax, v in zip("xyz", rs)], digits=3,
-            caption="rotation uncertainty: small rotation about the E axes (rotation vector of R_perturbed R^T)")
-    s.diagnostics(result.warnings)
-    d = result.diagnostics
-    rows = [{"fit": k, "RMS [um]": 1e6 * v} for k, v in d.get("fit_rms_m", {}).items()]
-    s = rep.section("Fits")
-    s.table(rows, digits=3)
-    terms = d.get("covariance", {}).get("std_by_source", {})
-    if terms:
-        labels = ("rx [mrad]", "ry [mrad]", "rz [mrad]", "tx [mm]", "ty [mm]", "tz [mm]")
-        srows = []
-        for src, v in terms.items():
-            vals = list(v["T_E_L.rotvec"]) + list(v["T_E_L.translation"])
-            srows.append({"source": src, **{lab: (None if x is None else 1e3 * x) for lab, x in zip(labels, vals)}})
-        arm = d.get("arm_dh_sigma") or {}
-        enc = d.get("encoder_sigma_m")
-        s.table(srows, digits=3, caption=f"standard deviation of X by source (tracker sigma "
-                f"{1e6 * (d.get('tracker_sigma_m') or 0):.1f} um, heights sigma "
-                f"{1e6 * (d.get('height_sigma_m') or 0):.1f} um, P3 encoder sigma per scan profile "
-                + (f"{1e6 * enc:.1f} um" if enc else "0 (readings taken as exact)" if enc == 0 else "not recorded")
-                + ", P3's D-H row "
-                + (f"{1e3 * arm['length_m']:.3g} mm / {np.rad2deg(arm['angle_rad']):.3g} deg)"
-                   if arm and any(arm.values()) else "taken as exact: errors of the arm model are not included)"))
-    if cal is not None and cal.mct.scan_residuals is not None:
-        fig, ax = new_figure(1, 2, size=(10, 3.4))
-        ax[0].hist(cal.mct.scan_residuals * 1e6, bins=60)
-        ax[0].set_xlabel("block scan: point-to-face residual [um]")
-        radius = np.linalg.norm(np.asarray(cal.data.arc_T) - cal.mct.O_A, axis=1)
-        ax[1].plot(np.rad2deg(np.asarray(cal.data.q_arc)[:, -2]), 1e6 * (radius - radius.mean()), "o")
-        ax[1].set_xlabel("R2 [deg]")
-        ax[1].set_ylabel("arc radius deviation [um]")
-        rep.section("Residuals").figure(fig, "block-scan fit residuals (all points) and tracker arc")
-    for sec in extra_sections:
-        rep.extend([sec])
-    return rep
-
-
-def report_from(result: CalibrationResult, cal: SphereCalibration | MCTCalibration | None = None, *,
-                extra_sections=()) -> Report:
-    if result.method == "mct":
-        return _mct_report(result, cal, extra_sections)
-    rep = Report("lineprofiler: hand-eye calibration of a line laser", subtitle=result.method)
-    s = rep.section("Estimate")
-    und = result.diagnostics.get("undetermined", [])
-    s.status(not und, "all components determined" if not und else
-             f"not determined by these poses: {', '.join(und)} (no value reported)")
-    s.parameters({k: v for k, v in result.estimate.items() if not k.startswith("fpdp.")}, result.std, result.units)
-    s.diagnostics(result.warnings)
-    if cal is not None:
-        fig, ax = new_figure(1, 2, size=(10, 3.4))
-        r = cal.refined.residuals * 1e6
-        ax[0].hist(r, bins=60)
-        ax[0].set_xlabel("point-to-sphere residual [um]")
-        ax[1].bar(np.arange(len(cal.refined.per_profile_rms)), cal.refined.per_profile_rms * 1e6)
-        ax[1].set_xlabel("profile")
-        ax[1].set_ylabel("RMS [um]")
-        rep.section("Residuals").figure(fig, "geometric refinement residuals (all raw points)")
-        rows = [{"profile": int(c.index), "x_c [mm]": 1e3 * c.centre[0], "z_c [mm]": 1e3 * c.centre[1],
-                 "r_c [mm]": 1e3 * c.radius, "side": int(sg), "points": c.n_points}
-                for c, sg in zip(cal.fpdp.cuts, cal.fpdp.signs)]
-        rep.section("FPDP circle cuts (seed Table 1)").table(rows, digits=4)
-    for sec in extra_sections:
-        rep.extend([sec])
-    return rep
-
-
-def load_result_report(path) -> Report:
-    from robocal.io import load_result
-
-    return report_from(load_result(Path(path)))
+def to_result(cal: SphereCalibration | MCTCalibration, inp: SphereInput | MCTInput | None = None):
+    """The workflow's ``to_result`` step: :func:`result_from` with the content hashes of every file read."""
+    return result_from(cal, hash_inputs(inp.files) if inp is not None else None)

@@ -103,7 +103,8 @@ def refine_sphere(q, profiles, chain: DHChain, sphere_radius: float, X0, Q0, *, 
         ``lsq`` holds the core's :class:`robocal.estimation.LSQResult`
         (cost history, correlations, observation scores, ``summary()``);
         ``warnings`` its diagnostics (``rank_deficient``, ``weakly_determined``,
-        ``outliers`` beyond 4 sigma with point indices and profiles,
+        ``outliers`` beyond the core's threshold (``lsq.outlier_sigma``: Bonferroni over the
+        points, :func:`robocal.estimation.outlier_sigma`) with point indices and profiles,
         ``not_converged``); ``sigma`` the point noise (m).
     """
     q = chain.check_q(q)
@@ -161,11 +162,11 @@ def refine_sphere(q, profiles, chain: DHChain, sphere_radius: float, X0, Q0, *, 
     prob.add_residuals(fun, name="point_to_sphere", jacobian=jac, residual_dim=1)
     if return_problem:
         return prob
-    # the robust loss bites at 3 sigma; points beyond 4 sigma (sigma re-estimated with clipping,
-    # so the outliers do not inflate it) are named; the covariance is s^2 (J^T W J)^+ with the
-    # loss's weights W, parameters the poses cannot determine named and given no std
-    lsq = solve(prob, method="trf", loss=loss, f_scale=3 * sc, x_scale="jac", xtol=1e-12, ftol=1e-12,
-                outlier_sigma=4.0)
+    # the robust loss bites at 3 sigma; points beyond the core's outlier threshold (Bonferroni over
+    # the points, robocal.estimation.outlier_sigma; sigma re-estimated with clipping, so the outliers
+    # do not inflate it) are named; the covariance is s^2 (J^T W J)^+ with the loss's weights W,
+    # parameters the poses cannot determine named and given no std
+    lsq = solve(prob, method="trf", loss=loss, f_scale=3 * sc, x_scale="jac", xtol=1e-12, ftol=1e-12)
     p = lsq.params
     r = lsq.residuals
     free = lsq.free_labels
@@ -183,8 +184,8 @@ def refine_sphere(q, profiles, chain: DHChain, sphere_radius: float, X0, Q0, *, 
             prof, n_in = np.unique(idx[pts], return_counts=True)
             shown = ", ".join(map(str, pts[:20])) + (", ..." if len(pts) > 20 else "")
             w = Diagnostic("outliers", f"{len(pts)} of {len(r)} points ({100 * len(pts) / len(r):.2g} %) lie beyond "
-                           f"4 sigma (sigma = {1e6 * np.sqrt(lsq.residual_variance):.3g} um) and were down-weighted "
-                           f"by the {loss} loss: points [{shown}]; by profile (points): "
+                           f"{lsq.outlier_sigma:.3g} sigma (sigma = {1e6 * np.sqrt(lsq.residual_variance):.3g} um) "
+                           f"and were down-weighted by the {loss} loss: points [{shown}]; by profile (points): "
                            + ", ".join(f"{int(i)} ({int(c)})" for i, c in zip(prof, n_in)),
                            params=w.params, indices=w.indices)
         warnings.append(w)
@@ -297,7 +298,7 @@ def _refine_eiv(q, profiles, chain, Rr, X0, Q0, m, idx, *, loss, sigma, hold, jo
             # goes on from the point with its usual tolerances.
             gtol = max(gtol, pre[3])
     lsq = solve(prob, method="trf", loss=loss, f_scale=3.0, x_scale="jac", xtol=1e-12, ftol=1e-12,
-                gtol=gtol, outlier_sigma=4.0)
+                gtol=gtol)
     p = lsq.params
     r = lsq.obs_residuals("point_to_sphere")
     cov = np.full((9, 9), np.nan)
@@ -317,11 +318,12 @@ def _refine_eiv(q, profiles, chain, Rr, X0, Q0, m, idx, *, loss, sigma, hold, jo
             if pts:
                 prof, n_in = np.unique(idx[pts], return_counts=True)
                 shown = ", ".join(map(str, pts[:20])) + (", ..." if len(pts) > 20 else "")
-                msg.append(f"{len(pts)} of {P} points ({100 * len(pts) / P:.2g} %) lie beyond 4 sigma (sigma = "
-                           f"{1e6 * sp * s:.3g} um) and were down-weighted by the {loss} loss: points [{shown}]; "
-                           "by profile (points): " + ", ".join(f"{int(i)} ({int(c)})" for i, c in zip(prof, n_in)))
+                msg.append(f"{len(pts)} of {P} points ({100 * len(pts) / P:.2g} %) lie beyond "
+                           f"{lsq.outlier_sigma:.3g} sigma (sigma = {1e6 * sp * s:.3g} um) and were down-weighted "
+                           f"by the {loss} loss: points [{shown}]; by profile (points): "
+                           + ", ".join(f"{int(i)} ({int(c)})" for i, c in zip(prof, n_in)))
             if jts:
-                msg.append(f"joint corrections beyond 4 x joint_sigma at pose(s) "
+                msg.append(f"joint corrections beyond {lsq.outlier_sigma:.3g} x joint_sigma at pose(s) "
                            + ", ".join(f"{k // dof} (q{k % dof + 1})" for k in jts[:20]))
             w = Diagnostic("outliers", "; ".join(msg), params=w.params, indices=tuple(pts))
         elif w.code == "weakly_determined" or (w.params and all(k.startswith("dq[") for k in w.params)):
