@@ -176,9 +176,9 @@ def test_accepted_slip_is_a_warning_and_the_solve_goes_on(detected):
 
 def test_joint_records_in_deg_declared_rad_are_named_at_load(tmp_path):
     run = _example(tmp_path, lambda d: d["joints"].__setitem__("unit", "rad"))
-    with pytest.raises(ImplausibleInputError, match=r"joints.unit: the joint records look like deg, not rad: read "
-                                                    r"as rad they lie up to \d+ deg outside the joint limits, read "
-                                                    r"as deg all within them .*set joints.unit: deg") as e:
+    with pytest.raises(ImplausibleInputError, match=r"joints.unit: `joints` look like deg, not rad \(joints.unit\): "
+                                                    r"read as deg the largest excess over the joint limits drops "
+                                                    r"from \S+ to 0 deg") as e:
         load_dataset(run, detect=False)
     assert e.value.slip == "joints_deg_as_rad"
 

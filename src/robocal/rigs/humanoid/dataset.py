@@ -29,7 +29,7 @@ import numpy as np
 import yaml
 
 from robocal.camera import CameraModel, Checkerboard
-from robocal.errors import FileFormatError, ImplausibleInputError, InconsistentDataError, InputError
+from robocal.errors import FileFormatError, InconsistentDataError, InputError
 from robocal.io import atomic_write_text, load_document
 from robocal.rigs.humanoid.model import FEET, HumanoidModel
 from robocal.rigs.humanoid.simulate import JOINT_RESOLUTION, HumanoidDataset
@@ -146,8 +146,15 @@ def _declared(doc, key: str, kind: str) -> str | None:
 
 
 def _joint_unit_slip(model: HumanoidModel, theta, unit: str, tol: float, exc: InputError, *, source: str) -> None:
-    """Raise :class:`ImplausibleInputError` when records outside the limits all fit them in the other unit."""
-    k = np.radians(1.0) if unit == "rad" else np.degrees(1.0)
+    """Raise :class:`ImplausibleInputError` when records outside the limits all fit them in the other unit.
+
+    The figure is how far [deg] the records lie outside the joint limits; the slip is
+    :func:`robocal.rigs.humanoid.slips.joint_unit_slip` (the one the corner check tries too), judged by
+    :func:`robocal.plausibility.check_slips`: it explains the records when it brings them within the
+    limits (``tol``). When it does not, the caller re-raises the limits error ``exc``."""
+    from robocal.plausibility import check_slips, try_slips
+    from robocal.rigs.humanoid.slips import joint_unit_slip
+
     lo, hi = [], []
     for name in model.joint_names:
         lim = model.tree.joint(name).limits
@@ -155,15 +162,15 @@ def _joint_unit_slip(model: HumanoidModel, theta, unit: str, tol: float, exc: In
         hi.append(np.inf if lim is None else lim[1])
     lo, hi = np.array(lo), np.array(hi)
 
-    def excess(q):
+    def excess(q) -> float:
         return float(np.degrees(np.max(np.maximum(np.maximum(lo - q, q - hi), 0.0))))
 
-    if excess(theta * k) <= np.degrees(tol):
-        other = "deg" if unit == "rad" else "rad"
-        raise ImplausibleInputError(
-            f"the joint records look like {other}, not {unit}: read as {unit} they lie up to {excess(theta):.0f} "
-            f"deg outside the joint limits, read as {other} all within them ({exc.message.split(': ', 1)[-1]}); "
-            f"set joints.unit: {other}", source=source, slip=f"joints_{other}_as_{unit}")
+    baseline = excess(theta)
+    trial = try_slips(joint_unit_slip(unit, lambda k: excess(theta * k)), baseline, unit="deg",
+                      threshold=float(np.degrees(tol)))
+    if trial.best is not None:
+        check_slips(what="largest excess over the joint limits", residual=baseline, unit="deg", plausible=False,
+                    reason=exc.message, trial=trial, source=source)
 
 
 def _image_path(doc_path: Path, s: str) -> Path:
