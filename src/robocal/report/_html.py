@@ -29,18 +29,19 @@ from robocal.io import atomic_write_text
 __all__ = ["Report", "Section", "figure_to_data_uri", "format_value", "new_figure"]
 
 _CSS = """
-body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:2em auto;max-width:1100px;color:#222;padding:0 1em}
+body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:2em auto;max-width:1100px;color:#222;padding:0 1em;overflow-wrap:break-word}
 h1{border-bottom:2px solid #246;padding-bottom:.2em}h2{color:#246;margin-top:1.6em}h3{color:#357}
-table{border-collapse:collapse;margin:.6em 0;font-size:.92em}
-th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right}th{background:#eef2f7}
+nav ul{columns:2 22em;column-gap:2em;margin:.6em 0}nav li{break-inside:avoid}
+table{border-collapse:collapse;margin:.6em 0;font-size:.92em;display:block;max-width:100%;overflow-x:auto}
+caption{caption-side:top;text-align:left;color:#555;padding:.2em 0}
+th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right;font-variant-numeric:tabular-nums}th{background:#eef2f7}
 td:first-child,th:first-child{text-align:left}
 .warn{background:#fff4e0;border-left:4px solid #e90;padding:.4em .8em;margin:.3em 0}
 .ok{background:#eaf7ea;border-left:4px solid #3a3;padding:.4em .8em;margin:.3em 0}
 .fail{background:#fdeaea;border-left:4px solid #c33;padding:.4em .8em;margin:.3em 0}
-figure{margin:1em 0}figcaption{color:#555;font-size:.9em}
-figure img{max-width:100%;height:auto}
-table{display:block;max-width:100%;overflow-x:auto}
-pre{background:#f6f6f6;padding:.6em;overflow-x:auto;font-size:.85em}
+figure{margin:1em 0}figcaption{color:#555;font-size:.9em;max-width:100%}
+figure img{display:block;max-width:100%;height:auto}
+pre{background:#f6f6f6;padding:.6em;overflow-x:auto;font-size:.85em;overflow-wrap:normal}
 .meta{color:#666;font-size:.85em}
 """
 
