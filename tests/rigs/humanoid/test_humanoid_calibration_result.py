@@ -54,3 +54,16 @@ def test_a_non_finite_start_is_an_input_error_not_a_divergence(model, corner_dat
     with pytest.raises(InputError, match="x0: expected .* finite start values") as info:
         calibrate(model, corner_data, x0=x0)
     assert not isinstance(info.value, ImplausibleInputError)
+
+
+def test_a_result_written_before_the_contract_still_gets_its_report(model, corner_data):
+    # results of robocal before issue 20 have no solver record, n_solved, camera frame or threshold
+    from robocal.io import CalibrationResult
+
+    cal = calibrate(model, corner_data, parameters="all")  # rank deficient: the rank text names the gauge
+    d = cal.to_result().to_dict()
+    for k in ("solver", "n_solved", "camera_frame", "outlier_sigma"):
+        del d["diagnostics"][k]
+    html = build_report(CalibrationResult.from_dict(d), base_dir=None).to_html()
+    assert "Jacobian rank 24 of 25 free parameters (4 not determined" in html
+    assert "<h2>Solver</h2>" in html and "No iterative solver ran" not in html

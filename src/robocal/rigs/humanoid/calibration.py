@@ -430,13 +430,17 @@ def parameter_rows(result: CalibrationResult) -> list[dict]:
 def rank_text(d: dict) -> str:
     """'Jacobian rank r of n free parameters ...' from a result's diagnostics, with the undetermined
     parameters and the gauge."""
-    r, n = d["rank"], d["n_free"]
+    r, n = d.get("rank"), d.get("n_free")
     text = f"Jacobian rank {r} of {n} free parameters"
-    if r < n:
-        text += (f" ({len(d['unidentifiable'])} not determined: {', '.join(d['unidentifiable'])}; gauge "
-                 f"{', '.join(d['gauge_held'])} held at the start value)")
-    return text + f", condition number {float(d['condition_number']):.3g}" + \
-        (f" (of the {d['n_solved']} solved)" if r < n else "")
+    under = r is not None and n is not None and r < n
+    if under:
+        und = d.get("unidentifiable") or []
+        text += (f" ({len(und)} not determined: {', '.join(und)}; gauge "
+                 f"{', '.join(d.get('gauge_held') or [])} held at the start value)")
+    cond = d.get("condition_number")
+    # (a result file writes an infinite condition number as null)
+    text += ", condition number " + ("inf" if cond is None else f"{float(cond):.3g}")
+    return text + (f" (of the {d['n_solved']} solved)" if under and "n_solved" in d else "")
 
 
 def rejection_text(d: dict) -> str:

@@ -203,7 +203,8 @@ def build_report(result: CalibrationResult, *, base_dir=None, title: str = TITLE
 def _solver_section(sec, d: dict) -> None:
     """The solver's table (of the final pass) and the cost of every LM pass on one plot."""
     record = dict(d.get("solver") or {})
-    solver_section(sec, record, caption="the final LM pass")
+    if record:  # (a result written before the solver record was kept has only the cost)
+        solver_section(sec, record, caption="the final LM pass")
     passes = {}
     if d.get("corner_sigma_measured") and d.get("cost_history_first_pass"):
         passes["pass 1: from zero, 0.3 px assumed"] = _floats(d["cost_history_first_pass"])
