@@ -30,9 +30,10 @@ from scipy.special import chdtri
 
 from robocal.diagnostics import Diagnostic
 from robocal.errors import InputError, NotEnoughDataError
-from robocal.rigs.flow.model import SensorArray, integrate_twists, rot2
+from robocal.rigs.flow.model import SensorArray, integrate_twists, rot2, se2_exp
 
-__all__ = ["SensorSteps", "Odometry", "fuse_steps", "dead_reckon", "flow_sigma", "CHI2_RATIO_WARN"]
+__all__ = ["SensorSteps", "Odometry", "fuse_steps", "dead_reckon", "flow_sigma", "final_pose_covariance",
+           "CHI2_RATIO_WARN"]
 
 #: A median chi-square ratio (see :func:`dead_reckon`) above this means the flow noise is
 #: understated (by more than 1.7x) or the array geometry is off: on the rendered loop with
@@ -142,6 +143,8 @@ class Odometry:
     chi2_ratio : float
         Median over redundant steps of ``chi2`` divided by the median of its
         chi-square distribution: about 1 when the stated flow noise is right.
+    method : str
+        How the twists were integrated (``"exact"`` or ``"euler"``).
     """
 
     t: np.ndarray
@@ -157,6 +160,7 @@ class Odometry:
     warnings: list = field(default_factory=list)
     chi2_ratio: float = float("nan")
     frames: dict = field(default_factory=dict)
+    method: str = "exact"
 
     def summary(self) -> dict:
         return {
@@ -358,4 +362,40 @@ def dead_reckon(steps: SensorSteps, array: SensorArray, *, pose0=(0.0, 0.0, 0.0)
                                     ({"invalid": int(inv[i].sum())} if inv[i].any() else {})
                                     for i, nm in enumerate(array.names)}}
     return Odometry(frames=frames, t=steps.t, poses=poses, twists=u, twist_cov=cov, velocity=vel, velocity_std=vstd, used=used,
-                    rejected=rejected, bridged=bridged, chi2=chi2, warnings=warnings, chi2_ratio=chi2_ratio)
+                    rejected=rejected, bridged=bridged, chi2=chi2, warnings=warnings, chi2_ratio=chi2_ratio,
+                    method=method)
+
+
+def final_pose_covariance(poses, twists, twist_cov, *, method: str = "exact") -> np.ndarray:
+    """Covariance (3, 3) of the last pose ``(X, Y, theta)`` of :func:`integrate_twists`, first order.
+
+    Each step's twist error (``twist_cov``, independent between steps) moves
+    every later pose: its translation part by ``R(theta_k)`` times it, its
+    rotation part rotates the rest of the path about the step's end point
+    (the standard SE(2) dead-reckoning propagation, e.g. Thrun, Burgard and
+    Fox, *Probabilistic Robotics*, MIT Press 2005, sec. 5.4). ``"exact"``
+    integration goes through the Jacobian of :func:`se2_exp` (central
+    differences). Under the fusion's white-noise model: the flow kernel's
+    time-correlated bias (see :mod:`robocal.rigs.flow.calibrate`) is not in
+    it. NaN when a step has no covariance (a bridged step, held at the last
+    velocity: its error is not modelled).
+    """
+    p = np.asarray(poses, float)
+    u = np.asarray(twists, float)
+    C = np.asarray(twist_cov, float)
+    K = u.shape[0]
+    if method == "exact":
+        h = 1e-7
+        J_exp = np.empty((K, 3, 3))
+        for j in range(3):
+            e = np.zeros(3)
+            e[j] = h
+            J_exp[:, :, j] = (se2_exp(u + e) - se2_exp(u - e)) / (2 * h)
+        C = J_exp @ C @ np.swapaxes(J_exp, 1, 2)
+    c, s = np.cos(p[:-1, 2]), np.sin(p[:-1, 2])
+    G = np.zeros((K, 3, 3))
+    G[:, 0, 0], G[:, 0, 1], G[:, 1, 0], G[:, 1, 1] = c, -s, s, c
+    G[:, 0, 2] = -(p[-1, 1] - p[1:, 1])
+    G[:, 1, 2] = p[-1, 0] - p[1:, 0]
+    G[:, 2, 2] = 1.0
+    return np.einsum("kab,kbc,kdc->ad", G, C, G)
