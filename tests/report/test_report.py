@@ -44,3 +44,14 @@ def test_wide_figures_and_tables_fit_the_column(tmp_path):
     css = r.write(tmp_path / "r.html").read_text().split("<style>")[1].split("</style>")[0]
     assert re.search(r"figure img\{[^}]*max-width:100%;height:auto", css)
     assert re.search(r"table\{[^}]*display:block;max-width:100%;overflow-x:auto", css)
+
+
+def test_table_cells_align_words_left_and_keep_vectors_on_one_line():
+    rep = Report("t")
+    rep.section("s").table([{"name": "view000", "value": 1.5, "text": "1.3 mm", "why": "both poses coincide",
+                             "t [mm]": "[561.6, 21.2, 259.7]", "v": np.array([1.0, 2.0])}])
+    page = rep.to_html()
+    assert '<td class="t">both poses coincide</td>' in page  # prose reads from the left
+    assert "<td>1.5</td>" in page and "<td>1.3 mm</td>" in page  # numbers (also formatted ones) stay right
+    assert '<td class="v">[561.6, 21.2, 259.7]</td>' in page and '<td class="v">[1., 2.]</td>' in page
+    assert "td.t{text-align:left}" in page.replace("td:first-child,th:first-child,", "")

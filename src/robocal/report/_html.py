@@ -18,6 +18,7 @@ import base64
 import html
 import io
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -31,11 +32,11 @@ __all__ = ["Report", "Section", "figure_to_data_uri", "format_value", "new_figur
 _CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:2em auto;max-width:1100px;color:#222;padding:0 1em;overflow-wrap:break-word}
 h1{border-bottom:2px solid #246;padding-bottom:.2em}h2{color:#246;margin-top:1.6em}h3{color:#357}
-nav ul{columns:2 22em;column-gap:2em;margin:.6em 0}nav li{break-inside:avoid}
+nav ul.cols{columns:2 22em;column-gap:2em}nav li{break-inside:avoid}
 table{border-collapse:collapse;margin:.6em 0;font-size:.92em;display:block;max-width:100%;overflow-x:auto}
 caption{caption-side:top;text-align:left;color:#555;padding:.2em 0}
 th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right;font-variant-numeric:tabular-nums}th{background:#eef2f7}
-td:first-child,th:first-child{text-align:left}
+td:first-child,th:first-child,td.t{text-align:left}td.v{white-space:nowrap}
 .warn{background:#fff4e0;border-left:4px solid #e90;padding:.4em .8em;margin:.3em 0}
 .ok{background:#eaf7ea;border-left:4px solid #3a3;padding:.4em .8em;margin:.3em 0}
 .fail{background:#fdeaea;border-left:4px solid #c33;padding:.4em .8em;margin:.3em 0}
@@ -83,6 +84,21 @@ def format_value(v, digits: int = 6) -> str:
     return str(v)
 
 
+#: Text a rig formatted itself that still reads as a number ("1.3 mm", "-0.2") or a vector ("[1.5, -2]").
+_NUMBER_TEXT = re.compile(r"\s*[-+\u2212]?\.?\d")
+_VECTOR_TEXT = re.compile(r"\s*\[[-+\u2212\d.,e\s]*\]\s*")
+
+
+def _cell(v, digits: int) -> str:
+    """A ``<td>``: numbers right-aligned (the column's default), words left-aligned, vectors on one line."""
+    text = html.escape(format_value(v, digits))
+    if isinstance(v, (list, tuple, np.ndarray)) or (isinstance(v, str) and _VECTOR_TEXT.fullmatch(v)):
+        return f'<td class="v">{text}</td>'
+    if isinstance(v, str) and len(v.strip()) > 1 and not _NUMBER_TEXT.match(v):
+        return f'<td class="t">{text}</td>'
+    return f"<td>{text}</td>"
+
+
 @dataclass
 class Section:
     """A titled part of a report; items render in the order they were added."""
@@ -110,8 +126,7 @@ class Section:
         columns = list(columns or rows[0].keys())
         head = "".join(f"<th>{html.escape(str(c))}</th>" for c in columns)
         body = "".join(
-            "<tr>" + "".join(f"<td>{html.escape(format_value(r.get(c), digits))}</td>" for c in columns) + "</tr>"
-            for r in rows
+            "<tr>" + "".join(_cell(r.get(c), digits) for c in columns) + "</tr>" for r in rows
         )
         cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
         self.items.append(f"<table>{cap}<tr>{head}</tr>{body}</table>")
@@ -241,13 +256,15 @@ class Report:
             for i, s in enumerate(self.sections)
         )
         sub = f"<p>{html.escape(self.subtitle)}</p>" if self.subtitle else ""
+        # a long table of contents in two columns, so the first section is not a screen down
+        nav_cls = ' class="cols"' if len(self.sections) > 8 else ""
         stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
         return (
             "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
             f"<title>{html.escape(self.title)}</title><style>{_CSS}</style></head><body>"
             f"<h1>{html.escape(self.title)}</h1>{sub}"
             f"<p class='meta'>robocal {html.escape(robocal.__version__)} — {stamp}</p>"
-            f"<nav><ul>{toc}</ul></nav>{body}</body></html>\n"
+            f"<nav><ul{nav_cls}>{toc}</ul></nav>{body}</body></html>\n"
         )
 
     def write(self, path) -> Path:
