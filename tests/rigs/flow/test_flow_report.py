@@ -47,6 +47,11 @@ def test_odometry_and_evaluate_reports_rebuild_from_the_result(tmp_path, capsys)
     assert code == 0, err
     assert "ATE [mm]" in _page(ev / "report.html")
     _rebuilt_equal(tmp_path, capsys, ev)
+    # and both read in a 1400 px browser window (tests/support/browser.py; skipped without Chromium)
+    from browser import check_page, chromium_executable
+
+    if chromium_executable() is not None:
+        assert check_page(odo / "report.html") == [] and check_page(ev / "report.html") == []
 
 
 def test_a_run_without_reference_still_gets_its_trajectory_drawn(tmp_path, capsys):
