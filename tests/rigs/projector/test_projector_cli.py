@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from robocal.cli import DemoContext
+from robocal.workflow import DemoContext
 from robocal.cli.main import main
 from robocal.io import load_result
 from robocal.rigs.projector.cli import RIG
@@ -37,9 +37,9 @@ def test_seed_example_reproduces_published_R(tmp_path, capsys):
     res = load_result(tmp_path / "result.json")
     assert res.rig == "projector" and res.method == "nonlinear"
     seed = res.diagnostics["methods"]["seed"]
-    R = np.array(seed["R_0_W"])
+    R = np.array(seed["T_0_W.rotation"])
     assert np.array_equal(np.trunc(R[:2, :2] * 1e4) / 1e4, [[0.9991, -0.0419], [0.0419, 0.9991]])
-    assert np.allclose(seed["t_0_W"], [2.40, -0.90, -2.90], atol=1e-12)
+    assert np.allclose(seed["T_0_W.translation"], [2.40, -0.90, -2.90], atol=1e-12)
     assert [w.code for w in res.warnings][0] == "inconsistent_data" and res.warnings[0].indices == (2,)
     assert len(seed["cost_history"]) == seed["iterations"] + 1
     html = (tmp_path / "report.html").read_text()
@@ -57,6 +57,12 @@ def test_room_examples_calibrate(tmp_path, capsys, name):
     assert code == 0
     res = load_result(tmp_path / "result.json")
     assert res.estimate["h"] == pytest.approx(2.78, abs=4 * res.std["h"])
+    # the pose in the shared vocabulary: rotation std = the yaw's about z (roll, pitch held by the level floor)
+    assert list(res.poses) == ["T_0_W"] and not any(k.startswith(("R_0_W", "q_0_W", "t_0_W")) for k in res.estimate)
+    pose = res.pose("T_0_W")
+    assert pose.std_rotation.tolist() == [0.0, 0.0, res.std["yaw"]] and pose.std_translation[2] == 0.0
+    assert pose.T[2, 3] == -res.estimate["H"] and np.isclose(res.estimate["T_0_W.rotvec"][2], res.estimate["yaw"],
+                                                              rtol=0, atol=1e-15)
     assert res.residual_unit == "m" and res.residual_rms < 0.02
     assert set(res.inputs)  # input hashes recorded
     assert res.diagnostics["std_basis"].startswith("absolute")  # the file states noise: 5 mm
@@ -150,8 +156,10 @@ def test_unreachable_waypoints_are_reported(tmp_path, capsys):
 
 
 def test_demo_passes(tmp_path):
-    out = RIG.demo(DemoContext(out_dir=tmp_path, rng=np.random.default_rng(2026), progress=False))
+    out = RIG.step("demo")(DemoContext(out_dir=tmp_path, rng=np.random.default_rng(2026), progress=False))
     assert out.passed, out.summary
+    check = out.result.diagnostics["truth_check"]  # NEES of the primary estimate against the simulated truth
+    assert check["passed"] and check["dof"] == 5 and set(check["z"]) == {"yaw", "t_x", "t_y", "h", "tilt_offset"}
     assert out.summary["published R"] == "reproduced" and out.result is not None
     assert any("Table 2" in s.title for s in out.sections)
 

@@ -13,13 +13,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from robocal.errors import InputError, RobocalError
-from robocal.rigs.projector.calibrate import floor_prediction_columns
+from robocal.rigs.projector.closed_form import floor_prediction_columns
 from robocal.rigs.projector.model import NearSingularityWarning, ProjectorModel
 from robocal.rigs.projector.published import TABLE2_DESIRED, TABLE2_MEASURED_A, TABLE2_MEASURED_B
 from robocal.validation import check_array
 
 __all__ = ["Evaluation", "evaluate_points", "table2_grid", "error_map", "published_table2_errors",
-           "floor_prediction_jacobian", "spot_error_covariance", "predicted_error_map", "estimate_covariance"]
+           "floor_prediction_jacobian", "spot_error_covariance", "predicted_error_map", "estimate_covariance",
+           "evaluation_extent"]
 
 
 @dataclass
@@ -134,6 +135,16 @@ def error_map(truth: ProjectorModel, calibrated: ProjectorModel, x_range, y_rang
     ev = evaluate_points(truth, calibrated, np.column_stack([X.ravel(), Y.ravel()]))
     err = np.where(ev.reached, ev.norm, np.nan).reshape(n, n)
     return xs, ys, err
+
+
+def evaluation_extent(truth: ProjectorModel, desired) -> tuple:
+    """``(x_range, y_range)`` (m) of the evaluation's error map: the grid and 60 % of the reachable floor, + 0.5 m."""
+    grid = np.asarray(desired, dtype=float)
+    nadir = truth.nadir_world
+    r = truth.floor_radius * 0.6
+    xr = (min(grid[:, 0].min(), nadir[0] - r) - 0.5, max(grid[:, 0].max(), nadir[0] + r) + 0.5)
+    yr = (min(grid[:, 1].min(), nadir[1] - r) - 0.5, max(grid[:, 1].max(), nadir[1] + r) + 0.5)
+    return xr, yr
 
 
 def published_table2_errors() -> dict:
