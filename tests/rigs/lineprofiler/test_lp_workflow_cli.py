@@ -1,38 +1,65 @@
-"""CLI on the example files, file formats and their errors, pose interpolation, the demo."""
+"""The lineprofiler and handeye commands on the example files, their errors, the demo."""
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from robocal.cli.main import main
-from robocal.errors import FileFormatError, InputError, ShapeError
-from robocal.geometry import matrix_from_rotvec, transform_from
+from robocal.errors import FileFormatError, ShapeError
+from robocal.estimation import truth_check
+from robocal.geometry import rotvec_from_matrix
+from robocal.io import load_result
 from robocal.rigs.lineprofiler.calibrate import calibrate_file
 from robocal.rigs.lineprofiler.cli import HANDEYE, RIG
 from robocal.workflow import DemoContext
-from robocal.io import load_result
-from robocal.rigs.lineprofiler.io import (
-    interpolate_poses,
-    load_block_faces_csv,
-    load_poses,
-    load_profiles_csv,
-    write_poses_csv,
-)
 
 EX = Path(__file__).resolve().parents[3] / "examples" / "lineprofiler"
 
 
+def _page(path: Path) -> str:
+    # the one line that differs between two builds of a report: when it was made
+    return re.sub(r"<p class='meta'>.*?</p>", "", path.read_text())
+
+
+def _rebuilt_equal(cal: Path, out: Path, rig: str, capsys) -> str:
+    """``robocal <rig> report`` and ``robocal report`` rebuild the page ``calibrate`` wrote; returns it."""
+    first = _page(cal / "report.html")
+    assert main([rig, "report", str(cal / "result.json"), "--out", str(out / "rig")]) == 0
+    assert main(["report", str(cal / "result.json"), "--out", str(out / "any")]) == 0
+    capsys.readouterr()
+    assert _page(out / "rig" / "report.html") == first
+    assert _page(out / "any" / "report.html") == first
+    return first
+
+
+def _bare_matrices(result) -> list[str]:
+    """Estimate keys holding a 3x3 / 4x4 matrix that is not a pose's rotation (the vocabulary forbids them)."""
+    return [k for k, v in result.estimate.items() if np.shape(v) in ((3, 3), (4, 4))
+            and not (k.endswith(".rotation") and k[: -len(".rotation")] in result.poses)]
+
+
 def test_calibrate_example_names_undetermined_component(tmp_path, capsys):
-    assert main(["lineprofiler", "calibrate", str(EX / "fpdp_input.yaml"), "--out", str(tmp_path)]) == 0
-    res = json.loads((tmp_path / "result.json").read_text())
+    cal = tmp_path / "cal"
+    assert main(["lineprofiler", "calibrate", str(EX / "fpdp_input.yaml"), "--out", str(cal)]) == 0
+    assert "T_E_L translation [mm] (fpdp+geometric): 34.982 +/- 0.033, undetermined, 119.996 +/- 0.056" \
+        in capsys.readouterr().out
+    res = json.loads((cal / "result.json").read_text())
     assert res["estimate"]["T_E_L.translation"][1] is None  # never a silent 0
+    assert res["std"]["T_E_L.translation"][1] is None and res["estimate"]["fpdp.T_E_L.translation"][1] is None
     assert "X.ty" in res["diagnostics"]["undetermined"]
     assert any(w["code"] == "rank_deficient" for w in res["warnings"])
     assert abs(res["estimate"]["T_E_L.translation"][0] - 0.035) < 2e-4
-    assert (tmp_path / "report.html").stat().st_size > 10000
-    assert main(["lineprofiler", "report", str(tmp_path / "result.json"), "--out", str(tmp_path / "r")]) == 0
+    result = load_result(cal / "result.json")
+    assert list(result.poses) == ["T_E_L", "fpdp.T_E_L"] and _bare_matrices(result) == []
+    assert result.poses["T_E_L"] == {"rotation_std": "left", "parent": "end effector E", "child": "laser L"}
+    # the rebuilt report keeps the sections drawn from the fit (they were lost on 'report' before)
+    page = _rebuilt_equal(cal, tmp_path / "rep", "lineprofiler", capsys)
+    for title in ("Residuals", "FPDP circle cuts (seed Table 1)", "Solver (geometric refinement)",
+                  "T_E_L rotation vector x"):
+        assert title in page, title
 
 
 def test_calibrate_with_joint_sigma(tmp_path):
@@ -54,11 +81,20 @@ def test_calibrate_with_joint_sigma(tmp_path):
         calibrate_file(y)
 
 
-def test_handeye_example(tmp_path):
+def test_handeye_example(tmp_path, capsys):
+    cal = tmp_path / "cal"
     assert main(["handeye", "calibrate", str(EX / "gripper_poses.csv"), str(EX / "target_poses.csv"),
-                 "--method", "park", "--out", str(tmp_path)]) == 0
-    res = json.loads((tmp_path / "result.json").read_text())
+                 "--method", "park", "--out", str(cal)]) == 0
+    assert "T_gripper_cam translation [mm] (park+refine): " in capsys.readouterr().out
+    res = json.loads((cal / "result.json").read_text())
     assert np.allclose(res["estimate"]["T_gripper_cam.translation"], [0.035, 0.06, 0.12], atol=2e-3)
+    result = load_result(cal / "result.json")
+    assert list(result.poses) == ["T_gripper_cam", "T_base_target"] and _bare_matrices(result) == []
+    # the fixed target is estimated with X by the refinement: it has a std too
+    assert all(0 < v < 1e-2 for v in res["std"]["T_base_target.translation"])
+    assert len(res["diagnostics"]["closure_residuals"]["rotation_rad"]) == 16
+    page = _rebuilt_equal(cal, tmp_path / "rep", "handeye", capsys)
+    assert "Closed-form solvers compared" in page and all(m in page for m in ("tsai", "horaud", "daniilidis"))
 
 
 def test_cli_bad_input_is_one_line(tmp_path, capsys):
@@ -66,67 +102,6 @@ def test_cli_bad_input_is_one_line(tmp_path, capsys):
     bad.write_text("t [s], x [m], y [m], z [m], qx, qy, qz, qw\n0, 0, 0, 0, 0, 0, 0.5, 0.5\n")
     assert main(["handeye", "calibrate", str(bad), str(bad), "--out", str(tmp_path / "o")]) == 2
     assert "unit quaternion" in capsys.readouterr().err
-
-
-def test_pose_files_errors(tmp_path):
-    f = tmp_path / "p.csv"
-    f.write_text("x [m], y [m], z [m], qx, qy, qz, qw\n0, 0, nan, 0, 0, 0, 1\n")
-    with pytest.raises(FileFormatError, match="nan"):
-        load_poses(f)
-    y = tmp_path / "p.yaml"
-    y.write_text("units: {length: mm}\nposes:\n  - {p: [1, 2, 3], R: [[1, 0, 0], [0, 1, 0], [0, 0.1, 1]]}\n")
-    with pytest.raises(FileFormatError, match="rotation matrix"):
-        load_poses(y)
-    y.write_text("units: {length: mm, time: s}\nposes:\n  - {p: [1, 2, 3], q: [0, 0, 0, 1], t: 0.5}\n")
-    T, t = load_poses(y)
-    assert np.allclose(T[0, :3, 3], [1e-3, 2e-3, 3e-3]) and t[0] == 0.5
-
-
-def test_profiles_csv_round_trip_and_errors(tmp_path):
-    profiles, q, t = load_profiles_csv(EX / "fpdp_profiles.csv", dof=3)
-    assert len(profiles) == len(q) == 16 and t is None
-    assert 0.15 < profiles[0][:, 1].mean() < 0.4  # z in metres
-    f = tmp_path / "x.csv"
-    f.write_text("profile, x [mm], z [mm], q1 [mm]\n0, 1, 2, 3\n0, 1, 2, 4\n")
-    with pytest.raises(FileFormatError, match="differ between its rows"):
-        load_profiles_csv(f)
-    f.write_text("profile, x [mm], z [mm], q1\n0, 1, 2, 3\n")
-    with pytest.raises(FileFormatError, match="needs a unit"):
-        load_profiles_csv(f)
-
-
-def test_csv_errors_name_the_file_line(tmp_path):
-    """Comments and blank lines before the data: messages name the file line, not the data row."""
-    head = "# exported by the tracker\n\n"
-    f = tmp_path / "faces.csv"
-    f.write_text(head + "face, x [mm], y [mm], z [mm]\n0, 1, 2, 3\n# probe re-seated\n4, 1, 2, 3\n")
-    with pytest.raises(FileFormatError, match=r"row 2 \(line 6\): column 'face' must be 0, 1 or 2"):
-        load_block_faces_csv(f)
-    f = tmp_path / "poses.csv"
-    f.write_text(head + "x [m], y [m], z [m], qx, qy, qz, qw\n0, 0, 0, 0, 0, 0, 1\n0, 0, 0, 0, 0, 0.5, 0.5\n")
-    with pytest.raises(FileFormatError, match=r"row 2 \(line 5\): quaternion"):
-        load_poses(f)
-    f = tmp_path / "prof.csv"
-    f.write_text(head + "profile, x [mm], z [mm], q1 [mm]\n0, 1, 2, 3\n\n0, 1, 2, 4\n-1, 1, 2, 4\n")
-    with pytest.raises(FileFormatError, match=r"row 3 \(line 7\): column 'profile'"):
-        load_profiles_csv(f)
-    f.write_text(head + "profile, x [mm], z [mm], q1 [mm]\n0, 1, 2, 3\n\n0, 1, 2, 4\n")
-    with pytest.raises(FileFormatError, match=r"row 2 \(line 6\) against its first, row 1 \(line 4\)"):
-        load_profiles_csv(f)
-
-
-def test_slerp_interpolation_between_streams(tmp_path):
-    t = np.array([0.0, 1.0, 2.0])
-    T = transform_from(matrix_from_rotvec([[0, 0, 0], [0, 0, 0.4], [0, 0, 0.8]]), [[0, 0, 0], [1, 0, 0], [2, 0, 0]])
-    write_poses_csv(tmp_path / "s.csv", T, t)
-    T2, t2 = load_poses(tmp_path / "s.csv")
-    Ti = interpolate_poses(t2, T2, [0.5, 1.75])
-    assert np.allclose(Ti[0], transform_from(matrix_from_rotvec([0, 0, 0.2]), [0.5, 0, 0]), atol=1e-9)
-    assert np.allclose(Ti[1, :3, 3], [1.75, 0, 0])
-    with pytest.raises(InputError, match="no extrapolation"):
-        interpolate_poses(t, T, [2.5])
-    with pytest.raises(InputError, match="counts must match"):
-        interpolate_poses(t[:2], T, [0.5])
 
 
 def test_rigs_registered_and_demo(tmp_path):
@@ -148,8 +123,14 @@ def test_calibrate_mct_example(tmp_path, capsys):
     d = res["diagnostics"]
     assert d["encoder_sigma_m"] == 5e-6  # the documented default
     assert set(d["covariance"]["std_by_source"]) == {"tracker", "heights", "block scan", "P3 encoder"}
-    assert main(["lineprofiler", "report", str(tmp_path / "result.json"), "--out", str(tmp_path / "r")]) == 0
-    assert "P3 encoder sigma per scan profile 5.0 um" in (tmp_path / "r" / "report.html").read_text()
+    result = load_result(tmp_path / "result.json")
+    # the intermediate frames are poses too, derived: no std of their own
+    assert list(result.poses) == ["T_E_L", "T_T_L", "T_T_E", "T_T_B", "T_L_B"] and _bare_matrices(result) == []
+    assert result.pose("T_T_L").std_rotation is None
+    np.testing.assert_allclose(result.pose("T_T_E").T @ result.pose("T_E_L").T, result.pose("T_T_L").T,
+                               atol=1e-12)  # eq. 5, X = T_T_E^-1 T_T_L: rounding only
+    page = _rebuilt_equal(tmp_path, tmp_path / "rep", "lineprofiler", capsys)
+    assert "P3 encoder sigma per scan profile 5.0 um" in page and "block-scan fit residuals" in page
 
 
 def _mct_copy(tmp_path):
@@ -185,9 +166,15 @@ def test_handeye_robot_world_example(tmp_path, capsys):
     # the same two pose lists give AX = ZB: T_gripper_cam and T_base_target together
     assert main(["handeye", "robot-world", str(EX / "gripper_poses.csv"), str(EX / "target_poses.csv"),
                  "--out", str(tmp_path)]) == 0
+    assert "T_gripper_cam translation [mm]: 35.187 +/- 1.108, 59.455 +/- 0.390, 120.385 +/- 0.248" \
+        in capsys.readouterr().out
     res = json.loads((tmp_path / "result.json").read_text())
     assert res["method"] == "robot-world shah+refine"
     result = load_result(tmp_path / "result.json")
+    assert set(result.poses) == {"T_target_base", "T_cam_gripper", "T_base_target", "T_gripper_cam"}
+    assert _bare_matrices(result) == []
+    # 'robocal report' rebuilds a robot-world result through the handeye workflow as well
+    _rebuilt_equal(tmp_path, tmp_path / "rep", "handeye", capsys)
     T = result.pose("T_gripper_cam").T
     assert np.allclose(T[:3, 3], [0.035, 0.06, 0.12], atol=2e-3)  # 0.2 mm / 1 mrad pose noise, 16 poses
     assert all(v is not None and 0 < v < 3e-3 for v in res["std"]["T_cam_gripper.translation"])
@@ -196,7 +183,6 @@ def test_handeye_robot_world_example(tmp_path, capsys):
     st = np.array(res["std"]["T_gripper_cam.translation"])
     assert np.all((st > 0) & (st < 3e-3)) and len(res["std"]["T_gripper_cam.rotvec"]) == 3
     assert np.all(np.abs(T[:3, 3] - [0.035, 0.06, 0.12]) < 4 * st)
-    assert "+/-" in capsys.readouterr().out
 
 
 def test_mct_arm_sigma_enters_the_covariance(tmp_path):
@@ -207,3 +193,22 @@ def test_mct_arm_sigma_enters_the_covariance(tmp_path):
     assert res["diagnostics"]["arm_dh_sigma"] == pytest.approx({"length_m": 3e-4, "angle_rad": np.deg2rad(0.1)})
     # 0.3 mm of arm error dominates the 0.03-0.08 mm the tracker and the scan leave
     assert all(v > 2.5e-4 for v in np.array(res["std"]["T_E_L.translation"])[[0, 2]])
+
+
+def test_handeye_simulate_calibrate_recovers_the_truth(tmp_path, capsys):
+    """``handeye simulate`` writes the two lists and their truth; ``calibrate`` finds X within its std (NEES)."""
+    import yaml
+
+    sim, cal = tmp_path / "sim", tmp_path / "cal"
+    assert main(["handeye", "simulate", "--seed", "3", "--out", str(sim)]) == 0
+    assert main(["handeye", "calibrate", str(sim / "gripper_poses.csv"), str(sim / "target_poses.csv"),
+                 "--out", str(cal)]) == 0
+    capsys.readouterr()
+    truth = yaml.safe_load((sim / "truth.yaml").read_text())
+    pose = load_result(cal / "result.json").pose("T_gripper_cam")
+    R, t = np.array(truth["T_gripper_cam"]["rotation"]), np.array(truth["T_gripper_cam"]["translation"])
+    err = np.r_[rotvec_from_matrix(pose.T[:3, :3] @ R.T), pose.T[:3, 3] - t]   # left rotation error, as the std
+    check = truth_check(err, np.r_[pose.std_rotation, pose.std_translation])
+    assert check.passed, check.to_dict()
+    # and the check can fail: the same errors against a std 10x too small
+    assert not truth_check(err, np.r_[pose.std_rotation, pose.std_translation] / 10).passed
