@@ -1,4 +1,5 @@
-"""CLI: simulate -> calibrate -> report, the example inputs, the ArUco image path, the demo, file errors."""
+"""The workflow through the CLI: simulate -> calibrate -> report, the example inputs, the ArUco image path,
+the demo, the result's vocabulary, file errors."""
 
 import json
 from pathlib import Path
@@ -7,10 +8,11 @@ import numpy as np
 import pytest
 import yaml
 
-from robocal.cli import DemoContext
 from robocal.cli.main import main
+from robocal.io import load_result
 from robocal.rigs.mirror.cli import RIG
 from robocal.rigs.mirror.files import load_input
+from robocal.workflow import DemoContext
 
 EXAMPLES = Path(__file__).resolve().parents[3] / "examples" / "mirror"
 
@@ -27,11 +29,12 @@ def test_simulate_calibrate_report(tmp_path, capsys):
     assert main(["mirror", "calibrate", str(sim / "mirror_input.yaml"), "--out", str(cal)]) == 0
     res = json.loads((cal / "result.json").read_text())
     assert res["rig"] == "mirror" and res["schema"] == "robocal.result/2"
-    T = np.array(res["estimate"]["T_r_c"])
+    t = np.array(res["estimate"]["T_r_c.translation"])
     truth = np.array(res["diagnostics"]["truth_T_r_c"])
-    std = np.array(res["std"]["t_r_c"])
-    assert np.all(np.abs(T[:3, 3] - truth[:3, 3]) < 4 * std)
-    assert res["units"]["t_r_c"] == "m" and res["residual_unit"] == "px"
+    std = np.array(res["std"]["T_r_c.translation"])
+    assert np.all(np.abs(t - truth[:3, 3]) < 4 * std)
+    assert res["units"]["T_r_c.translation"] == "m" and res["residual_unit"] == "px"
+    assert res["poses"]["T_r_c"] == {"rotation_std": "left", "parent": "robot", "child": "camera"}
     assert len(res["diagnostics"]["single_image"]) == 2
     html = (cal / "report.html").read_text()
     assert "planar" in html and "data:image/png;base64" in html
@@ -43,10 +46,12 @@ def test_simulate_calibrate_report(tmp_path, capsys):
                                   "own_camera.yaml"])
 def test_examples_run(tmp_path, name):
     assert main(["mirror", "calibrate", str(EXAMPLES / name), "--out", str(tmp_path)]) == 0
-    res = json.loads((tmp_path / "result.json").read_text())
-    T = np.array(res["estimate"]["T_r_c"])
-    truth = np.array(res["diagnostics"]["truth_T_r_c"])
-    assert np.linalg.norm(T[:3, 3] - truth[:3, 3]) < 4 * np.linalg.norm(res["std"]["t_r_c"])
+    res = load_result(tmp_path / "result.json")
+    pose = res.pose("T_r_c")
+    truth = np.array(res.diagnostics["truth_T_r_c"])
+    assert np.linalg.norm(pose.T[:3, 3] - truth[:3, 3]) < 4 * np.linalg.norm(pose.std_translation)
+    # the simulated truth is checked by NEES against the reported covariance (alpha = 1e-3)
+    assert res.diagnostics["truth_check"]["passed"] and res.diagnostics["truth_check"]["dof"] == 6
 
 
 def test_no_refine(tmp_path):
@@ -87,10 +92,13 @@ def test_bad_files_give_one_line_errors(tmp_path, capsys):
 
 
 def test_demo_runs_and_passes(tmp_path):
-    out = RIG.demo(DemoContext(out_dir=tmp_path, rng=np.random.default_rng(2026), progress=False))
+    out = RIG.step("demo")(DemoContext(out_dir=tmp_path, rng=np.random.default_rng(2026), progress=False))
     assert out.passed, out.summary
-    assert {"1 image error", "4 placements error", "ArUco image error"} <= set(out.summary)
+    assert {"1 image error", "4 placements error", "ArUco image error", "4 placements NEES",
+            "ArUco image NEES"} <= set(out.summary)
     assert out.result is not None and (tmp_path / "report.html").exists()
+    html = (tmp_path / "report.html").read_text()
+    assert "NEES" in html and "points drawn on grey" not in html  # the rendered image is drawn under its overlay
 
 
 def test_report_of_another_rig_or_incomplete_result_is_a_one_line_error(tmp_path, capsys):
@@ -128,8 +136,8 @@ def test_noise_free_simulation_round_trips(tmp_path):
 
 def test_calibration_errors_name_the_input_file(tmp_path):
     # errors raised during calibration (not parsing) must still name the file
+    from robocal.cli._workflow import calibrate_files
     from robocal.errors import NotEnoughDataError
-    from robocal.rigs.mirror.workflow import calibrate_file
 
     doc = yaml.safe_load((EXAMPLES / "published_single.yaml").read_text())
     doc["images"][0]["body_uv"] = doc["images"][0]["body_uv"][:3]
@@ -137,7 +145,7 @@ def test_calibration_errors_name_the_input_file(tmp_path):
     p = tmp_path / "three_body_points.yaml"
     p.write_text(yaml.safe_dump(doc))
     with pytest.raises(NotEnoughDataError) as exc:
-        calibrate_file(p)
+        calibrate_files(RIG, [p], out_dir=tmp_path / "o")
     assert str(exc.value).startswith(str(p)) and "at least 4" in str(exc.value)
 
 

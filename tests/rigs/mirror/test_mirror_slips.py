@@ -70,7 +70,7 @@ def test_accept_implausible_writes_the_result_with_a_warning(tmp_path, capsys):
     assert res["warnings"][0]["code"] == "implausible_input"
     assert res["warnings"][0]["params"] == ["mirror_rectangle_m_as_mm"]
     # the answer for the data as given: the camera metres from the body (the slip's effect, kept)
-    assert np.linalg.norm(res["estimate"]["t_r_c"]) > 1.0  # [m]; the truth is 0.65 m from the odometry centre
+    assert np.linalg.norm(res["estimate"]["T_r_c.translation"]) > 1.0  # [m]; the truth is 0.65 m from the odometry centre
 
 
 def test_correct_inputs_pass_every_check(tmp_path, capsys):

@@ -291,13 +291,13 @@ def test_own_camera_example_hashes_the_camera_file_and_a_camera_file_as_input_is
     from pathlib import Path
 
     from robocal.errors import FileFormatError
-    from robocal.rigs.mirror.workflow import calibrate_file
+    from robocal.rigs.mirror.workflow import calibrate_input, to_result
 
     ex = Path(__file__).resolve().parents[3] / "examples" / "mirror"
     inp = load_input(ex / "own_camera.yaml")
     assert inp.camera == load_input(ex / "published_single.yaml").camera
     assert inp.camera_file and inp.camera_file.endswith("opencv_camera.yaml")
-    _, result, _ = calibrate_file(ex / "own_camera.yaml", out_dir=tmp_path)
+    result = to_result(calibrate_input(inp, out_dir=tmp_path), inp)
     assert any(k.endswith("opencv_camera.yaml") for k in result.inputs)
     with pytest.raises(FileFormatError, match=r"looks like a camera calibration file .* 'camera: \{file: "):
         load_input(ex / "opencv_camera.yaml")

@@ -99,6 +99,8 @@ class MirrorInput:
     camera_file: str | None = None  # the file of ``camera: {file: ...}``, if any
     #: units ``mirror_rectangle`` and ``body_points`` were written in (robocal.rigs.mirror.slips.declared_units)
     declared: dict = field(default_factory=dict)
+    #: ``T_r_c`` (4, 4) [m] of the file's ``truth`` section (written by ``robocal mirror simulate``), else None
+    truth: np.ndarray | None = None
 
 
 def _uv(doc, key, n=None):
@@ -262,7 +264,15 @@ def load_input(path) -> MirrorInput:
     from robocal.rigs.mirror.slips import declared_units
 
     return MirrorInput(cam, rect, body, obs, sigma, tags, images, src, mirror_tags, camera_file,
-                       declared_units(doc))
+                       declared_units(doc), _truth(doc))
+
+
+def _truth(doc: Document) -> np.ndarray | None:
+    """The simulated ``T_r_c`` of a ``truth: {R_r_c: 3x3, t_r_c: [x, y, z]}`` section (lengths in the file's unit)."""
+    if "truth" not in doc:
+        return None
+    t = doc.sub("truth")
+    return transform_from(t.array("R_r_c", shape=(3, 3)), t.array("t_r_c", kind="length", shape=(3,)))
 
 
 def write_input(path, camera: CameraModel, rectangle: MarkerRectangle, body_points_r, observations, *,

@@ -1,25 +1,34 @@
-"""End-to-end workflows behind the CLI and the demo (library functions, no argparse)."""
+"""The mirror rig's steps of the rig contract (:mod:`robocal.workflow`): library functions, no argparse.
+
+``simulate_files`` -> ``load_input`` -> ``calibrate_input`` -> ``to_result``
+-> :func:`robocal.rigs.mirror.report.build_report`, plus ``summary`` (the
+lines printed after ``robocal mirror calibrate``) and ``demo``. The core
+(:mod:`robocal.cli._workflow`) runs them; :mod:`robocal.rigs.mirror.cli`
+only declares them.
+"""
 
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import yaml
 
-from robocal.errors import InputError, RobocalError
-from robocal.io import hash_inputs, load_document
+from robocal.errors import InputError
+from robocal.io import CalibrationResult, hash_inputs
 from robocal.rigs.mirror.calibrate import MirrorCalibration, calibrate
-from robocal.rigs.mirror.files import load_input, write_input
+from robocal.rigs.mirror.files import MirrorInput, load_input, write_input
 from robocal.rigs.mirror.model import MirrorScene
-from robocal.rigs.mirror.montecarlo import pose_error
-from robocal.rigs.mirror.render import default_body_tags, detect_mirror_image, render_mirror_image
-from robocal.rigs.mirror.report import build_report, relative_image_paths, result_from_calibration
+from robocal.rigs.mirror.result import pose_error, relative_image_paths, result_from_calibration
 from robocal.rigs.mirror.simulate import default_setup, simulate_observations
+from robocal.workflow import DemoContext, DemoOutcome
 
-__all__ = ["simulate_files", "calibrate_file", "planar_summary", "demo"]
+__all__ = ["simulate_files", "load_input", "calibrate_input", "to_result", "summary", "planar_summary", "demo",
+           "MirrorRun", "INPUT_NAME"]
 
+#: The input file ``simulate`` writes (``Workflow.simulated_inputs``).
 INPUT_NAME = "mirror_input.yaml"
 
 
@@ -28,21 +37,24 @@ def _truth_block(T_r_c) -> dict:
     return {"R_r_c": np.round(T[:3, :3], 12).tolist(), "t_r_c": np.round(T[:3, 3] * 1e3, 9).tolist()}
 
 
-def simulate_files(out_dir, *, placements: int = 1, sigma_px: float = 0.5, seed: int = 0,
-                   images: bool = False) -> list[Path]:
+def simulate_files(out_dir, rng: np.random.Generator | None = None, *, placements: int = 1, sigma_px: float = 0.5,
+                   images: bool = False, seed: int = 0, progress: bool = False) -> list[Path]:
     """Write ``mirror_input.yaml`` (and PNG images with ``images=True``) for the published scene.
 
+    ``rng``: the run's random generator (default: ``np.random.default_rng(seed)``).
     The file carries a ``truth`` section (``R_r_c``, ``t_r_c`` in mm) that
-    ``calibrate`` uses to report errors.
+    ``calibrate`` uses to check the answer (``diagnostics.truth_check``).
     """
     import cv2
+
+    from robocal.rigs.mirror.render import default_body_tags, detect_mirror_image, render_mirror_image
 
     if int(placements) < 1:
         raise InputError(f"placements: must be >= 1, got {placements}")
     if not np.isfinite(sigma_px) or sigma_px < 0:
         raise InputError(f"sigma_px: must be >= 0, got {sigma_px}")
     out_dir = Path(out_dir)
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(seed) if rng is None else rng
     cam, scene = default_setup(placements, rng)
     written = []
     if images:
@@ -72,99 +84,122 @@ def simulate_files(out_dir, *, placements: int = 1, sigma_px: float = 0.5, seed:
     return written
 
 
-def _read_truth(path) -> np.ndarray | None:
-    doc = load_document(path)
-    if "truth" not in doc:
-        return None
-    t = doc.sub("truth")
-    T = np.eye(4)
-    T[:3, :3] = t.array("R_r_c", shape=(3, 3))
-    T[:3, 3] = t.array("t_r_c", kind="length", shape=(3,))
-    return T
+@dataclass
+class MirrorRun:
+    """What ``calibrate_input`` hands ``to_result``: the calibration and the folder the result goes to.
+
+    ``base_dir`` makes the image paths of the result relative to the result
+    file (:func:`~robocal.rigs.mirror.result.relative_image_paths`).
+    """
+
+    calibration: MirrorCalibration
+    base_dir: Path
 
 
-def planar_summary(cal: MirrorCalibration) -> str:
-    """One line on the marker planar ambiguity for stdout ('' when no image had two distinct poses)."""
-    amb = [s for s in cal.singles if s.choice.ambiguous]
+def calibrate_input(inp: MirrorInput, *, out_dir=None, progress: bool = False, accept_implausible: bool = False,
+                    no_refine: bool = False, **_) -> MirrorRun:
+    """Calibrate from a loaded input (:func:`~robocal.rigs.mirror.files.load_input`).
+
+    ``no_refine``: the patent's single-image estimates only, averaged over the
+    images (CLI ``--no-refine``). ``out_dir``: the folder the result will be
+    written to (default: the current directory). ``accept_implausible``: see
+    :func:`robocal.rigs.mirror.calibrate.calibrate`.
+    """
+    cal = calibrate(inp.camera, inp.rectangle, inp.body_points_r, inp.observations, sigma_px=inp.sigma_px,
+                    refine=not no_refine, progress=progress, accept_implausible=accept_implausible,
+                    declared=inp.declared)
+    return MirrorRun(cal, Path(out_dir) if out_dir is not None else Path.cwd())
+
+
+def to_result(run: MirrorRun, inp: MirrorInput) -> CalibrationResult:
+    """The result record (:func:`~robocal.rigs.mirror.result.result_from_calibration`) with the inputs' hashes."""
+    inputs = hash_inputs([inp.source, *([inp.camera_file] if inp.camera_file else []), *inp.image_paths.values()])
+    return result_from_calibration(run.calibration, inputs=inputs,
+                                   image_paths=relative_image_paths(inp.image_paths, run.base_dir),
+                                   truth=inp.truth, sigma_px=inp.sigma_px)
+
+
+def planar_summary(result: CalibrationResult) -> str:
+    """One line on the marker planar ambiguity ('' when no image had two distinct poses)."""
+    singles = result.diagnostics.get("single_image") or []
+    amb = [s for s in singles if s["planar_choice"].get("ambiguous")]
     if not amb:
         return ""
-    guessed = [o.name for s, o in zip(cal.singles, cal.observations)
-               if s.choice.ambiguous and not s.choice.decisive]
-    text = (f"planar choice: {len(amb)} of {len(cal.singles)} image(s) had two marker poses; "
+    guessed = [s["name"] for s in amb if not s["planar_choice"].get("decisive", True)]
+    text = (f"planar choice: {len(amb)} of {len(singles)} image(s) had two marker poses; "
             f"{len(amb) - len(guessed)} decided by a test")
     if guessed:
         text += f", {len(guessed)} guessed ({', '.join(guessed)})"
     return text + "; reasons and the other pose's answer in report.html"
 
 
-def calibrate_file(path, *, refine: bool = True, progress: bool = False, out_dir=None,
-                   accept_implausible: bool = False):
-    """Calibrate from an input file: ``(MirrorCalibration, CalibrationResult, Report)``.
+def summary(result: CalibrationResult) -> str:
+    """The lines printed after ``robocal mirror calibrate``: ``t_r_c`` with its std, the rotation std, the planar choice."""
+    pose = result.pose("T_r_c")
+    t = pose.T[:3, 3] * 1e3
+    s = pose.std_translation * 1e3
+    text = (f"t_r_c = [{t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}] mm  (std {s[0]:.1f}, {s[1]:.1f}, {s[2]:.1f} mm); "
+            f"rotation std {np.degrees(pose.std_rotation).max():.3g} deg")
+    line = planar_summary(result)
+    return f"{text}\n{line}" if line else text
 
-    ``out_dir``: folder the result will be written to; image paths are then
-    stored relative to it (else relative to the current directory).
-    ``accept_implausible``: see :func:`robocal.rigs.mirror.calibrate.calibrate`.
+
+def _error_text(e) -> str:
+    return f"{np.linalg.norm(e[3:]) * 1e3:.1f} mm / {np.degrees(np.linalg.norm(e[:3])):.2f} deg"
+
+
+def demo(ctx: DemoContext) -> DemoOutcome:
+    """Simulate -> calibrate -> check on the published scene (points, 4 placements) and one rendered image.
+
+    Passes when both answers are consistent with their reported covariance
+    (:func:`robocal.estimation.truth_check`, NEES over the 6 pose parameters).
     """
-    inp = load_input(path)
-    try:
-        cal = calibrate(inp.camera, inp.rectangle, inp.body_points_r, inp.observations, sigma_px=inp.sigma_px,
-                        refine=refine, progress=progress, accept_implausible=accept_implausible,
-                        declared=inp.declared)
-    except RobocalError as exc:  # the library names the image and field; the user also needs the file
-        raise (exc if exc.source else exc.with_source(str(path))) from None
-    truth = _read_truth(path)
-    inputs = hash_inputs([path, *([inp.camera_file] if inp.camera_file else []), *inp.image_paths.values()])
-    base = Path(out_dir) if out_dir is not None else Path.cwd()
-    result = result_from_calibration(cal, inputs=inputs, image_paths=relative_image_paths(inp.image_paths, base),
-                                     truth=truth)
-    return cal, result, build_report(result, base_dir=base)
+    import cv2
 
+    from robocal.rigs.mirror.render import default_body_tags, detect_mirror_image, render_mirror_image
+    from robocal.rigs.mirror.report import build_report
 
-def demo(out_dir, rng: np.random.Generator, *, progress: bool = False):
-    """Simulate -> calibrate -> check on the published scene (points, 4 placements) and one rendered image."""
-    from robocal.cli import DemoOutcome
-
-    out_dir = Path(out_dir)
+    out_dir = Path(ctx.out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    rng = ctx.rng
     t0 = time.perf_counter()
     cam, scene = default_setup(4, rng)
     obs = simulate_observations(cam, scene, rng, sigma_px=0.5)
     single = calibrate(cam, scene.rectangle, scene.body_points_r, obs[:1], sigma_px=0.5)
-    joint: MirrorCalibration = calibrate(cam, scene.rectangle, scene.body_points_r, obs, sigma_px=0.5)
+    joint = calibrate(cam, scene.rectangle, scene.body_points_r, obs, sigma_px=0.5)
     e1 = pose_error(single.T_r_c, scene.T_r_c)
     e4 = pose_error(joint.T_r_c, scene.T_r_c)
-    # 3-sigma check per component against the reported covariance
-    z = np.abs(e4) / np.sqrt(np.diag(joint.cov))
-    passed = bool(np.all(z < 3.5))
-    result = result_from_calibration(joint, truth=scene.T_r_c)
-    report = build_report(result, title="mirror demo: published scene, 4 mirror placements, 0.5 px")
+    result = result_from_calibration(joint, truth=scene.T_r_c, sigma_px=0.5)
+    report = build_report(result, base_dir=out_dir, title="mirror demo: published scene, 4 mirror placements, 0.5 px")
     # the image path: one rendered image, ArUco tags on the body found in the flipped image
     tags = default_body_tags()
     scene_tags = MirrorScene(scene.T_c_r, scene.T_c_m[:1], tags.body_points_r(), scene.rectangle)
     img = render_mirror_image(cam, scene_tags, tags, rng=rng)
+    cv2.imwrite(str(out_dir / "rendered_image.png"), img)
     obs_img = detect_mirror_image(img, cam, tags, name="rendered image", rectangle=scene.rectangle)
     cal_img = calibrate(cam, scene.rectangle, scene_tags.body_points_r, [obs_img])
     e_img = pose_error(cal_img.T_r_c, scene.T_r_c)
-    z_img = np.abs(e_img) / np.sqrt(np.diag(cal_img.cov))
-    passed = passed and bool(np.all(z_img < 4.0))
-    res_img = result_from_calibration(cal_img, truth=scene.T_r_c)
-    rep_img = build_report(res_img, images={"rendered image": img})
+    res_img = result_from_calibration(cal_img, truth=scene.T_r_c, image_paths={"rendered image": "rendered_image.png"})
+    rep_img = build_report(res_img, base_dir=out_dir)
+    check4, check_img = result.diagnostics["truth_check"], res_img.diagnostics["truth_check"]
     sec = report.section("ArUco path: one rendered image")
     sec.text(f"{len(obs_img.body_ids) // 4} of {len(tags.ids)} body tags found in the flipped image; "
              f"error {np.linalg.norm(e_img[3:]) * 1e3:.1f} mm / {np.degrees(np.linalg.norm(e_img[:3])):.2f} deg "
-             f"(reported std {np.linalg.norm(cal_img.std_translation) * 1e3:.1f} mm).")
+             f"(reported std {np.linalg.norm(cal_img.std_translation) * 1e3:.1f} mm); NEES {check_img['nees']:.2f} "
+             f"over {check_img['dof']} parameters, limit {check_img['threshold']:.1f}.")
     for s in rep_img.sections:
         if s.title.startswith("Images"):
             report.extend([s], prefix="ArUco")
     report.write(out_dir / "report.html")
-    summary = {
-        "1 image error": f"{np.linalg.norm(e1[3:]) * 1e3:.1f} mm / {np.degrees(np.linalg.norm(e1[:3])):.2f} deg",
-        "4 placements error": f"{np.linalg.norm(e4[3:]) * 1e3:.1f} mm / {np.degrees(np.linalg.norm(e4[:3])):.2f} deg",
+    summary_ = {
+        "1 image error": _error_text(e1),
+        "4 placements error": _error_text(e4),
         "4 placements std": f"{np.linalg.norm(joint.std_translation) * 1e3:.1f} mm / "
                             f"{np.degrees(np.linalg.norm(joint.std_rotation)):.2f} deg",
+        "4 placements NEES": f"{check4['nees']:.2f} (limit {check4['threshold']:.1f})",
         "ArUco image error": f"{np.linalg.norm(e_img[3:]) * 1e3:.1f} mm",
+        "ArUco image NEES": f"{check_img['nees']:.2f} (limit {check_img['threshold']:.1f})",
         "time": f"{time.perf_counter() - t0:.1f} s",
     }
-    return DemoOutcome(summary=summary, passed=passed, sections=list(report.sections), result=result)
-
-
+    passed = bool(check4["passed"] and check_img["passed"])
+    return DemoOutcome(summary=summary_, passed=passed, sections=list(report.sections), result=result)
