@@ -1,4 +1,4 @@
-"""Fuzz: every example input, mutated as users mutate files, through its command, in-process.
+"""The robocal program (``main``, in-process) on every example input mutated as users mutate files (fuzzing).
 
 The contract checked for each mutated input (issue 18): exit status 0, or 2
 with exactly one stderr line starting ``robocal: error:`` and no traceback;
@@ -17,7 +17,7 @@ Derandomized (tests/conftest.py) and bounded: the default profile draws a few
 examples per command (~60 s on a 2-core machine); ``HYPOTHESIS_PROFILE=explore``
 draws ten times as many, fresh each run::
 
-    HYPOTHESIS_PROFILE=explore python -m pytest tests/cli/test_fuzz_inputs.py -q
+    HYPOTHESIS_PROFILE=explore python -m pytest tests/cli/test_main_mutated_inputs.py -q
 """
 
 from __future__ import annotations
