@@ -47,7 +47,7 @@ class MirrorObservation:
         Noise covariance of the body points in groups of four consecutive
         rows of ``body_uv`` (the corners of one tag, order ``u0, v0, ..., u3,
         v3``), relative: times ``sigma_px^2``. The ArUco path sets it from
-        the edge-fit geometry (:func:`~robocal.rigs.mirror.render.tag_corner_covariance`):
+        the edge-fit geometry (:func:`~robocal.rigs.mirror.detect.tag_corner_covariance`):
         a tag's corners share its four fitted border lines, so their errors
         are correlated (-0.68 between the ends of one side); the joint
         refinement whitens each tag's residuals with it. None: independent,
