@@ -60,7 +60,7 @@ def test_nao_structure(nao):
     assert nao.chain("Lthigh", "Lthigh") == []
     with pytest.raises(InputError, match="not an ancestor"):
         nao.chain("l_sole", "torso")
-    # At q = 0 the sole is below the hip by thigh + tibia + foot height (spec 03's NAO numbers).
+    # At q = 0 the sole is below the hip by thigh + tibia + foot height (the NAO H25 link lengths).
     sole = nao.fk(np.zeros(nao.n_joints))["l_sole"]
     assert np.abs(sole[:3, 3] - [0, 0.05, -0.085 - 0.1 - 0.1029 - 0.04519]).max() < 1e-15
 
