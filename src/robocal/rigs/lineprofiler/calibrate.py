@@ -1,4 +1,9 @@
-"""The rig's workflow as library calls: input file -> FPDP -> geometric refinement -> result + report.
+"""The rig's calibration as library calls: input file -> FPDP -> geometric refinement (or MCT).
+
+:func:`load_input` reads and checks an input YAML and the files it names,
+:func:`calibrate_input` calibrates it, :func:`to_result` makes the result
+(:mod:`.result`; its report: :mod:`.report`); :func:`calibrate_file` is the
+three in one call.
 
 Input (YAML, units stated)::
 

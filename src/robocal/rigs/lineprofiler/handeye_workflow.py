@@ -265,7 +265,7 @@ def build_report(result, *, base_dir=None):
                  "translation vs estimate [mm]": None if "error" in c else 1e3 * c["translation_diff_m"],
                  "rotation RMS [mrad]": None if "error" in c else 1e3 * c["rotation_rms_rad"],
                  "translation RMS [mm]": None if "error" in c else 1e3 * c["translation_rms_m"],
-                 "note": c.get("error", "")} for c in cmp]
+                 **({"failed": c["error"]} if any("error" in e for e in cmp) else {})} for c in cmp]
         rep.section("Closed-form solvers compared").table(
             rows, digits=4, caption="each closed form on the same motions, against the estimate above")
     solver_section(rep.section("Solver (refinement)"), d.get("solver") or {})
