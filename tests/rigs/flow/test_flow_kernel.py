@@ -1,4 +1,4 @@
-"""Flow kernel (seed 003 eqs. 1-5) on real photographs shifted by known sub-pixel amounts."""
+"""Flow kernel (Li, Guan and Chu 2017, eqs. 1-5) on real photographs shifted by known sub-pixel amounts."""
 
 import cv2
 import numpy as np

@@ -1,5 +1,10 @@
 """Rig ``flow``: dead reckoning from several downward optical-flow sensors (Li, Guan and Chu 2017).
 
+Source: LI Shi-yun, GUAN Le, CHU Jin-kui, *Dead-reckoning for mobile robot
+based on multiple optical flow sensors*, 2017, DOI
+10.13873/J.1000-9787(2017)10-0061-03 ("the seed"; equations cited by its
+numbers, see docs/sources.md [S3]).
+
 Modules: :mod:`.kernel` (SAD block matching, sub-pixel, the per-sensor flow
 API) over :mod:`.kernel_config` (``FlowConfig``, no numba),
 :mod:`.kernel_compiled` (the numba loops) and :mod:`.kernel_metric` (gyro

@@ -1,5 +1,5 @@
 """Optical flow of one downward sensor: SAD block matching, sub-pixel refinement,
-gyro compensation and metric conversion (seed 003 §1, eqs. 1–5).
+gyro compensation and metric conversion (Li, Guan and Chu 2017, §1, eqs. 1–5).
 
 The defaults are the PX4FLOW firmware's: a 64x64 window, 8x8 blocks on a 5x5
 grid, an integer search over +/-4 px (81 candidates), a per-block texture gate,

@@ -130,7 +130,7 @@ def _sad_batch(prev_t, curr_t, ys, xs, block, search, out, keys):  # pragma: no 
 def _sad_frac(prev, curr, y0, x0, block, iy, ix, qy, qx, scale):  # pragma: no cover - compiled
     """SAD of a block against ``curr`` sampled at offset ``(ix + qx/scale, iy + qy/scale)``.
 
-    Bilinear interpolation in exact integer arithmetic (seed 003 eq. 2,
+    Bilinear interpolation in exact integer arithmetic (Li, Guan and Chu 2017, eq. 2,
     ``g = A00 + A10 a + A01 b + A11 a b`` with ``a = qx/scale``,
     ``b = qy/scale``); ``qx, qy`` in ``0 .. scale-1``. Returns the SAD in
     grey levels (float).

@@ -16,7 +16,7 @@ __all__ = ["rotational_flow", "compensate_rotation", "metric_displacement", "spe
 
 
 def rotational_flow(angle, xy_px, focal_px):
-    """Image flow caused by a small camera rotation (seed 003 eqs. 3–4, rotational part).
+    """Image flow caused by a small camera rotation (Li, Guan and Chu 2017, eqs. 3–4, rotational part).
 
     For a rotation by the small angles ``angle = (dx, dy, dz)`` (rad, camera
     axes: x = u, y = v, z = optical axis) a static point at image position
@@ -54,7 +54,7 @@ def rotational_flow(angle, xy_px, focal_px):
 
 
 def compensate_rotation(flow_px, gyro, dt, focal_px, *, centroid_px=None, threshold: float = 0.01):
-    """Remove the flow the sensor's own rotation causes (seed 003 eqs. 3–4).
+    """Remove the flow the sensor's own rotation causes (Li, Guan and Chu 2017, eqs. 3–4).
 
     Parameters
     ----------
@@ -85,7 +85,7 @@ def compensate_rotation(flow_px, gyro, dt, focal_px, *, centroid_px=None, thresh
 
 
 def metric_displacement(flow_px, height, focal_px):
-    """Sensor displacement over the ground from compensated flow (seed 003 eq. 5).
+    """Sensor displacement over the ground from compensated flow (Li, Guan and Chu 2017, eq. 5).
 
     The ground moves opposite to the sensor, so in the sensor frame S
     (``x_S`` = image u, ``y_S`` = image up):

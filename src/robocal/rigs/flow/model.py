@@ -1,4 +1,4 @@
-"""The sensor array on the robot and the planar motion model (seed 003 §2, eqs. 6–12).
+"""The sensor array on the robot and the planar motion model (Li, Guan and Chu 2017, §2, eqs. 6–12).
 
 Frames
 ------
@@ -73,7 +73,7 @@ class SensorArray:
         if n < 2:
             raise NotEnoughDataError(
                 f"the array has {n} sensor(s): one sensor gives 2 equations for the 3 unknowns "
-                "(dX, dY, dtheta) of seed 003 eq. 9 — at least 2 sensors are needed"
+                "(dX, dY, dtheta) of eq. 9 in Li, Guan and Chu (2017) — at least 2 sensors are needed"
             )
         # eq. 9 needs rank(A) = 3: the rotation is seen only through sensors at different
         # points (all at one point, e.g. every R = 0, leave dtheta undetermined)
@@ -82,7 +82,7 @@ class SensorArray:
             pos = ", ".join(f"({x * 1e3:.1f}, {y * 1e3:.1f})" for x, y in self.positions)
             raise DegenerateGeometryError(
                 f"sensor array: all sensors sit at one point (positions {pos} mm; expected at least 2 distinct "
-                "points): A of seed 003 eq. 9 has rank < 3 and the rotation is undetermined"
+                "points): A of eq. 9 in Li, Guan and Chu (2017) has rank < 3 and the rotation is undetermined"
             )
 
     @property
@@ -124,7 +124,7 @@ class SensorArray:
         if len(items) < 2:
             raise NotEnoughDataError(
                 f"{doc.source}: 'sensors' lists {len(items)} sensor(s); the array needs at least 2 "
-                "(one sensor gives 2 equations for 3 unknowns, seed 003 eq. 9)"
+                "(one sensor gives 2 equations for 3 unknowns, eq. 9 of Li, Guan and Chu 2017)"
             )
         R = [it.float("R", kind="length") for it in items]
         psi = [it.float("psi", kind="angle") for it in items]
@@ -179,7 +179,7 @@ def se2_log(rel):
 
 
 def integrate_twists(twists, pose0=(0.0, 0.0, 0.0), *, method: str = "exact"):
-    """Chain body-frame twists into poses (seed 003 eq. 12).
+    """Chain body-frame twists into poses (Li, Guan and Chu 2017, eq. 12).
 
     Parameters
     ----------

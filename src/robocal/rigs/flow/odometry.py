@@ -1,4 +1,4 @@
-"""Robot motion from several flow sensors: the seed's A u = b, robustly (seed 003 eqs. 6–12).
+"""Robot motion from several flow sensors: the seed's A u = b, robustly (Li, Guan and Chu 2017, eqs. 6–12).
 
 For each frame interval ``k`` every valid sensor ``i`` gives its metric ground
 displacement ``dS_i`` in its own frame at the *end* of the interval (block
@@ -301,7 +301,7 @@ def fuse_steps(steps: SensorSteps, array: SensorArray, *, robust: bool = True, o
 
 def dead_reckon(steps: SensorSteps, array: SensorArray, *, pose0=(0.0, 0.0, 0.0), method: str = "exact",
                 robust: bool = True) -> Odometry:
-    """Trajectory of the robot from its flow sensors (seed 003 eqs. 9–12).
+    """Trajectory of the robot from its flow sensors (Li, Guan and Chu 2017, eqs. 9–12).
 
     Parameters
     ----------

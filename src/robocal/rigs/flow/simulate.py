@@ -259,7 +259,7 @@ def _render(tex, tex_px, centres, R_wc, f_px, window, ss, gaps, gap_contrast, te
                         iy = min(int(ty), ht - 2)
                         a = tx - ix
                         b = ty - iy
-                        # eq. 2 of seed 003 is this same bilinear form
+                        # eq. 2 of Li, Guan and Chu (2017) is this same bilinear form
                         g = (tex[iy, ix] * (1 - a) * (1 - b) + tex[iy, ix + 1] * a * (1 - b)
                              + tex[iy + 1, ix] * (1 - a) * b + tex[iy + 1, ix + 1] * a * b)
                         for gi in range(ng):
