@@ -266,7 +266,7 @@ def calibrate(model: HumanoidModel, data: HumanoidDataset, *, parameters: str | 
         text = by_view_text(rejected)
         if rejected_views:
             text += ("; " if text else "") + f"whole view(s) {rejected_views} (more than " \
-                    f"{100 * max_rejected_fraction:.0f} % of their corners beyond {outlier_sigma:g} sigma)"
+                    f"{100 * max_rejected_fraction:.0f} % of their corners beyond {outlier_sigma:.3g} sigma)"
         removed = present & ~keep
         warnings.append(Diagnostic("low_quality", f"--reject-outliers: removed {int(removed.sum())} corner(s) "
                                                   f"and re-solved once: {text}",
@@ -352,6 +352,6 @@ def _corner_stats(model, data, params, S, residual_variance, outlier_sigma, keep
 
 def _outlier_diagnostic(outliers, flat, outlier_sigma, n_corners, note="") -> Diagnostic:
     text = by_view_text(outliers)
-    return Diagnostic("outliers", f"{len(outliers)} corner residuals beyond {outlier_sigma:g} sigma"
+    return Diagnostic("outliers", f"{len(outliers)} corner residuals beyond {outlier_sigma:.3g} sigma"
                                   f"{note} ({100 * len(outliers) / n_corners:.1f} %): {text}",
                       indices=tuple(int(i) for i in flat))
