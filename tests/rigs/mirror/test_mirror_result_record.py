@@ -69,3 +69,26 @@ def test_without_the_joint_refinement_mirror_poses_have_no_std_and_the_report_sa
     assert "solver" not in res.diagnostics
     html = build_report(res).to_html()
     assert "No joint refinement" in html
+
+
+def test_a_result_written_before_schema_2_still_gives_its_report(two_placements, tmp_path):
+    # the old vocabulary: bare 4x4 T_r_c, t_r_c, q_r_c, rotvec_r_c, a K x 4 x 4 T_c_m stack, no mirror_poses
+    cam, scene, obs, cal = two_placements
+    d = result_from_calibration(cal).to_dict()
+    d["schema"] = "robocal.result/1"
+    pose = d["estimate"]
+    d["estimate"] = {"T_r_c": cal.T_r_c.tolist(), "t_r_c": cal.T_r_c[:3, 3].tolist(), "q_r_c": [0.0, 0.0, 0.0, 1.0],
+                     "rotvec_r_c": pose["T_r_c.rotvec"], "T_c_m": cal.T_c_m.tolist()}
+    d["std"] = {"t_r_c": d["std"]["T_r_c.translation"], "rotvec_r_c": d["std"]["T_r_c.rotvec"]}
+    d["units"] = {"T_r_c": "m", "t_r_c": "m", "q_r_c": "1", "rotvec_r_c": "rad", "T_c_m": "m"}
+    del d["poses"], d["diagnostics"]["mirror_poses"]
+    (tmp_path / "old.json").write_text(json.dumps(d))
+    old = load_result(tmp_path / "old.json")
+    with pytest.raises(KeyError):
+        old.pose("T_r_c")
+    html = build_report(old).to_html()
+    new = build_report(result_from_calibration(cal)).to_html()
+    # the parameter table (first table of the page) is the same; the mirror-pose std is unknown ("-")
+    first = lambda h: h[h.index("<table"):h.index("</table>")]  # noqa: E731
+    assert first(html) == first(new)
+    assert html.count("<td>-</td>") > new.count("<td>-</td>")

@@ -28,6 +28,7 @@ from robocal.rigs.mirror.result import (  # noqa: F401  (re-exported: their form
     pose_error,
     relative_image_paths,
     result_from_calibration,
+    upgraded,
 )
 
 __all__ = ["build_report", "draw_image_overlay", "relative_image_paths", "result_from_calibration"]
@@ -237,7 +238,10 @@ def build_report(result: CalibrationResult, *, base_dir=None, title: str = TITLE
     ``diagnostics.images`` are read relative to it (default: the current
     directory). Raises :class:`~robocal.errors.FileFormatError` naming the
     first missing field when the record lacks what the report is drawn from.
+    A result written before schema 2 (bare ``T_r_c``, ``T_c_m``) is read too
+    (:func:`~robocal.rigs.mirror.result.upgraded`).
     """
+    result = upgraded(result)
     _check_record(result)
     d = result.diagnostics
     cam = CameraModel.from_dict(d["camera"])

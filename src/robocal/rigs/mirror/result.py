@@ -26,8 +26,8 @@ import numpy as np
 from robocal.geometry import rotvec_from_matrix
 from robocal.io import CalibrationResult
 
-__all__ = ["result_from_calibration", "relative_image_paths", "pose_error", "solver_record", "UNOBSERVABLE",
-           "TRUTH_NAMES", "SOLVER_FIELDS"]
+__all__ = ["result_from_calibration", "relative_image_paths", "pose_error", "solver_record", "upgraded",
+           "UNOBSERVABLE", "TRUTH_NAMES", "SOLVER_FIELDS"]
 
 #: What no check can see; in every result (``diagnostics.unobservable``) and report.
 UNOBSERVABLE = ("What no check can see: t_r_c is measured from the origin of the body model (body_points or "
@@ -161,3 +161,31 @@ def result_from_calibration(cal, *, inputs=None, image_paths=None, truth=None, s
     result.add_pose("T_r_c", cal.T_r_c, std_rotation=cal.std_rotation, std_translation=cal.std_translation,
                     parent="robot", child="camera", rotation_std="left")
     return result
+
+
+def upgraded(result: CalibrationResult) -> CalibrationResult:
+    """A mirror result written before schema 2 in this module's vocabulary (others unchanged).
+
+    Those files had ``estimate.T_r_c`` (4x4), ``t_r_c``, ``q_r_c``,
+    ``rotvec_r_c`` and ``T_c_m`` (K x 4 x 4), with std under ``t_r_c`` and
+    ``rotvec_r_c`` (the same left-perturbation std): the report of an old run
+    can still be rebuilt. The mirror poses then have no std.
+    """
+    import copy
+
+    est = result.estimate or {}
+    if "T_r_c.rotation" in est or np.shape(est.get("T_r_c")) != (4, 4):
+        return result
+    new = copy.deepcopy(result)
+    new.estimate = {k: v for k, v in est.items() if k not in ("T_r_c", "t_r_c", "q_r_c", "rotvec_r_c", "T_c_m")}
+    for k in ("T_r_c", "t_r_c", "q_r_c", "rotvec_r_c", "T_c_m"):
+        new.units.pop(k, None)
+    std_r, std_t = new.std.pop("rotvec_r_c", None), new.std.pop("t_r_c", None)
+    new.add_pose("T_r_c", np.asarray(est["T_r_c"], dtype=float), std_rotation=std_r, std_translation=std_t,
+                 parent="robot", child="camera", rotation_std="left")
+    names = [o.get("name", f"image {k}") for k, o in enumerate(new.diagnostics.get("observations") or [])]
+    stack = np.asarray(est.get("T_c_m", []), dtype=float).reshape(-1, 4, 4)
+    new.diagnostics.setdefault("mirror_poses", [
+        {"image": names[k] if k < len(names) else f"image {k}", "T_c_m": T.tolist(), "std_rotvec": None,
+         "std_translation": None} for k, T in enumerate(stack)])
+    return new
