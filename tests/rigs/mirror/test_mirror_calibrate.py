@@ -419,6 +419,10 @@ def test_outliers_are_named_by_image_and_point_at_a_multiplicity_corrected_thres
     cal = calibrate(cam, scene.rectangle, scene.body_points_r, obs, sigma_px=0.5)
     assert cal.lsq.observation_scores.max() > outlier_threshold(3.0, 2)
     assert "outliers" not in [w.code for w in cal.warnings]
+    # the threshold is the estimation layer's default for every rig, not a copy of the rig's own
+    from robocal.estimation import outlier_sigma
+
+    assert cal.lsq.outlier_sigma == outlier_sigma(9 * (4 + len(scene.body_points_r))) > 4.0
     # two gross errors: named by image and marker letter / body_points row
     rng = np.random.default_rng(3)
     cam, scene = default_setup(4, rng)
