@@ -247,3 +247,37 @@ def test_cli_nadir_snap_constants_equal_the_path_planner_ones():
 
     assert cli.NADIR_SNAP == path.NADIR_SNAP
     assert cli.MAX_NADIR_SNAP == path.MAX_NADIR_SNAP
+
+
+def test_a_result_is_read_back_as_its_pose_by_evaluate_and_path_and_a_v1_file_too(tmp_path, capsys):
+    from robocal.rigs.projector.commands import model_from_result
+    from robocal.rigs.projector.files import load_calibration_input
+
+    code, *_ = run(["projector", "calibrate", EXAMPLES / "room_A.yaml", "--out", tmp_path / "cal"], capsys)
+    assert code == 0
+    res = load_result(tmp_path / "cal" / "result.json")
+    nominal = load_calibration_input(EXAMPLES / "room_A.yaml").model
+    m = model_from_result(tmp_path / "cal" / "result.json", nominal)
+    T = res.pose("T_0_W").T
+    assert np.array_equal(m.R_0_W, T[:3, :3]) and np.array_equal(m.t_0_W, T[:3, 3])
+    assert m.h == pytest.approx(res.estimate["h"], abs=1e-15) and m.offsets == tuple(res.estimate["offsets"])
+    # the same estimate as a robocal.result/1 file wrote it (R_0_W, t_0_W as separate keys)
+    v1 = {"schema": "robocal.result/1", "rig": "projector", "method": "nonlinear",
+          "estimate": {"R_0_W": T[:3, :3].tolist(), "t_0_W": T[:3, 3].tolist(), "h": res.estimate["h"],
+                       "offsets": res.estimate["offsets"]}}
+    (tmp_path / "v1.json").write_text(json.dumps(v1))
+    m1 = model_from_result(tmp_path / "v1.json", nominal)
+    assert np.array_equal(m1.R_0_W, m.R_0_W) and np.array_equal(m1.t_0_W, m.t_0_W) and m1.d1 == m.d1
+    # a path input naming the result file gets the calibrated head
+    f = tmp_path / "path.yaml"
+    f.write_text(f"units: {{length: m, angle: deg, speed: m/s, time: s}}\nprojectors: [{{name: A, H: 2.9, "
+                 f"result: {tmp_path / 'cal' / 'result.json'}}}]\npath: {{waypoints: [[1.5, -1.5], [3.0, -0.5]], "
+                 f"speed: 0.3, dt: 0.2}}\n")
+    code, out, err = run(["projector", "path", f, "--out", tmp_path / "path"], capsys)
+    assert code == 0 and "all feasible" in out, err
+    # a result of another rig is named as such
+    other = dict(v1, rig="mirror")
+    (tmp_path / "other.json").write_text(json.dumps(other))
+    f.write_text(f.read_text().replace(str(tmp_path / "cal" / "result.json"), str(tmp_path / "other.json")))
+    code, _, err = run(["projector", "path", f, "--out", tmp_path / "p2"], capsys)
+    assert code == 2 and "result of rig 'mirror', expected 'projector'" in err and err.count("\n") == 1, err

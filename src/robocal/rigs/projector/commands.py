@@ -17,33 +17,9 @@ import numpy as np
 
 from robocal.errors import FileFormatError, InputError, RobocalError
 from robocal.io import atomic_write_text, load_result, to_jsonable
+from robocal.rigs.projector.files import extrinsics_from_result
 
-__all__ = ["run_evaluate", "run_path", "model_from_result", "extrinsics_from_result"]
-
-
-def extrinsics_from_result(res, *, source: str) -> dict:
-    """``{R_0_W, t_0_W[, d1_from_h, offsets]}`` of a projector result: its pose ``T_0_W`` (``robocal.result/2``).
-
-    A ``robocal.result/1`` file of this rig wrote ``R_0_W`` and ``t_0_W`` as
-    separate keys; it is still read. ``h`` (when estimated) is returned as
-    ``h`` for the caller to turn into ``d1 = H - h``.
-    """
-    if res.rig != "projector":
-        raise FileFormatError(f"result of rig {res.rig!r}, expected 'projector'", source=source)
-    e = res.estimate
-    try:
-        if "T_0_W" in res.poses:
-            T = res.pose("T_0_W").T
-            out = {"R_0_W": T[:3, :3], "t_0_W": T[:3, 3]}
-        else:  # robocal.result/1
-            out = {"R_0_W": np.asarray(e["R_0_W"], dtype=float), "t_0_W": np.asarray(e["t_0_W"], dtype=float)}
-        if "h" in e:
-            out["h"] = float(e["h"])
-        if "offsets" in e:
-            out["offsets"] = tuple(float(v) for v in e["offsets"])
-    except (KeyError, TypeError, ValueError) as exc:
-        raise FileFormatError(f"not a projector result (missing/invalid {exc})", source=source) from None
-    return out
+__all__ = ["run_evaluate", "run_path", "model_from_result"]
 
 
 def model_from_result(path: Path, nominal):

@@ -54,7 +54,7 @@ from robocal.io import Document, load_csv, load_document, load_result
 from robocal.rigs.projector.model import HORIZON_TOL, ProjectorModel
 
 __all__ = ["CalibrationInput", "load_calibration_input", "projector_from_doc", "projector_to_yaml",
-           "load_path_input", "PathInput"]
+           "extrinsics_from_result", "load_path_input", "PathInput"]
 
 
 #: Keys of a ``projector:`` mapping; with extrinsics also :data:`EXTRINSIC_KEYS`.
@@ -62,6 +62,31 @@ PROJECTOR_KEYS = ("name", "H", "d1", "d2", "offsets", "tilt_limit", "rate_limits
 EXTRINSIC_KEYS = ("yaw", "R_0_W", "t_0_W", "result")
 PATH_INPUT_KEYS = ("units", "projectors", "walls", "path")
 PATH_KEYS = ("units", "waypoints", "speed", "dt", "file")
+
+
+def extrinsics_from_result(res, *, source: str) -> dict:
+    """``{R_0_W, t_0_W[, d1_from_h, offsets]}`` of a projector result: its pose ``T_0_W`` (``robocal.result/2``).
+
+    A ``robocal.result/1`` file of this rig wrote ``R_0_W`` and ``t_0_W`` as
+    separate keys; it is still read. ``h`` (when estimated) is returned as
+    ``h`` for the caller to turn into ``d1 = H - h``.
+    """
+    if res.rig != "projector":
+        raise FileFormatError(f"result of rig {res.rig!r}, expected 'projector'", source=source)
+    e = res.estimate
+    try:
+        if "T_0_W" in res.poses:
+            T = res.pose("T_0_W").T
+            out = {"R_0_W": T[:3, :3], "t_0_W": T[:3, 3]}
+        else:  # robocal.result/1
+            out = {"R_0_W": np.asarray(e["R_0_W"], dtype=float), "t_0_W": np.asarray(e["t_0_W"], dtype=float)}
+        if "h" in e:
+            out["h"] = float(e["h"])
+        if "offsets" in e:
+            out["offsets"] = tuple(float(v) for v in e["offsets"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise FileFormatError(f"not a projector result (missing/invalid {exc})", source=source) from None
+    return out
 
 
 def projector_from_doc(doc: Document, *, extrinsics: bool = False) -> ProjectorModel:
@@ -88,18 +113,15 @@ def projector_from_doc(doc: Document, *, extrinsics: bool = False) -> ProjectorM
                 raise doc.error("result", f"give either 'result' or the extrinsics {both}, not both (which one "
                                           f"counts?)")
             res = load_result(doc.path("result"))
-            if res.rig != "projector":
-                raise doc.error("result", f"result of rig {res.rig!r}, expected 'projector'")
-            e = res.estimate
             try:
-                kw["R_0_W"] = np.asarray(e["R_0_W"], dtype=float)
-                kw["t_0_W"] = np.asarray(e["t_0_W"], dtype=float)
-                if "h" in e:
-                    kw["d1"] = kw["H"] - float(e["h"])
-                if "offsets" in e:
-                    kw["offsets"] = tuple(float(v) for v in e["offsets"])
-            except (KeyError, TypeError, ValueError) as exc:
-                raise doc.error("result", f"not a projector result (missing/invalid {exc})") from None
+                x = extrinsics_from_result(res, source=str(doc.path("result")))
+            except FileFormatError as exc:
+                raise doc.error("result", exc.message) from None
+            kw["R_0_W"], kw["t_0_W"] = x["R_0_W"], x["t_0_W"]
+            if "h" in x:
+                kw["d1"] = kw["H"] - x["h"]
+            if "offsets" in x:
+                kw["offsets"] = x["offsets"]
         else:
             if "yaw" in doc:
                 kw["R_0_W"] = matrix_from_angle("z", doc.float("yaw", kind="angle"))

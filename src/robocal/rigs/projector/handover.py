@@ -126,7 +126,6 @@ class MultiPlan:
         t_handover, ok`` (``ok``: ready by the hand-over time; else the head arrives late and the spot
         jumps there).
         """
-        K = len(self.t)
         streams, preaim = [], []
         for k, tr in enumerate(self.trajectories):
             lim = np.asarray(tr_limits(self, k))
