@@ -30,10 +30,9 @@ def _stairs(ax, hist: dict, scale: float, xlabel: str) -> None:
     ax.set_ylabel("points")
 
 
-def _estimate_section(rep: Report, result, status_ok: bool, status_text: str) -> Section:
+def _estimate_section(rep: Report, result, status_ok: bool, status_text: str, shown: dict) -> Section:
     s = rep.section("Estimate")
     s.status(status_ok, status_text)
-    shown = {k: v for k, v in result.estimate.items() if not k.startswith("fpdp.")}
     s.parameters(shown, result.std, result.units)
     s.diagnostics(result.warnings)
     return s
@@ -43,7 +42,8 @@ def _sphere_report(result, rep: Report) -> None:
     d = result.diagnostics
     und = d.get("undetermined", [])
     _estimate_section(rep, result, not und, "all components determined" if not und else
-                      f"not determined by these poses: {', '.join(und)} (no value reported)")
+                      f"not determined by these poses: {', '.join(und)} (no value reported)",
+                      {k: v for k, v in result.estimate.items() if not k.startswith("fpdp.")})
     if "fpdp.T_E_L.rotation" in result.estimate:
         s = rep.section("FPDP (linear, seed eqs. 3-4)")
         s.parameters({k: v for k, v in result.estimate.items() if k.startswith("fpdp.")}, result.std, result.units)
@@ -69,8 +69,17 @@ def _sphere_report(result, rep: Report) -> None:
 def _mct_report(result, rep: Report) -> None:
     d = result.diagnostics
     und = d.get("undetermined", [])
+    est = result.estimate
     _estimate_section(rep, result, not und, "every component has a standard deviation" if not und else
-                      f"no standard deviation for {', '.join(und)}")
+                      f"no standard deviation for {', '.join(und)}",
+                      {k: v for k, v in est.items() if k.startswith("T_E_L.")})
+    frames = [n for n in result.poses if n != "T_E_L"]
+    if frames:
+        s = rep.section("Intermediate frames (seed eqs. 6-12)")
+        s.parameters({k: v for k, v in est.items() if k.rpartition(".")[0] in frames or k == "P3_direction_L"},
+                     result.std, result.units)
+        s.text("At the block scan's reference pose; T: laser tracker, B: block corner, L: laser, E: end effector. "
+               "Derived from the fits: no standard deviation of their own.")
     rows = [{"fit": k, "RMS [um]": 1e6 * v} for k, v in d.get("fit_rms_m", {}).items()]
     s = rep.section("Fits")
     s.table(rows, digits=3)
