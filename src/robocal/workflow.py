@@ -51,6 +51,7 @@ so that declaring a workflow imports none of the rig's numerical code (``robocal
 
 from __future__ import annotations
 
+import argparse
 import importlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -59,7 +60,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Workflow", "Option", "Command", "DemoContext", "DemoOutcome", "STEPS", "resolve"]
+__all__ = ["Workflow", "Option", "Command", "DemoContext", "DemoOutcome", "STEPS", "resolve", "seed_value"]
 
 #: The steps a workflow may declare, in the order the core runs them.
 STEPS = ("simulate", "load_input", "calibrate", "to_result", "build_report", "summary", "demo")
@@ -76,6 +77,17 @@ def resolve(step: Callable | str | None) -> Callable | None:
     for part in attr.split("."):
         obj = getattr(obj, part)
     return obj
+
+
+def seed_value(text: str) -> int:
+    """argparse ``type=`` of a ``--seed``: a whole number >= 0 (NumPy's ``SeedSequence`` takes no negative entropy)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {value}")
+    return value
 
 
 class Option:
@@ -119,8 +131,9 @@ class Command:
         ``robocal <rig> <name>``, its line in the rig's help, its own help text.
     run : callable or "module:attr"
         ``run(args) -> int``: the command's work (a library-level function in
-        the rig, taking the parsed arguments; it writes into ``args.out``
-        through :func:`robocal.cli.prepare_out_dir` when it has ``out``).
+        the rig, taking the parsed arguments; it claims ``args.out`` with
+        :func:`robocal.io.prepare_out_dir` and writes with
+        :func:`robocal.io.write_run` when it has ``out``).
     options : tuple of Option
         Its arguments.
     examples : tuple of str

@@ -24,6 +24,16 @@ def test_solver_section_shows_the_record_and_its_cost_curve():
     assert "accepted steps" in html and "condition number" in html and "data:image/png" in html
 
 
+def test_solver_section_with_passes_draws_them_all():
+    lsq = _fit()
+    rec = lsq.to_dict()
+    rep = Report("t")
+    solver_section(rep.section("Solver"), {k: v for k, v in rec.items() if k != "cost_history"},
+                   passes={"pass 1": [5.0, 2.0], "pass 2": rec["cost_history"]})
+    html = rep.to_html()
+    assert "each solver pass" in html and "<td>5</td>" in html  # initial cost from the first pass
+
+
 def test_solver_section_without_record_says_so():
     rep = Report("t")
     solver_section(rep.section("Solver"), {})

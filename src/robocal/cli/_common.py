@@ -7,12 +7,12 @@ result object, write files with these helpers, print a short summary.
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
-import sys
 from pathlib import Path
 
-from robocal.io import CalibrationResult, claim_folder, write_result
-from robocal.report import Report
+from robocal.io import prepare_out_dir, write_run  # noqa: F401 - re-exported: the CLI's helpers, library-level
+from robocal.workflow import seed_value
+
+_seed = seed_value  # the old private name (rigs' plan --seed used it)
 
 __all__ = [
     "add_out_argument",
@@ -74,55 +74,8 @@ def add_out_argument(parser: argparse.ArgumentParser, *, help: str | None = None
     parser.add_argument("--force", action="store_true", help=FORCE_HELP)
 
 
-def _seed(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
-    if value < 0:  # numpy's SeedSequence takes non-negative entropy only
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {value}")
-    return value
-
-
 def add_seed_argument(parser: argparse.ArgumentParser, default: int = 0) -> None:
-    parser.add_argument("--seed", type=_seed, default=default, help="seed of the random generator (>= 0)")
-
-
-def prepare_out_dir(out: Path | None, label: str, *, force: bool | None = None) -> Path:
-    """Create ``out`` (or a fresh time-stamped folder named after ``label``) as this run's output folder.
-
-    ``label`` names the command (``"flow-simulate"``). Inside a command run
-    (:class:`robocal.io.CommandRun`, which ``robocal``'s ``main`` opens) the
-    folder is checked and marked: an earlier run of the same command is
-    removed first, another command's run or unknown files are refused unless
-    ``force`` (default: the run's ``--force``), and ``INCOMPLETE`` stays until
-    the command finishes (see ``docs/results.md``, "Output folders"). From
-    the Python API without a run it only makes the folder.
-    """
-    if out is None:
-        stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-        out = Path(f"robocal-out-{label}-{stamp}")
-        n = 1
-        while out.exists():
-            n += 1
-            out = Path(f"robocal-out-{label}-{stamp}-{n}")
-    return claim_folder(Path(out), label, force=force)
-
-
-def write_run(out_dir: Path, result: CalibrationResult | None, report: Report | None, *, quiet: bool = False):
-    """Write ``out_dir/result.json`` and ``out_dir/report.html`` (atomically)."""
-    paths = []
-    if result is not None:
-        paths.append(write_result(Path(out_dir) / "result.json", result))
-    if report is not None:
-        paths.append(report.write(Path(out_dir) / "report.html"))
-    if not quiet:
-        for p in paths:
-            print(f"wrote {p}")
-        if result is not None:
-            for w in result.warnings:
-                print(f"warning: {w}", file=sys.stderr)
-    return paths
+    parser.add_argument("--seed", type=seed_value, default=default, help="seed of the random generator (>= 0)")
 
 
 def add_accept_implausible_argument(parser: argparse.ArgumentParser) -> None:

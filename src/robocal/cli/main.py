@@ -23,13 +23,13 @@ from pathlib import Path
 import numpy as np
 
 import robocal
-from robocal.cli._common import FORCE_HELP, OneLineErrorParser, RawHelp, _seed, examples_epilog, prepare_out_dir
+from robocal.cli._common import FORCE_HELP, OneLineErrorParser, RawHelp, examples_epilog, prepare_out_dir
 from robocal.cli._rig import DemoContext, demo_of, discover_rigs, registered_rig_names
 from robocal.cli._workflow import add_report_command, add_workflow_commands
 from robocal.errors import InputError, RobocalError
 from robocal.io import CommandRun, preflight, set_command_line, write_result
 from robocal.report import Report
-from robocal.workflow import Workflow
+from robocal.workflow import Workflow, seed_value
 
 __all__ = ["main", "build_parser", "run_demo"]
 
@@ -71,7 +71,7 @@ def build_parser(rigs=None) -> argparse.ArgumentParser:
     demo.add_argument("--out", type=Path, default=None, metavar="DIR",
                       help="report directory (default: a fresh robocal-out-demo-<time> folder)")
     demo.add_argument("--force", action="store_true", help=FORCE_HELP)
-    demo.add_argument("--seed", type=_seed, default=2026,
+    demo.add_argument("--seed", type=seed_value, default=2026,
                       help="seed of the random generator; each rig draws from its own stream keyed by its name, "
                            "so a rig's figures do not depend on which other rigs run")
     demo.add_argument("--rigs", default=None, metavar="NAMES",

@@ -69,15 +69,19 @@ def plot_residual_histogram(residuals, ax=None, *, sigma: float | None = None, u
     return ax
 
 
-def solver_section(section: Section, record: dict, *, caption: str = "") -> Section:
+def solver_section(section: Section, record: dict, *, caption: str = "", passes: dict | None = None) -> Section:
     """The solver's record as a table (status, steps, cost, rank, condition) and its cost plot.
 
     ``record``: :meth:`robocal.estimation.LSQResult.to_dict` (as stored in a
     result's ``diagnostics``); missing fields are shown as dashes.
+    ``passes``: ``{label: cost history}`` of several solver passes (a start
+    pass, then the final one), drawn one after the other; default: the
+    record's own ``cost_history``.
     """
     if not record:
         return section.text("No iterative solver ran (closed-form estimate).")
-    hist = np.asarray([np.nan if v is None else float(v) for v in record.get("cost_history") or []], dtype=float)
+    curves = {k: _floats(v) for k, v in passes.items()} if passes else None
+    hist = _floats(record.get("cost_history") or ([] if not curves else next(iter(curves.values()))))
     row = {
         "method": record.get("method"),
         "loss": record.get("loss"),
@@ -94,10 +98,17 @@ def solver_section(section: Section, record: dict, *, caption: str = "") -> Sect
     }
     section.table([{"quantity": k, "value": v} for k, v in row.items()], ["quantity", "value"], digits=5,
                   caption=caption or None)
-    if hist.size > 1:
+    if curves:
+        ax = plot_cost(curves)
+        section.figure(ax.figure, caption="cost per accepted step of each solver pass (log scale)")
+    elif hist.size > 1:
         ax = plot_cost(hist)
         section.figure(ax.figure, caption="cost per accepted step of the least-squares solver (log scale)")
     return section
+
+
+def _floats(values) -> np.ndarray:
+    return np.asarray([np.nan if v is None else float(v) for v in values], dtype=float)
 
 
 def truth_section(section: Section, check: dict) -> Section:
