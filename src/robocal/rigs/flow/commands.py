@@ -55,13 +55,13 @@ def _kernel_options(args) -> dict:
 def _out(args, label: str) -> Path:
     # the core's output-folder claim (cli._common, which imports nothing of the CLI's parser): the
     # Command contract's way for an extra command to write into --out
-    from robocal.cli._common import prepare_out_dir
+    from robocal.io import prepare_out_dir
 
     return prepare_out_dir(args.out, label)
 
 
 def _write(out: Path, result, report) -> None:
-    from robocal.cli._common import write_run
+    from robocal.io import write_run
 
     write_run(out, result, report)
 

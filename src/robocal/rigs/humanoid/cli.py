@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from robocal.cli._common import _seed, examples_epilog
-from robocal.workflow import Command, Option, Workflow
+from robocal.cli._common import examples_epilog
+from robocal.workflow import Command, Option, Workflow, seed_value
 
 __all__ = ["RIG"]
 
@@ -98,7 +98,7 @@ RIG = Workflow(
                             "tie_hip_yaw_pitch decides)"),
                 Option("--corner-sigma", type=float, default=0.3, help="expected corner noise [px]"),
                 # the type add_seed_argument gives every other --seed (a whole number >= 0)
-                Option("--seed", type=_seed, default=0, help="seed of the random generator (>= 0)"),
+                Option("--seed", type=seed_value, default=0, help="seed of the random generator (>= 0)"),
             ),
         ),
     ),

@@ -72,7 +72,9 @@ def run_plan(args) -> int:
         raise InputError("--poses and --candidates must be >= 1")
     if not (np.isfinite(args.corner_sigma) and args.corner_sigma > 0):
         raise InputError(f"--corner-sigma must be a finite number > 0 px, got {args.corner_sigma}")
-    out = _out_dir(args.out, "humanoid-plan")  # --force: read by the command run (claim_folder)
+    from robocal.io import prepare_out_dir
+
+    out = prepare_out_dir(args.out, "humanoid-plan")  # --force: read by the command run (claim_folder)
     paths, plan = plan_files(out, np.random.default_rng(args.seed), poses=args.poses, candidates=args.candidates,
                              params=args.params, data=args.data, tie=args.tie, corner_sigma=args.corner_sigma,
                              progress=True)
@@ -84,21 +86,3 @@ def run_plan(args) -> int:
               f"{'undetermined' if w is None else f'{w:.4f} deg'}")
     return 0
 
-
-def _out_dir(out, label: str, *, force=None) -> Path:
-    """The command's output folder, claimed as every command claims it (:func:`robocal.io.claim_folder`):
-    ``out``, or a fresh ``robocal-out-<label>-<time>`` folder.
-
-    (``robocal.cli.prepare_out_dir`` does the same, but library code may not import the CLI; this
-    stays until the core offers it outside ``robocal.cli``.)"""
-    import datetime as _dt
-
-    from robocal.io import claim_folder
-
-    if out is None:
-        stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-        out, n = Path(f"robocal-out-{label}-{stamp}"), 1
-        while out.exists():
-            n += 1
-            out = Path(f"robocal-out-{label}-{stamp}-{n}")
-    return claim_folder(Path(out), label, force=force)
