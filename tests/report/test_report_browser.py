@@ -78,6 +78,14 @@ def test_the_check_flags_a_broken_image_and_a_fixed_wide_box(tmp_path):
     assert "page: 3008 px wide" in text
 
 
+def test_a_page_the_check_could_not_measure_is_an_error_not_a_pass(tmp_path):
+    # the page leaves before 'load': no findings were written, which must not read as "no problems"
+    (tmp_path / "away.html").write_text("<!DOCTYPE html><html><head><script>location.replace('about:blank')</script>"
+                                        "</head><body>x</body></html>")
+    with pytest.raises(RuntimeError, match="did not run the page check on away.html"):
+        check_page(tmp_path / "away.html")
+
+
 def _cli(argv, capsys) -> int:
     code = main([str(a) for a in argv])
     capsys.readouterr()
