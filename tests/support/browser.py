@@ -119,7 +119,7 @@ window.addEventListener('load', () => setTimeout(() => {
         // scaled to the column is fine; scaled below half, a plot's labels are too small to read
         if (el.naturalWidth > 0 && r.width < 0.5 * el.naturalWidth) {
           out.push(describe(el) + ': drawn at ' + px(100 * r.width / el.naturalWidth) + ' % of its ' + el.naturalWidth
-                   + ' px width (its text is too small to read)');
+                   + ' px width: too small to read');
         }
       }
     }
