@@ -258,12 +258,15 @@ def build_report(result, *, base_dir=None):
     if cl:
         fig, ax = new_figure(1, 2, size=(10, 3.2))
         n = np.arange(len(cl["rotation_rad"]))
-        ax[0].bar(n, 1e3 * np.asarray(cl["rotation_rad"], float))
-        ax[0].set_xlabel("pose")
-        ax[0].set_ylabel("rotation residual [mrad]")
-        ax[1].bar(n, 1e3 * np.asarray(cl["translation_m"], float))
-        ax[1].set_xlabel("pose")
-        ax[1].set_ylabel("translation residual [mm]")
+        for a, key, label in ((ax[0], "rotation_rad", "rotation residual [mrad]"),
+                              (ax[1], "translation_m", "translation residual [mm]")):
+            v = 1e3 * np.asarray(cl[key], float)
+            if len(n) <= 200:
+                a.bar(n, v)
+            else:                               # 10^4 bars take seconds to draw and show nothing more
+                a.plot(n, v, ".", ms=2)
+            a.set_xlabel("pose")
+            a.set_ylabel(label)
         rep.section("Residuals").figure(fig, "closure residual per pose: T_base_gripper[i] X T_cam_target[i] "
                                              "against Y = T_base_target")
     cmp = d.get("solver_comparison")
