@@ -18,22 +18,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from robocal.estimation import MonteCarloResult, monte_carlo
-from robocal.geometry import rotvec_from_matrix
 from robocal.rigs.mirror.calibrate import calibrate, calibrate_single, predicted_covariance
 from robocal.rigs.mirror.model import MirrorScene
+from robocal.rigs.mirror.result import pose_error
 from robocal.rigs.mirror.scene import perturbed_placements
 from robocal.rigs.mirror.simulate import default_setup, simulate_observations
 
 __all__ = ["pose_error", "single_image_study", "multi_placement_study", "StudyRow", "LABELS"]
 
 LABELS = ["rot_x", "rot_y", "rot_z", "t_x", "t_y", "t_z"]
-
-
-def pose_error(T_est, T_true) -> np.ndarray:
-    """``[rotvec(R_est R_true^T) [rad], t_est - t_true [m]]``, shape (6,)."""
-    T_est = np.asarray(T_est).reshape(4, 4)
-    T_true = np.asarray(T_true).reshape(4, 4)
-    return np.concatenate([rotvec_from_matrix(T_est[:3, :3] @ T_true[:3, :3].T), T_est[:3, 3] - T_true[:3, 3]])
 
 
 def single_image_study(n_trials: int, rng: np.random.Generator, *, sigma_px: float = 0.5,
