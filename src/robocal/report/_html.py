@@ -36,7 +36,7 @@ nav ul.cols{columns:2 22em;column-gap:2em}nav li{break-inside:avoid}
 table{border-collapse:collapse;margin:.6em 0;font-size:.92em;display:block;max-width:100%;overflow-x:auto}
 caption{caption-side:top;text-align:left;color:#555;padding:.2em 0}
 th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right;font-variant-numeric:tabular-nums}th{background:#eef2f7}
-td:first-child,th:first-child,td.t,th.t{text-align:left}td.v{white-space:nowrap}
+td:first-child,th:first-child,td.t{text-align:left}td.v{white-space:nowrap}
 .warn{background:#fff4e0;border-left:4px solid #e90;padding:.4em .8em;margin:.3em 0}
 .ok{background:#eaf7ea;border-left:4px solid #3a3;padding:.4em .8em;margin:.3em 0}
 .fail{background:#fdeaea;border-left:4px solid #c33;padding:.4em .8em;margin:.3em 0}
@@ -98,10 +98,10 @@ def _kind(v) -> str:
     return ""
 
 
-def _cell(v, digits: int, tag: str = "td", kind: str | None = None) -> str:
-    text = html.escape(format_value(v, digits) if tag == "td" else str(v))
-    kind = _kind(v) if kind is None else kind
-    return f'<{tag} class="{kind}">{text}</{tag}>' if kind else f"<{tag}>{text}</{tag}>"
+def _cell(v, digits: int) -> str:
+    kind = _kind(v)
+    text = html.escape(format_value(v, digits))
+    return f'<td class="{kind}">{text}</td>' if kind else f"<td>{text}</td>"
 
 
 @dataclass
@@ -129,9 +129,7 @@ class Section:
         if not rows:
             return self.text("(no rows)")
         columns = list(columns or rows[0].keys())
-        # a header sits over its column as the column's words do
-        kinds = {c: next((_kind(r.get(c)) for r in rows if r.get(c) is not None), "") for c in columns}
-        head = "".join(_cell(c, digits, "th", "t" if kinds[c] == "t" else "") for c in columns)
+        head = "".join(f"<th>{html.escape(str(c))}</th>" for c in columns)
         body = "".join(
             "<tr>" + "".join(_cell(r.get(c), digits) for c in columns) + "</tr>" for r in rows
         )
