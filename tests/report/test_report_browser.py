@@ -9,6 +9,7 @@ can). One page takes about 1-2 s, almost all of it Chromium starting.
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -109,3 +110,14 @@ def test_calibration_report_reads_in_a_browser(name, tmp_path, capsys):
     assert _cli([name, "calibrate", *[sim / f for f in wf.simulated_inputs], "--out", cal, "--accept-implausible"],
                 capsys) == 0
     assert check_page(cal / "report.html") == []
+
+
+def test_projector_timed_path_report_reads_in_a_browser(tmp_path, capsys):
+    # issue 20's collapsed plot: the timed spot path over the floor (its example has an
+    # infeasible stretch, which is exit 1 by the command's documented contract; the page
+    # is written either way)
+    example = Path(__file__).parents[2] / "examples" / "projector" / "path_timed.yaml"
+    if "projector" not in registered_rig_names() or not example.is_file():
+        pytest.skip("no projector rig or no examples/projector/path_timed.yaml")
+    assert _cli(["projector", "path", example, "--out", tmp_path / "path"], capsys) in (0, 1)
+    assert check_page(tmp_path / "path" / "report.html") == []
