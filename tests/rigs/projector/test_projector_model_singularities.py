@@ -5,16 +5,6 @@ import math
 import numpy as np
 import pytest
 
-from robocal.rigs.projector.calibrate import calibrate
-
-SIGMA = 0.005  # world measurement noise (m)
-
-
-def _calibrate(sc, estimate=("h", "tilt_offset")):
-    return calibrate(sc.points_W, theta=sc.theta, model=sc.nominal, methods=("nonlinear",), estimate=estimate,
-                     sigma=SIGMA)
-
-
 
 def test_near_singularities_warn_with_a_clear_message_and_stay_finite():
     import warnings
@@ -43,8 +33,6 @@ def test_near_singularities_warn_with_a_clear_message_and_stay_finite():
     with pytest.raises(SingularConfigurationError) as exc:
         m.joint_rates([0.3, 1e-8], [0.1, 0.0])
     assert "index ()" not in str(exc.value)
-
-
 
 
 def test_ik_validates_on_nadir_without_a_nadir_point():

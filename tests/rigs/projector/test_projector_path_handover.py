@@ -5,16 +5,6 @@ import math
 import numpy as np
 import pytest
 
-from robocal.rigs.projector.calibrate import calibrate
-
-SIGMA = 0.005  # world measurement noise (m)
-
-
-def _calibrate(sc, estimate=("h", "tilt_offset")):
-    return calibrate(sc.points_W, theta=sc.theta, model=sc.nominal, methods=("nonlinear",), estimate=estimate,
-                     sigma=SIGMA)
-
-
 
 def test_pan_range_limits_a_path_that_winds_round_the_nadir():
     from robocal.rigs.projector.path import joint_trajectory, plan_multi

@@ -8,12 +8,6 @@ from robocal.rigs.projector.simulate import simulate_calibration
 SIGMA = 0.005  # world measurement noise (m)
 
 
-def _calibrate(sc, estimate=("h", "tilt_offset")):
-    return calibrate(sc.points_W, theta=sc.theta, model=sc.nominal, methods=("nonlinear",), estimate=estimate,
-                     sigma=SIGMA)
-
-
-
 def test_cost_curves_get_one_axis_per_method_so_the_seed_curve_is_visible():
     from robocal.report import new_figure
     from robocal.rigs.projector.plots import iterative_methods, plot_cost_curves

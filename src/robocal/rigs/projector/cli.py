@@ -10,8 +10,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from robocal.cli._common import _seed, examples_epilog
-from robocal.workflow import Command, Option, Workflow
+from robocal.cli._common import examples_epilog
+from robocal.workflow import Command, Option, Workflow, seed_value
 
 __all__ = ["RIG"]
 
@@ -110,7 +110,7 @@ RIG = Workflow(
         Option("--theta-noise", type=float, default=0.0, metavar="DEG",
                help="encoder noise sigma [deg], >= 0 (written to the input as joint_noise, which calibrate uses)"),
         # the core's --seed, declared here so that the step gets it too (written into projector.yaml's header)
-        Option("--seed", type=_seed, default=0, help="seed of the random generator (>= 0)"),
+        Option("--seed", type=seed_value, default=0, help="seed of the random generator (>= 0)"),
     ),
     calibrate_help="estimate the pose T_0_W (and h, tilt offset): result.json + report.html",
     calibrate_description=("Input format: see docs/rigs/projector.md or robocal.rigs.projector.files.\n"

@@ -2,8 +2,8 @@
 
 Declared in :mod:`robocal.rigs.projector.cli`; the numerical work is in
 :mod:`.workflow`, :mod:`.evaluate` and :mod:`.path`. A command writes its
-folder through the core's ``prepare_out_dir`` / ``write_run``
-(:class:`robocal.workflow.Command`), imported when it runs.
+folder through the core's :func:`robocal.io.prepare_out_dir` and
+:func:`robocal.io.write_run` (library level: nothing here imports the CLI).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from robocal.errors import FileFormatError, InputError, RobocalError
-from robocal.io import atomic_write_text, load_result, to_jsonable
+from robocal.io import atomic_write_text, load_result, prepare_out_dir, to_jsonable, write_run
 from robocal.rigs.projector.files import extrinsics_from_result
 
 __all__ = ["run_evaluate", "run_path", "model_from_result"]
@@ -37,7 +37,6 @@ def run_evaluate(args) -> int:
         raise InputError(f"--spacing must be a finite distance > 0 [m], got {args.spacing:g}")
     if not all(math.isfinite(c) for c in args.center):
         raise InputError(f"--center must be two finite coordinates [m], got {args.center[0]:g} {args.center[1]:g}")
-    from robocal.cli._common import prepare_out_dir, write_run
     from robocal.rigs.projector.files import load_calibration_input
     from robocal.rigs.projector.report import build_report
     from robocal.rigs.projector.workflow import calibration_result, run_calibration, run_evaluation
@@ -141,7 +140,6 @@ def _check_path_options(args) -> None:
 def run_path(args) -> int:
     """``robocal projector path``: commands.csv, one commands_<name>.csv per head, plan.json, report.html."""
     _check_path_options(args)
-    from robocal.cli._common import prepare_out_dir, write_run
     from robocal.rigs.projector.files import load_path_input
     from robocal.rigs.projector.path import plan_multi, require_reachable_path, retime
     from robocal.rigs.projector.workflow import path_report

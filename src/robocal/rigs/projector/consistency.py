@@ -18,6 +18,7 @@ import numpy as np
 
 from robocal.diagnostics import Diagnostic
 from robocal.errors import DegenerateGeometryError, NotEnoughDataError, ShapeError, UnitError
+from robocal.estimation import OUTLIER_FAMILY_P
 from robocal.rigs.projector.model import NearSingularityWarning, ProjectorModel
 from robocal.validation import check_array
 
@@ -126,8 +127,8 @@ MAX_KEPT_PAIRS = 1_000_000
 MAX_SUSPECTS = 200
 MAX_TABLE_PAIRS = 10_000
 #: Family-wise false-alarm rate of the pairwise check when the noise is stated (Bonferroni over the pairs):
-#: the core's outlier default (robocal.estimation.OUTLIER_FAMILY_P).
-CONSISTENCY_ALPHA = 0.01
+#: the core's outlier default.
+CONSISTENCY_ALPHA = OUTLIER_FAMILY_P
 
 
 @dataclass
