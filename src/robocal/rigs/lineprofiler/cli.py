@@ -11,7 +11,7 @@ import argparse
 import math
 from pathlib import Path
 
-from robocal.workflow import Command, Option, Workflow
+from robocal.workflow import Command, Option, Workflow, seed_value
 
 __all__ = ["RIG", "HANDEYE"]
 
@@ -55,8 +55,7 @@ def _examples(*lines: str) -> str:
 _POSES = Option("--poses", type=int_at_least(5, "FPDP fits X and the sphere centre from 5 or more"), default=16,
                 help="number of arm poses of the FPDP sphere scan")
 _NOISE_FREE = Option("--noise-free", action="store_true", help="no measurement noise")
-_SEED = Option("--seed", type=int_at_least(0, "a seed of numpy's generator"), default=0,
-               help="seed of the random generator (>= 0)")
+_SEED = Option("--seed", type=seed_value, default=0, help="seed of the random generator (>= 0)")
 
 
 RIG = Workflow(

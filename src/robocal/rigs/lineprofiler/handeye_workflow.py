@@ -207,8 +207,8 @@ def robot_world_result(res, pair: PosePair) -> CalibrationResult:
 
 def run_robot_world(args) -> int:
     """``robocal handeye robot-world GRIPPER TARGET --out DIR``: ``DIR/result.json`` and ``DIR/report.html``."""
-    from robocal.cli._common import prepare_out_dir, write_run
     from robocal.errors import RobocalError
+    from robocal.io import prepare_out_dir, write_run
 
     pair = load_pose_pair(args.gripper_poses, args.target_poses)
     try:

@@ -159,7 +159,7 @@ def demo(ctx: DemoContext) -> DemoOutcome:
 
 def run_compare(args) -> int:
     """``robocal lineprofiler compare``: the seed's FPDP vs MCT comparison re-run in simulation."""
-    from robocal.cli._common import prepare_out_dir
+    from robocal.io import prepare_out_dir
     from robocal.progress import progress
     from robocal.report import Report
     from robocal.rigs.lineprofiler.compare import run_comparison
