@@ -18,7 +18,7 @@ __all__ = ["RIG"]
 EXAMPLES = Path("examples/projector")
 #: :data:`robocal.rigs.projector.path.NADIR_SNAP` and ``MAX_NADIR_SNAP`` [m], repeated for the ``path`` parser so
 #: that ``--help`` does not import the path planner (its model pulls in scipy.spatial, ~0.4 s); a test
-#: (tests/rigs/projector/test_projector_cli.py) asserts that they equal path's.
+#: (tests/rigs/projector/test_projector_cli_commands.py) asserts that they equal path's.
 NADIR_SNAP = 1e-3
 MAX_NADIR_SNAP = 0.1
 #: ``simulate --points`` cap, repeated from :data:`robocal.rigs.projector.workflow.MAX_SIM_POINTS` for the help text.
