@@ -281,3 +281,14 @@ def test_a_result_is_read_back_as_its_pose_by_evaluate_and_path_and_a_v1_file_to
     f.write_text(f.read_text().replace(str(tmp_path / "cal" / "result.json"), str(tmp_path / "other.json")))
     code, _, err = run(["projector", "path", f, "--out", tmp_path / "p2"], capsys)
     assert code == 2 and "result of rig 'mirror', expected 'projector'" in err and err.count("\n") == 1, err
+
+
+def test_report_of_a_result_missing_what_it_draws_is_one_line_exit_2(tmp_path, capsys):
+    code, *_ = run(["projector", "calibrate", EXAMPLES / "room_A_csv.yaml", "--out", tmp_path / "cal"], capsys)
+    assert code == 0
+    d = json.loads((tmp_path / "cal" / "result.json").read_text())
+    del d["diagnostics"]["residuals"]
+    (tmp_path / "edited").mkdir()
+    (tmp_path / "edited" / "result.json").write_text(json.dumps(d))
+    code, out, err = run(["report", tmp_path / "edited" / "result.json", "--out", tmp_path / "rep"], capsys)
+    assert code == 2 and err.count("\n") == 1 and "'residuals' missing" in err and "Traceback" not in err, err

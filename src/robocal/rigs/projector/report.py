@@ -16,6 +16,7 @@ import math
 import numpy as np
 
 from robocal.diagnostics import Diagnostic
+from robocal.errors import FileFormatError
 from robocal.io import CalibrationResult
 from robocal.report import Report, Section, new_figure, plot_residual_histogram, solver_section, truth_section
 from robocal.rigs.projector.model import ProjectorModel
@@ -57,11 +58,22 @@ def _normalised(result: CalibrationResult) -> CalibrationResult:
 
 
 def build_report(result: CalibrationResult, *, base_dir=None) -> Report:
-    """The report of a projector result (calibrate, evaluate or the demo), from the result alone."""
+    """The report of a projector result (calibrate, evaluate or the demo), from the result alone.
+
+    Raises :class:`~robocal.errors.FileFormatError` naming the field when the
+    result lacks what the report is drawn from (a result written before the
+    report was built from results, or an edited file).
+    """
     result = _normalised(result)
     d = result.diagnostics
     rep = Report(d.get("title") or "projector calibration", subtitle=SUBTITLE)
-    rep.sections.extend(report_sections(result))
+    try:
+        rep.sections.extend(report_sections(result))
+    except (KeyError, TypeError, IndexError, ValueError) as exc:
+        what = repr(exc.args[0]) if isinstance(exc, KeyError) and exc.args else str(exc)
+        raise FileFormatError(f"not a projector result this version can draw a report from: {what} missing or "
+                              f"invalid (under 'diagnostics' or 'estimate'); run 'robocal projector calibrate' "
+                              f"again") from None
     return rep
 
 
