@@ -236,3 +236,17 @@ def test_calibrate_driver_runs_every_method():
     assert err < 4 * best.std["yaw"]
     m = run.calibrated_model()
     assert abs(m.h - sc.truth.h) < 4 * best.std["h"]
+
+
+def test_truth_check_passes_an_honest_estimate_and_names_the_parameter_of_a_biased_truth():
+    """The demo's acceptance check: NEES over the free parameters with the reported covariance (p = 0.001)."""
+    from robocal.rigs.projector.workflow import truth_check_of
+
+    sc = simulate_calibration(np.random.default_rng(3), n_points=8, sigma=0.005)
+    run = calibrate(sc.points_W, theta=sc.theta, model=sc.nominal, estimate=("h", "tilt_offset"), sigma=sc.sigma)
+    ok = truth_check_of(run.best, sc.truth)
+    assert ok.passed and ok.dof == 5 and set(ok.z) == {"yaw", "t_x", "t_y", "h", "tilt_offset"}
+    # the truth moved by 8 std along x: the check fails (chi-square(5) limit 20.5 < 64) and names t_x
+    moved = sc.truth.with_(t_0_W=sc.truth.t_0_W + np.array([8 * run.best.std["t_x"], 0.0, 0.0]))
+    bad = truth_check_of(run.best, moved)
+    assert not bad.passed and bad.worst[0] == "t_x"
