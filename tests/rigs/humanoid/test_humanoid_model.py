@@ -13,7 +13,7 @@ def test_nao_geometry_matches_aldebaran_and_spec(model):
     tree = model.tree
     q0 = np.zeros(tree.n_joints)
     fk = tree.fk(q0)
-    # spec 03 / Aldebaran H25 links: neck 126.5 mm, hips (0, +-50, -85) mm, thigh 100, tibia 102.9, foot 45.19
+    # Aldebaran H25 links (docs/rigs/humanoid.md): neck 126.5 mm, hips (0, +-50, -85) mm, thigh 100, tibia 102.9, foot 45.19
     np.testing.assert_allclose(fk["Neck"][:3, 3], [0, 0, 0.1265])
     np.testing.assert_allclose(fk["LPelvis"][:3, 3], [0, 0.05, -0.085])
     np.testing.assert_allclose(fk["RPelvis"][:3, 3], [0, -0.05, -0.085])

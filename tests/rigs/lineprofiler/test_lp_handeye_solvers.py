@@ -6,7 +6,7 @@ import pytest
 from opencv_reference import opencv  # cv2 on OpenCV 4; outputs recorded from 4.x on OpenCV 5
 
 from robocal.errors import DegenerateGeometryError, InputError, NonFiniteError, NotEnoughDataError, ShapeError
-from robocal.geometry import invert_transform, matrix_from_rotvec, rotvec_from_matrix, rotz, transform_from
+from robocal.geometry import invert_transform, matrix_from_angle, matrix_from_rotvec, rotvec_from_matrix, transform_from
 from robocal.rigs.lineprofiler.handeye import (
     AXXB_METHODS,
     calibrate_hand_eye,
@@ -98,7 +98,7 @@ def test_robot_world_matches_truth_and_opencv():
 def planar_scene(rng, n=8):
     """Every gripper rotation about the base z axis (mobile robot, seed 002)."""
     X, Y = rand_T(rng), rand_T(rng)
-    Tg = transform_from(rotz(rng.uniform(-2, 2, n)), np.c_[rng.normal(size=(n, 2)), np.zeros(n)])
+    Tg = transform_from(matrix_from_angle("z", rng.uniform(-2, 2, n)), np.c_[rng.normal(size=(n, 2)), np.zeros(n)])
     Tc = invert_transform(X) @ invert_transform(Tg) @ Y
     return Tg, Tc
 

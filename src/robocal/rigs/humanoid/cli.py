@@ -19,7 +19,7 @@ _WF = "robocal.rigs.humanoid.workflow"
 
 RIG = Workflow(
     name="humanoid",
-    help="NAO leg joint offsets + head camera mounting from checkerboards under the feet (seed 001)",
+    help="NAO leg joint offsets + head camera mounting from checkerboards under the feet (Fan and Lou, seed 001 [S1])",
     description="Kinematic calibration of a NAO-class humanoid: the lower head camera watches a checkerboard "
                 "pinned under each foot; Levenberg-Marquardt over joint offsets, camera and board mounting "
                 "(the seed's 21 parameters), with uncertainties, identifiability and outliers.\n\n"

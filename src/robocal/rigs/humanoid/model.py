@@ -1,4 +1,4 @@
-"""The NAO-class humanoid model of the leg calibration (seed 001, spec 03-humanoid).
+"""The NAO-class humanoid model of the leg calibration (seed 001 = Fan and Lou [S1], docs/sources.md; the model in docs/rigs/humanoid.md).
 
 Frames (``docs/conventions.md``: ``T_a_b`` maps frame-b points into frame a):
 

@@ -1,4 +1,4 @@
-"""Pose planning: leg poses that make the calibration well conditioned (spec 03, "Beyond the seed").
+"""Pose planning: leg poses that make the calibration well conditioned (docs/rigs/humanoid.md, "Beyond the seed").
 
 Greedy D-optimal design: from a pool of candidate poses (within the joint
 limits, board fully visible with its face toward the camera, feet apart --

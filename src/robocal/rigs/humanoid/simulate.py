@@ -1,4 +1,4 @@
-"""Simulated leg-calibration runs with known ground truth (spec 03-humanoid, "Beyond the seed").
+"""Simulated leg-calibration runs with known ground truth (docs/rigs/humanoid.md, "Beyond the seed").
 
 * :func:`draw_truth` -- true offsets at a realistic scale (~0.5 deg joints and
   camera, ~0.5 deg / 1 mm board mounting);

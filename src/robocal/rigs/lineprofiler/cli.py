@@ -60,7 +60,7 @@ _SEED = Option("--seed", type=seed_value, default=0, help="seed of the random ge
 
 RIG = Workflow(
     name="lineprofiler",
-    help="hand-eye calibration of an arm-mounted line laser (seed 004: FPDP, MCT)",
+    help="hand-eye calibration of an arm-mounted line laser (Jing, Hu and Guo, seed 004 [S4]: FPDP, MCT)",
     description="Line-laser profiler hand-eye calibration: FPDP (sphere, linear), geometric refinement on all "
                 "profile points, MCT (laser tracker and standard block), FPDP vs MCT re-run in simulation.\n\n"
                 + _examples("robocal lineprofiler simulate --out lineprofiler-sim",

@@ -25,11 +25,11 @@ def write_hand_eye_poses(out_dir: Path, rig, d, tr, rng: np.random.Generator, *,
     target the sphere centre's frame (``tr.sphere_centre``, axes of the world). With ``noise``: 1 mrad and
     0.2 mm per sensor pose. Returns the two paths.
     """
-    from robocal.geometry import invert_transform, matrix_from_rotvec, rotx, transform_from
+    from robocal.geometry import invert_transform, matrix_from_angle, matrix_from_rotvec, transform_from
     from robocal.rigs.lineprofiler.io import write_poses_csv
 
     n = len(d.q)
-    Tg = rig.chain.fk(d.q) @ transform_from(rotx(np.linspace(-0.6, 0.6, n)), np.zeros((n, 3)))
+    Tg = rig.chain.fk(d.q) @ transform_from(matrix_from_angle("x", np.linspace(-0.6, 0.6, n)), np.zeros((n, 3)))
     Tc = invert_transform(rig.X) @ invert_transform(Tg) @ transform_from(np.eye(3), tr.sphere_centre)
     if noise:
         Tc = transform_from(matrix_from_rotvec(rng.normal(size=(n, 3)) * 1e-3) @ Tc[:, :3, :3],

@@ -37,7 +37,7 @@ def _number(kind, minimum, strict):
 
 RIG = Workflow(
     name="mirror",
-    help="camera-to-robot-body calibration from one image of a plane mirror (seed 002)",
+    help="camera-to-robot-body calibration from one image of a plane mirror (patent CN 101096101, seed 002 [S2])",
     description=(
         "Foot-eye calibration of a mobile robot: a plane mirror with four markers (a known rectangle) in front\n"
         "of the robot; the camera sees the markers and the reflection of feature points on the body.\n"

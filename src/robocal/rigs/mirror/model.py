@@ -1,6 +1,6 @@
 """Frames and geometry of the plane-mirror "foot-eye" calibration (seed 002).
 
-Frames (seed 002 §1, spec 04-mirror.md)
+Frames (seed 002 §1, patent CN 101096101 [S2]; docs/rigs/mirror.md)
 ---------------------------------------
 ``c``
     camera: optical centre, x right, y down, z along the optical axis.
@@ -40,10 +40,10 @@ Eq. [4] is an image in the published text. Written out (see
 ``T_om_r = F T_m_ri`` with ``F = diag(-1, 1, 1)`` — *not* plain equality:
 ``om`` and ``ri`` are each the mirror image of ``m`` and ``r`` with their x
 axis flipped, and the flip has to be undone on both sides. Taking the two
-equal (as the spec's paraphrase reads) gives a wrong ``T_c_r``; the test
+equal (as a paraphrase of the patent reads) gives a wrong ``T_c_r``; the test
 suite checks both statements.
 
-The compact form (spec 04): with the mirror plane ``n . x = d`` in ``c``
+The compact form (docs/rigs/mirror.md): with the mirror plane ``n . x = d`` in ``c``
 (``n = R_c_m e_z``, ``d = n . t_c_m``) and ``H = I - 2 n n^T``,
 
 .. math:: R_{cr} = H R_{cri} F, \\qquad t_{cr} = H t_{cri} + 2 d n .
@@ -59,13 +59,13 @@ from robocal.camera import MarkerRectangle
 from robocal.errors import DegenerateGeometryError, InputError, ShapeError
 from robocal.geometry import (
     apply_transform,
-    householder_matrix,
+    householder_from_normal,
     invert_transform,
     reflect_frame,
     reflect_points,
-    rotation_of,
+    rotation_from_transform,
     transform_from,
-    translation_of,
+    translation_from_transform,
 )
 from robocal.validation import check_points, check_transform
 
@@ -158,7 +158,7 @@ def patent_compose(T_c_m, T_c_ri, *, literal_eq4: bool = False) -> PatentSteps:
         Mirror-image robot frame in the camera (body points' PnP with the
         object set ``(-x, y, z)``, eq. [2]).
     literal_eq4 : bool
-        Take ``(R_om_r, T_om_r) = (R_m_ri, T_m_ri)`` literally, as the spec's
+        Take ``(R_om_r, T_om_r) = (R_m_ri, T_m_ri)`` literally, as a
         paraphrase of eq. [4] reads. Wrong in general; kept so that a test can
         show it (and the docs can say why the default differs).
 
@@ -199,16 +199,16 @@ def patent_compose(T_c_m, T_c_ri, *, literal_eq4: bool = False) -> PatentSteps:
 
 
 def householder_compose(T_c_m, T_c_ri) -> np.ndarray:
-    """Compact form: ``R_cr = H R_cri F``, ``t_cr = H t_cri + 2 d n`` (spec 04).
+    """Compact form: ``R_cr = H R_cri F``, ``t_cr = H t_cri + 2 d n`` (docs/rigs/mirror.md).
 
     ``n, d`` from :func:`mirror_plane`. Returns ``T_c_r`` (..., 4, 4).
     """
     T_c_m = _pose(T_c_m, "T_c_m")
     T_c_ri = _pose(T_c_ri, "T_c_ri")
     n, d = mirror_plane(T_c_m)
-    H = householder_matrix(n)
-    R = H @ rotation_of(T_c_ri) @ F_X
-    t = np.einsum("...ij,...j->...i", H, translation_of(T_c_ri)) + 2.0 * np.asarray(d)[..., None] * n
+    H = householder_from_normal(n)
+    R = H @ rotation_from_transform(T_c_ri) @ F_X
+    t = np.einsum("...ij,...j->...i", H, translation_from_transform(T_c_ri)) + 2.0 * np.asarray(d)[..., None] * n
     return transform_from(R, t)
 
 
