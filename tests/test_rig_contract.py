@@ -21,6 +21,7 @@ from robocal.cli._rig import discover_rigs, registered_rig_names
 from robocal.cli.main import main
 from robocal.io import READABLE_SCHEMAS, SCHEMA, load_result
 from robocal.workflow import Workflow
+from browser import check_page, chromium_executable
 
 RIG_NAMES = registered_rig_names()
 #: What a rig's declaration must not import (cf. tests/cli/test_rig_imports.py)
@@ -117,6 +118,11 @@ def test_simulate_calibrate_report_round_trip(name, tmp_path, capsys):
     code, out, err = _run(["report", cal / "result.json", "--out", rep2], capsys)
     assert code == 0, err
     assert _strip_stamp((rep2 / "report.html").read_text()) == first
+
+    # a person reads it: every image loads, nothing overflows a 1400 px window
+    if chromium_executable() is None:
+        pytest.skip("Chromium not installed (.ci/run installs Debian's chromium): report not checked in a browser")
+    assert check_page(cal / "report.html", width=1400) == []
 
 
 @pytest.mark.parametrize("name", RIG_NAMES)
