@@ -69,6 +69,13 @@ def test_library_code_never_imports_the_cli():
 _CLI_ALLOWED = ("__future__", "argparse", "math", "pathlib", "robocal.workflow", "robocal.cli", "robocal.cli._common")
 
 
+def _declares(fn: ast.FunctionDef) -> bool:
+    """Whether a function only builds declarations: it calls Option(...) and nothing but str formatting."""
+    calls = [n.func for n in ast.walk(fn) if isinstance(n, ast.Call)]
+    names = {c.id for c in calls if isinstance(c, ast.Name)}
+    return "Option" in names and names <= {"Option", "Command", "tuple", "str", "int", "float"}
+
+
 def test_rig_cli_modules_are_declarations_only():
     # no numerical library and no rig library at module level, no long functions: the
     # work is in the rig's library modules, named by the Workflow's "module:attr" steps
@@ -79,7 +86,7 @@ def test_rig_cli_modules_are_declarations_only():
             if isinstance(node, (ast.Import, ast.ImportFrom)):
                 mods = [a.name for a in node.names] if isinstance(node, ast.Import) else [node.module or ""]
                 offenders += [f"{cli.parent.name}/cli.py imports {m}" for m in mods if m not in _CLI_ALLOWED]
-            elif isinstance(node, ast.FunctionDef) and node.end_lineno - node.lineno > 15:
+            elif isinstance(node, ast.FunctionDef) and node.end_lineno - node.lineno > 15 and not _declares(node):
                 offenders.append(f"{cli.parent.name}/cli.py: {node.name} is {node.end_lineno - node.lineno} lines "
                                  "(argument parsers only; move work into the rig's library)")
     assert not offenders, offenders

@@ -60,7 +60,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Workflow", "Option", "Command", "DemoContext", "DemoOutcome", "STEPS", "resolve", "seed_value"]
+__all__ = ["Workflow", "Option", "Command", "DemoContext", "DemoOutcome", "STEPS", "resolve", "seed_value",
+           "ACCEPT_IMPLAUSIBLE_HELP", "accept_implausible_option"]
 
 #: The steps a workflow may declare, in the order the core runs them.
 STEPS = ("simulate", "load_input", "calibrate", "to_result", "build_report", "summary", "demo")
@@ -119,6 +120,17 @@ class Option:
 
     def __repr__(self) -> str:
         return f"Option({', '.join(map(repr, self.flags))}, to={self.to!r})"
+
+
+#: The help of ``--accept-implausible``, the same on every command that has it (see :mod:`robocal.plausibility`).
+ACCEPT_IMPLAUSIBLE_HELP = ("when the answer is physically implausible (a likely unit slip, a transposed board, an "
+                           "inverted pose list, ...), write it with an implausible_input warning instead of stopping "
+                           "with exit status 2")
+
+
+def accept_implausible_option() -> Option:
+    """``--accept-implausible`` for a rig's own command (``calibrate`` gets it from the core)."""
+    return Option("--accept-implausible", action="store_true", to=None, help=ACCEPT_IMPLAUSIBLE_HELP)
 
 
 @dataclass(frozen=True)

@@ -4,23 +4,17 @@ import json
 import numpy as np
 import pytest
 
-from robocal.cli import DemoOutcome, Rig
+from robocal.cli import DemoOutcome
 from robocal.cli.main import build_parser, main, run_demo
 from robocal.errors import InputError
 from robocal.io import CalibrationResult
 from robocal.report import Section
+from robocal.workflow import Workflow
 
 
 def _toy_rig(fail_with=None, passed=True):
-    def add_commands(p):
-        sub = p.add_subparsers(dest="sub")
-        c = sub.add_parser("calibrate")
-        c.add_argument("input")
-
-        def run(args):
-            raise InputError("field 'x': must be > 0, got -1", source=args.input)
-
-        c.set_defaults(func=run)
+    def load_input(path):
+        raise InputError("field 'x': must be > 0, got -1", source=str(path))
 
     def demo(ctx):
         if fail_with:
@@ -33,7 +27,13 @@ def _toy_rig(fail_with=None, passed=True):
             result=CalibrationResult(rig="toy", method="m", estimate={"x": x}),
         )
 
-    return Rig("toy", "a toy rig", "toy description", add_commands, demo)
+    return _toy_workflow(load_input, demo=demo)
+
+
+def _toy_workflow(load_input, *, demo=None, calibrate=None):
+    """A rig whose calibrate fails in ``load_input`` (or in ``calibrate``)."""
+    return Workflow("toy", "a toy rig", "toy description", load_input=load_input,
+                    calibrate=calibrate or (lambda inp, **_: inp), to_result=lambda cal, inp: cal, demo=demo)
 
 
 def test_help_and_version(capsys):
@@ -121,13 +121,10 @@ def test_library_error_is_prefixed_with_the_input_file(capsys, monkeypatch):
 
     rig = _toy_rig()
 
-    def add_commands(p):
-        sub = p.add_subparsers(dest="sub")
-        c = sub.add_parser("calibrate")
-        c.add_argument("input")
-        c.set_defaults(func=lambda a: (_ for _ in ()).throw(InputError("points 0 and 1 coincide")))
+    def load_input(path):
+        raise InputError("points 0 and 1 coincide")
 
-    monkeypatch.setattr(m, "discover_rigs", lambda names=None: [Rig("toy", "t", "t", add_commands, rig.demo)])
+    monkeypatch.setattr(m, "discover_rigs", lambda names=None: [_toy_workflow(load_input, demo=rig.demo)])
     assert main(["toy", "calibrate", "in.yaml"]) == 2
     assert capsys.readouterr().err == "robocal: error: in.yaml: points 0 and 1 coincide\n"
 
@@ -216,17 +213,11 @@ def test_failures_user_data_provokes_are_one_line_naming_the_input(tmp_path, cap
     inp = tmp_path / "room.yaml"
     inp.write_text("H: 1\n")
 
-    def add_commands(p):
-        c = p.add_subparsers(dest="sub").add_parser("calibrate")
-        c.add_argument("input")
+    def calibrate(inp, **_):
+        warnings.warn("overflow encountered in square", RuntimeWarning)  # held back: the error line is the answer
+        raise exc
 
-        def run(args):
-            warnings.warn("overflow encountered in square", RuntimeWarning)  # held back: the error line is the answer
-            raise exc
-
-        c.set_defaults(func=run)
-
-    monkeypatch.setattr(m, "discover_rigs", lambda names=None: [Rig("toy", "t", "t", add_commands, None)])
+    monkeypatch.setattr(m, "discover_rigs", lambda names=None: [_toy_workflow(lambda path: path, calibrate=calibrate)])
     assert main(["toy", "calibrate", str(inp)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith(f"robocal: error: {inp}: ") and says in err, err

@@ -6,9 +6,9 @@ import os
 import pytest
 
 import robocal.cli.main as m
-from robocal.cli import Rig
-from robocal.cli._common import add_out_argument, prepare_out_dir
+from robocal.cli._common import prepare_out_dir
 from robocal.errors import FileFormatError, InputError
+from robocal.workflow import Command, Option, Workflow
 from robocal.io import INCOMPLETE, MANIFEST, CalibrationResult, atomic_write_bytes, atomic_write_text, load_result, \
     read_manifest, write_result
 
@@ -16,18 +16,12 @@ from robocal.io import INCOMPLETE, MANIFEST, CalibrationResult, atomic_write_byt
 def _writer_rig(name="toy"):
     """A rig with two commands writing the files named on the command line."""
 
-    def add_commands(p):
-        sub = p.add_subparsers(dest="sub")
-        for cmd in ("first", "second"):
-            c = sub.add_parser(cmd)
-            c.add_argument("input", nargs="?", default=None)
-            c.add_argument("--files", default="result.json")
-            c.add_argument("--then", choices=["ok", "error", "interrupt"], default="ok")
-            c.add_argument("--over", default=None, help="also write this path")
-            add_out_argument(c)
-            c.set_defaults(func=lambda a, cmd=cmd: _write(a, f"{name}-{cmd}"))
-
-    return Rig(name, "writes files", "writes files", add_commands, None)
+    options = (Option("input", nargs="?", default=None), Option("--files", default="result.json"),
+               Option("--then", choices=["ok", "error", "interrupt"], default="ok"),
+               Option("--over", default=None, help="also write this path"))
+    return Workflow(name, "writes files", "writes files", commands=tuple(
+        Command(cmd, "writes files", run=lambda a, cmd=cmd: _write(a, f"{name}-{cmd}"), options=options)
+        for cmd in ("first", "second")))
 
 
 def _write(args, label):

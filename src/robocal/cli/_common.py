@@ -10,7 +10,7 @@ import argparse
 from pathlib import Path
 
 from robocal.io import prepare_out_dir, write_run  # noqa: F401 - re-exported: the CLI's helpers, library-level
-from robocal.workflow import seed_value
+from robocal.workflow import ACCEPT_IMPLAUSIBLE_HELP, seed_value
 
 _seed = seed_value  # the old private name (rigs' plan --seed used it)
 
@@ -80,7 +80,4 @@ def add_seed_argument(parser: argparse.ArgumentParser, default: int = 0) -> None
 
 def add_accept_implausible_argument(parser: argparse.ArgumentParser) -> None:
     """``--accept-implausible``: go on when the answer is implausible (see :mod:`robocal.plausibility`)."""
-    parser.add_argument(
-        "--accept-implausible", action="store_true",
-        help="when the answer is physically implausible (a likely unit slip, a transposed board, ...), "
-             "write it with an implausible_input warning instead of stopping with exit status 2")
+    parser.add_argument("--accept-implausible", action="store_true", help=ACCEPT_IMPLAUSIBLE_HELP)

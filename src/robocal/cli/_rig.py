@@ -3,8 +3,7 @@
 A rig package exposes ``RIG = Workflow(...)`` (:mod:`robocal.workflow`, the
 contract) in its ``cli`` module and lists it in ``pyproject.toml`` under
 ``[project.entry-points."robocal.rigs"]``; the core discovers rigs through
-that group and never imports one by name. :class:`Rig` (a parser hook plus a
-demo) is the older, undeclared form, kept while rigs move to the contract.
+that group and never imports one by name.
 
 Command convention, the same for every rig::
 
@@ -14,45 +13,16 @@ Command convention, the same for every rig::
 
 from __future__ import annotations
 
-import argparse
 import sys
-from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from collections.abc import Iterable
 from importlib.metadata import entry_points
 
 from robocal.workflow import DemoContext, DemoOutcome, Workflow, resolve
 
-__all__ = ["Rig", "Workflow", "DemoContext", "DemoOutcome", "discover_rigs", "registered_rig_names", "demo_of"]
+__all__ = ["Workflow", "DemoContext", "DemoOutcome", "discover_rigs", "registered_rig_names", "demo_of"]
 
 
-@dataclass(frozen=True)
-class Rig:
-    """A registered workflow.
-
-    Attributes
-    ----------
-    name : str
-        Sub-command name (``robocal <name> ...``).
-    help : str
-        One line for ``robocal --help``.
-    description : str
-        Longer text for ``robocal <name> --help`` (examples welcome).
-    add_commands : callable
-        ``add_commands(parser)`` adds the rig's sub-commands to its parser;
-        each sub-command sets ``func=`` (``func(args) -> int``) via
-        ``set_defaults``.
-    demo : callable, optional
-        ``demo(ctx: DemoContext) -> DemoOutcome`` run by ``robocal demo``.
-    """
-
-    name: str
-    help: str
-    description: str
-    add_commands: Callable[[argparse.ArgumentParser], None]
-    demo: Callable[[DemoContext], DemoOutcome] | None = None
-
-
-def demo_of(rig: Rig | Workflow):
+def demo_of(rig: Workflow):
     """The rig's demo callable (imported now for a workflow's ``"module:attr"``), or None."""
     return resolve(rig.demo)
 
@@ -62,7 +32,7 @@ def registered_rig_names() -> list[str]:
     return sorted({ep.name for ep in entry_points(group="robocal.rigs")})
 
 
-def discover_rigs(names: Iterable[str] | None = None) -> list[Rig]:
+def discover_rigs(names: Iterable[str] | None = None) -> list[Workflow]:
     """Load the rigs registered in the ``robocal.rigs`` entry-point group.
 
     Parameters
@@ -94,7 +64,7 @@ def discover_rigs(names: Iterable[str] | None = None) -> list[Rig]:
         except Exception as exc:  # noqa: BLE001 - any plugin failure is reported, not fatal
             _warn_broken(ep, exc)
             continue
-        if not isinstance(rig, (Rig, Workflow)):
+        if not isinstance(rig, Workflow):
             raise TypeError(f"entry point {ep.name} -> {ep.value} is not a robocal.workflow.Workflow")
         rigs.append(rig)
     return rigs

@@ -29,7 +29,7 @@ from robocal.cli._workflow import add_report_command, add_workflow_commands
 from robocal.errors import InputError, RobocalError
 from robocal.io import CommandRun, preflight, set_command_line, write_result
 from robocal.report import Report
-from robocal.workflow import Workflow, seed_value
+from robocal.workflow import seed_value
 
 __all__ = ["main", "build_parser", "run_demo"]
 
@@ -84,14 +84,11 @@ def build_parser(rigs=None) -> argparse.ArgumentParser:
     lst.set_defaults(func=lambda a: _list_rigs(rigs))
 
     # `robocal report` reads the rig from the result file: it loads every rig when it runs
-    add_report_command(sub, lambda: {w.name: w for w in discover_rigs() if isinstance(w, Workflow)})
+    add_report_command(sub, lambda: {w.name: w for w in discover_rigs()})
 
     for rig in rigs:
         p = sub.add_parser(rig.name, help=rig.help, description=rig.description, formatter_class=RawHelp)
-        if isinstance(rig, Workflow):
-            add_workflow_commands(p, rig)
-        else:
-            rig.add_commands(p)
+        add_workflow_commands(p, rig)
         p.set_defaults(func=lambda a, p=p: (p.print_help(), 0)[1])
     return parser
 

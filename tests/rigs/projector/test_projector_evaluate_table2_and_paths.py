@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from robocal.errors import InputError, NotEnoughDataError, ShapeError
-from robocal.geometry import rotz
+from robocal.geometry import matrix_from_angle
 from robocal.rigs.projector.evaluate import error_map, evaluate_points, published_table2_errors, table2_grid
 from robocal.rigs.projector.model import ProjectorModel
 from robocal.rigs.projector.path import joint_trajectory, plan_multi, sample_polyline, segments_blocked
@@ -22,7 +22,7 @@ def test_table2_protocol_zero_error_for_perfect_calibration_and_known_error_for_
     # a yaw error delta with t unchanged turns the commanded floor about the world origin:
     # each spot moves by delta * its distance from the origin of {W}
     delta = 1e-3
-    wrong = truth.with_(R_0_W=rotz(delta) @ truth.R_0_W)
+    wrong = truth.with_(R_0_W=matrix_from_angle("z", delta) @ truth.R_0_W)
     ev = evaluate_points(truth, wrong, grid)
     dist = np.linalg.norm(grid, axis=1)
     assert np.allclose(ev.norm, delta * dist, rtol=2e-3, atol=1e-12)

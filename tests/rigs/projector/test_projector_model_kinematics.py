@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from robocal.errors import InputError, NonFiniteError, SingularConfigurationError
-from robocal.geometry import rotz
+from robocal.geometry import matrix_from_angle
 from robocal.rigs.projector.model import NearSingularityWarning, ProjectorModel, UnreachablePointError
 
 SETTINGS = settings(max_examples=60, deadline=None)
@@ -76,7 +76,7 @@ def test_ik_round_trip_vectorised_batch_shapes(model):
     assert back.shape == (4, 150, 2)
     assert np.abs(back - th).max() < 1e-12
     # world frame round trip through eq. (1)
-    mw = model.with_(R_0_W=rotz(0.04), t_0_W=np.array([2.4, -0.9, -2.9]))
+    mw = model.with_(R_0_W=matrix_from_angle("z", 0.04), t_0_W=np.array([2.4, -0.9, -2.9]))
     pw = mw.spot_world(th)
     assert np.abs(pw[..., 2]).max() < 1e-12
     assert np.abs(mw.ik_world(pw[..., :2]) - th).max() < 1e-12

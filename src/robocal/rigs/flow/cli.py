@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from robocal.workflow import Command, Option, Workflow
+from robocal.workflow import Command, Option, Workflow, accept_implausible_option
 
 __all__ = ["RIG", "TEXTURES"]
 
@@ -32,10 +32,6 @@ examples:
   robocal flow evaluate examples/flow/loop/run.yaml --array flow-cal/array_calibrated.yaml --out flow-eval
   robocal flow report flow-cal/result.json --out flow-cal-report      (any flow result.json)
   robocal flow convert-mavlink flow.tlog --array array.yaml --sensor-map 0:s60,1:s120,2:s270 --out flow-conv"""
-
-_ACCEPT_HELP = ("when the answer is physically implausible (a likely unit slip, a transposed board, ...), "
-                "write it with an implausible_input warning instead of stopping with exit status 2")
-
 
 def _kernel_options(*, simulate: bool = False, debias: bool = True) -> tuple:
     """The block matcher's options (raw frames only; for ``simulate``: the kernel of the written flow.csv)."""
@@ -59,7 +55,7 @@ def _kernel_options(*, simulate: bool = False, debias: bool = True) -> tuple:
 
 
 _RUN_COMMAND_OPTIONS = _kernel_options() + (
-    Option("--accept-implausible", action="store_true", help=_ACCEPT_HELP),)
+    accept_implausible_option(),)
 
 RIG = Workflow(
     name="flow",

@@ -11,7 +11,7 @@ import argparse
 import math
 from pathlib import Path
 
-from robocal.workflow import Command, Option, Workflow, seed_value
+from robocal.workflow import Command, Option, Workflow, accept_implausible_option, seed_value
 
 __all__ = ["RIG", "HANDEYE"]
 
@@ -146,10 +146,7 @@ HANDEYE = Workflow(
                 run=f"{_HE}:run_robot_world",
                 options=(*_PAIR,
                          Option("--no-refine", action="store_true", help="Shah's closed form only (no covariance)"),
-                         Option("--accept-implausible", action="store_true",
-                                help="when the pose lists are implausible (a likely unit slip, an inverted "
-                                     "list, ...), write the result with an implausible_input warning instead of "
-                                     "stopping with exit status 2")),
+                         accept_implausible_option()),
                 examples=(f"robocal handeye robot-world {EXAMPLES}/gripper_poses.csv {EXAMPLES}/target_poses.csv "
                           "--out rw",)),
     ),

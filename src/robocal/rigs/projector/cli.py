@@ -11,7 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from robocal.cli._common import examples_epilog
-from robocal.workflow import Command, Option, Workflow, seed_value
+from robocal.workflow import Command, Option, Workflow, accept_implausible_option, seed_value
 
 __all__ = ["RIG"]
 
@@ -41,9 +41,7 @@ EVALUATE = Command(
         Option("--spacing", type=float, default=2.0, metavar="M", help="Table 2 grid spacing [m]"),
         Option("--center", type=float, nargs=2, default=(0.0, 0.0), metavar=("X", "Y"),
                help="Table 2 grid centre in {W} [m]"),
-        Option("--accept-implausible", action="store_true",
-               help="when the answer is physically implausible (a likely unit slip, ...), write it with an "
-                    "implausible_input warning instead of stopping with exit status 2"),
+        accept_implausible_option(),
     ),
 )
 
