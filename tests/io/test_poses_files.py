@@ -45,6 +45,8 @@ def test_planar_csv_gives_rotations_about_z(tmp_path):
     got = load_poses(f)
     assert got.planar
     np.testing.assert_allclose(got.xy_theta[1], [0.1, 0.0, np.pi / 2], atol=1e-12)
+    f.write_text("t [s], x [m], y [m], theta [rad]\n0, 0, 0, 0\n1, 0, 0, 7.0\n")
+    assert load_poses(f).xy_theta[1, 2] == 7.0  # a heading past a full turn is kept as written
 
 
 @pytest.mark.parametrize("text, match", [

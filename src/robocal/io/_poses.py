@@ -50,20 +50,28 @@ class PoseList:
         Whether the file held planar ``x, y, theta`` poses (then ``z = 0``
         and the rotation is about z).
     source : str
+    heading : (N,) ndarray or None
+        A planar file's ``theta`` [rad] as written (not wrapped to
+        ``(-pi, pi]``: a heading past a full turn keeps its count).
     """
 
     T: np.ndarray
     t: np.ndarray | None
     planar: bool = False
     source: str = ""
+    heading: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.T)
 
     @property
     def xy_theta(self) -> np.ndarray:
-        """``(N, 3)`` planar poses ``x, y`` [m] and heading ``theta`` [rad] (the rotation about z)."""
-        return np.column_stack([self.T[:, 0, 3], self.T[:, 1, 3], np.arctan2(self.T[:, 1, 0], self.T[:, 0, 0])])
+        """``(N, 3)`` planar poses ``x, y`` [m] and heading ``theta`` [rad] (the rotation about z).
+
+        A planar file's headings as written; else the rotation's angle about z in ``(-pi, pi]``.
+        """
+        th = self.heading if self.heading is not None else np.arctan2(self.T[:, 1, 0], self.T[:, 0, 0])
+        return np.column_stack([self.T[:, 0, 3], self.T[:, 1, 3], th])
 
 
 def _transforms(R, p) -> np.ndarray:
@@ -106,7 +114,7 @@ def load_poses(path) -> PoseList:
             p = np.column_stack([tab.column(c, kind="length") for c in "xyz"])
             R = _rotations_from_quats(np.column_stack([tab.column(c) for c in ("qx", "qy", "qz", "qw")]), src,
                                       tab.where)
-            planar = False
+            planar, heading = False, None
         elif all(c in tab for c in ("x", "y", "theta")):
             xy = np.column_stack([tab.column("x", kind="length"), tab.column("y", kind="length")])
             th = tab.column("theta", kind="angle")
@@ -114,14 +122,14 @@ def load_poses(path) -> PoseList:
             R = np.zeros((len(th), 3, 3))
             R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, -s, s, c, 1.0
             p = np.column_stack([xy, np.zeros(len(th))])
-            planar = True
+            planar, heading = True, th
         else:
             raise FileFormatError("a pose CSV needs the columns x, y, z, qx, qy, qz, qw (3-D poses) or "
                                   "x, y, theta (planar poses), with units in the header (x [m])", source=src)
         t = tab.column("t", kind="time") if "t" in tab else None
         if t is not None:
             _check_times(t, src, tab.where)
-        return PoseList(_transforms(R, p), t, planar, src)
+        return PoseList(_transforms(R, p), t, planar, src, heading)
     doc = load_document(path)
     items = doc.items_list("poses")
     if not items:

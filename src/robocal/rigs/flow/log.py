@@ -406,13 +406,19 @@ def write_poses_csv(path, t, poses, *, comment: str = "") -> Path:
 
 
 def read_poses_csv(path):
-    """``t (N,)``, poses ``(N, 3)`` from a ``t, x, y, theta`` CSV (units in the header)."""
-    tab = load_csv(path, required=["t", "x", "y", "theta"])
-    t = tab.column("t", kind="time")
-    if np.any(np.diff(t) <= 0):
-        r = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 1
-        raise FileFormatError(f"timestamps must increase strictly: row {r + 1} has t = {t[r]:.6f} s after {t[r - 1]:.6f} s", source=str(path))
-    return t, np.stack([tab.column("x", kind="length"), tab.column("y", kind="length"), tab.column("theta", kind="angle")], 1)
+    """``t (N,)``, poses ``(N, 3)`` (x, y [m], theta [rad]) from a ``t, x, y, theta`` CSV (units in the header).
+
+    Read by the core's pose-list reader (:func:`robocal.io.load_poses`), which
+    checks units, NaN and strictly increasing times; a planar log needs its
+    timestamps.
+    """
+    from robocal.io import load_poses
+
+    poses = load_poses(path)
+    if not poses.planar or poses.t is None:
+        raise FileFormatError("a trajectory needs the columns t, x, y, theta with units in the header "
+                              "(t [s], x [m], y [m], theta [rad])", source=str(path))
+    return poses.t, poses.xy_theta
 
 
 @dataclass

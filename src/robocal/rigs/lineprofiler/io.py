@@ -32,12 +32,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp
 
-from robocal.errors import FileFormatError, InputError
-from robocal.geometry import transform_from
-from robocal.io import atomic_write_text, load_csv, load_document, to_si, unit_kind
-from robocal.validation import check_rotation_matrix
+from robocal.errors import FileFormatError
+from robocal.io import atomic_write_text, interpolate_poses, load_csv, to_si, unit_kind, write_poses
+from robocal.io import load_poses as _core_load_poses
 
 __all__ = ["load_profiles_csv", "write_profiles_csv", "load_poses", "write_poses_csv", "interpolate_poses",
            "load_tracker_csv", "write_tracker_csv", "load_block_faces_csv", "write_block_faces_csv"]
@@ -140,84 +138,14 @@ def write_profiles_csv(path, profiles, q=None, t=None, *, angle_joints=()) -> Pa
     return atomic_write_text(path, "\n".join(lines) + "\n")
 
 
-def _rotations_from_quats(qs, src: str, where=None):
-    """Rotation matrices of scalar-last quaternions; ``where(i)`` names entry ``i`` in messages."""
-    qs = np.asarray(qs, float)
-    n = np.linalg.norm(qs, axis=1)
-    bad = np.flatnonzero(np.abs(n - 1) > 1e-3)
-    if bad.size:
-        at = where(bad[0]) if where is not None else f"row {bad[0] + 1}"
-        raise FileFormatError(f"{at}: quaternion (qx, qy, qz, qw) has norm {n[bad[0]]:.6g}, "
-                              "expected a unit quaternion (scalar-last)", source=src)
-    return Rotation.from_quat(qs).as_matrix()
-
-
 def load_poses(path):
-    """Read a pose list; returns ``(T (N, 4, 4) in m, t (N,) or None)``."""
-    path = Path(path)
-    src = str(path)
-    if path.suffix.lower() == ".csv":
-        tab = load_csv(path, required=("x", "y", "z", "qx", "qy", "qz", "qw"))
-        p = np.column_stack([tab.column(c, kind="length") for c in "xyz"])
-        R = _rotations_from_quats(np.column_stack([tab.column(c) for c in ("qx", "qy", "qz", "qw")]), src,
-                                  tab.where)
-        t = tab.column("t", kind="time") if "t" in tab else None
-        return transform_from(R, p), t
-    doc = load_document(path)
-    items = doc.items_list("poses")
-    if not items:
-        raise FileFormatError("field 'poses' is empty", source=src)
-    Ts, ts = [], []
-    for k, it in enumerate(items):
-        p = it.array("p", kind="length", shape=(3,))
-        if "q" in it:
-            R = _rotations_from_quats(it.array("q", shape=(4,))[None], src, lambda _, k=k: f"poses[{k}].q")[0]
-        elif "R" in it:
-            try:
-                R = check_rotation_matrix(it.array("R", shape=(3, 3)), f"poses[{k}].R", atol=1e-4)
-            except InputError as exc:
-                raise FileFormatError(exc.message, source=src) from None
-        else:
-            raise FileFormatError(f"poses[{k}] needs 'q' (qx, qy, qz, qw) or 'R'", source=src)
-        Ts.append(transform_from(R, p))
-        if "t" in it:
-            ts.append(it.float("t", kind="time"))
-    if ts and len(ts) != len(Ts):
-        raise FileFormatError("either every pose has a timestamp 't' or none", source=src)
-    return np.array(Ts), (np.array(ts) if ts else None)
+    """Read a pose list (:func:`robocal.io.load_poses`, the core reader of every rig); ``(T (N, 4, 4) m, t (N,) or None)``."""
+    poses = _core_load_poses(path)
+    return poses.T, poses.t
 
 
-def write_poses_csv(path, T, t=None) -> Path:
-    """Write poses as ``t [s], x [m], y [m], z [m], qx, qy, qz, qw`` (scalar-last, w >= 0)."""
-    q = Rotation.from_matrix(np.asarray(T)[:, :3, :3]).as_quat(canonical=True)
-    head = (["t [s]"] if t is not None else []) + ["x [m]", "y [m]", "z [m]", "qx", "qy", "qz", "qw"]
-    rows = [", ".join(head)]
-    for i, Ti in enumerate(T):
-        vals = ([f"{t[i]:.6f}"] if t is not None else []) + [f"{v:.9f}" for v in (*Ti[:3, 3], *q[i])]
-        rows.append(", ".join(vals))
-    return atomic_write_text(path, "\n".join(rows) + "\n")
-
-
-def interpolate_poses(t_src, T_src, t_query) -> np.ndarray:
-    """Poses at ``t_query``: SLERP (scipy) for rotation, linear for translation.
-
-    Raises :class:`~robocal.errors.InputError` for unsorted source times or
-    queries outside ``[t_src[0], t_src[-1]]`` (no extrapolation).
-    """
-    t_src = np.asarray(t_src, float)
-    t_query = np.asarray(t_query, float)
-    T_src = np.asarray(T_src, float)
-    if len(t_src) != len(T_src):
-        raise InputError(f"{len(t_src)} timestamps but {len(T_src)} poses: counts must match")
-    if len(t_src) < 2 or np.any(np.diff(t_src) <= 0):
-        raise InputError("pose timestamps must be strictly increasing (at least 2)")
-    out = (t_query < t_src[0]) | (t_query > t_src[-1])
-    if np.any(out):
-        raise InputError(f"{out.sum()} query time(s) outside the pose stream [{t_src[0]:g}, {t_src[-1]:g}] s, "
-                         f"first {t_query[out][0]:g} s: no extrapolation")
-    R = Slerp(t_src, Rotation.from_matrix(T_src[:, :3, :3]))(t_query).as_matrix()
-    p = np.column_stack([np.interp(t_query, t_src, T_src[:, k, 3]) for k in range(3)])
-    return transform_from(R, p)
+# the hand-eye files are the core's pose lists: one writer and one interpolation for all rigs
+write_poses_csv = write_poses
 
 
 def load_tracker_csv(path, *, dof: int | None = None, joint_types=None):
