@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -61,7 +62,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["Workflow", "Option", "Command", "DemoContext", "DemoOutcome", "STEPS", "resolve", "seed_value",
-           "ACCEPT_IMPLAUSIBLE_HELP", "accept_implausible_option"]
+           "ACCEPT_IMPLAUSIBLE_HELP", "accept_implausible_option", "number_at_least"]
 
 #: The steps a workflow may declare, in the order the core runs them.
 STEPS = ("simulate", "load_input", "calibrate", "to_result", "build_report", "summary", "demo")
@@ -89,6 +90,30 @@ def seed_value(text: str) -> int:
     if value < 0:
         raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {value}")
     return value
+
+
+def number_at_least(kind: type, minimum: float, *, strict: bool = False, why: str = "", unit: str = ""):
+    """argparse ``type=``: a finite ``kind`` (``int`` or ``float``) ``>= minimum`` (``> minimum`` when ``strict``).
+
+    A bad value is argparse's one-line usage error naming the option, the
+    bound and, when given, ``why`` it holds: ``--runs: must be >= 2 (the spread
+    of repeated calibrations needs 2 or more), got 1``.
+    """
+    what = "a whole number" if kind is int else "a number"
+
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what}{' of ' + unit if unit else ''}, got {text!r}") from None
+        if not math.isfinite(value) or value < minimum or (strict and value == minimum):
+            because = f" ({why})" if why else ""
+            raise argparse.ArgumentTypeError(f"must be {'>' if strict else '>='} {minimum:g}{(' ' + unit) if unit else ''}"
+                                             f"{because}, got {text}")
+        return value
+
+    parse.__name__ = kind.__name__  # argparse names the type in "invalid int value" fallbacks
+    return parse
 
 
 class Option:

@@ -7,11 +7,10 @@ The steps live in the library: :mod:`.calibrate` (load, calibrate, result),
 
 from __future__ import annotations
 
-import argparse
-import math
 from pathlib import Path
 
-from robocal.workflow import Command, Option, Workflow, accept_implausible_option, seed_value
+from robocal.cli._common import examples_epilog
+from robocal.workflow import Command, Option, Workflow, accept_implausible_option, number_at_least, seed_value
 
 __all__ = ["RIG", "HANDEYE"]
 
@@ -20,39 +19,7 @@ _LP = "robocal.rigs.lineprofiler"
 _HE = f"{_LP}.handeye_workflow"
 
 
-# argparse types of the options (here: importing another module of the rig would load the package's
-# numerical code for `--help`)
-
-def int_at_least(minimum: int, why: str):
-    """argparse type: an integer >= ``minimum`` (``why`` says what needs it)."""
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-        if v < minimum:
-            raise argparse.ArgumentTypeError(f"must be >= {minimum} ({why}), got {v}")
-        return v
-    return parse
-
-
-def length_mm(text: str) -> float:
-    """argparse type: a finite length >= 0 in mm."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of mm, got {text!r}") from None
-    if not (math.isfinite(v) and v >= 0):
-        raise argparse.ArgumentTypeError(f"must be a finite length >= 0 in mm, got {text}")
-    return v
-
-
-def _examples(*lines: str) -> str:
-    # the same block as robocal.cli's examples_epilog (not imported: the declaration stays light)
-    return "examples:\n" + "\n".join(f"  {ln}" for ln in lines)
-
-
-_POSES = Option("--poses", type=int_at_least(5, "FPDP fits X and the sphere centre from 5 or more"), default=16,
+_POSES = Option("--poses", type=number_at_least(int, 5, why="FPDP fits X and the sphere centre from 5 or more"), default=16,
                 help="number of arm poses of the FPDP sphere scan")
 _NOISE_FREE = Option("--noise-free", action="store_true", help="no measurement noise")
 _SEED = Option("--seed", type=seed_value, default=0, help="seed of the random generator (>= 0)")
@@ -63,7 +30,7 @@ RIG = Workflow(
     help="hand-eye calibration of an arm-mounted line laser (Jing, Hu and Guo, seed 004 [S4]: FPDP, MCT)",
     description="Line-laser profiler hand-eye calibration: FPDP (sphere, linear), geometric refinement on all "
                 "profile points, MCT (laser tracker and standard block), FPDP vs MCT re-run in simulation.\n\n"
-                + _examples("robocal lineprofiler simulate --out lineprofiler-sim",
+                + examples_epilog("robocal lineprofiler simulate --out lineprofiler-sim",
                             f"robocal lineprofiler calibrate {EXAMPLES}/fpdp_input.yaml --out lineprofiler-cal",
                             f"robocal lineprofiler calibrate {EXAMPLES}/mct_input.yaml --out lineprofiler-mct",
                             "robocal lineprofiler report lineprofiler-cal/result.json --out lineprofiler-report",
@@ -78,9 +45,9 @@ RIG = Workflow(
     simulate_help="write simulated FPDP and MCT input files (and hand-eye pose lists)",
     simulate_options=(
         _POSES, _NOISE_FREE,
-        Option("--scan-profiles", type=int_at_least(3, "MCT's block scan needs a P3 stroke of 3 or more"),
+        Option("--scan-profiles", type=number_at_least(int, 3, why="MCT's block scan needs a P3 stroke of 3 or more"),
                default=31, help="profiles in the MCT block scan"),
-        Option("--encoder-sigma", type=length_mm, default=0.0, metavar="MM",
+        Option("--encoder-sigma", type=number_at_least(float, 0.0, unit="mm"), default=0.0, metavar="MM",
                help="P3 encoder read-out noise of the MCT scan and line readings, in mm (default 0: exact)"),
         _SEED,
     ),
@@ -96,10 +63,10 @@ RIG = Workflow(
                 run=f"{_LP}.workflow:run_compare",
                 options=(
                     _SEED,
-                    Option("--runs", type=int_at_least(2, "the spread of repeated calibrations needs 2 or more"),
+                    Option("--runs", type=number_at_least(int, 2, why="the spread of repeated calibrations needs 2 or more"),
                            default=3, help="repeated experiments (the seed's 3); e_v, e_theta, e_p against their "
                                            "mean"),
-                    Option("--poses", type=int_at_least(5, "FPDP fits X and the sphere centre from 5 or more"),
+                    Option("--poses", type=number_at_least(int, 5, why="FPDP fits X and the sphere centre from 5 or more"),
                            default=16, help="arm poses per FPDP experiment (the seed's 16)"),
                 ),
                 examples=("robocal lineprofiler compare --out lineprofiler-compare",)),
@@ -117,7 +84,7 @@ HANDEYE = Workflow(
     help="AX = XB hand-eye solvers (Tsai, Park, Horaud, Andreff, Daniilidis) and robot-world AX = ZB, "
          "with refinement",
     description="Classic hand-eye calibration from pose lists (see docs/rigs/lineprofiler.md).\n\n"
-                + _examples("robocal handeye simulate --out handeye-sim",
+                + examples_epilog("robocal handeye simulate --out handeye-sim",
                             f"robocal handeye calibrate {EXAMPLES}/gripper_poses.csv {EXAMPLES}/target_poses.csv "
                             "--method park --out he",
                             f"robocal handeye robot-world {EXAMPLES}/gripper_poses.csv {EXAMPLES}/target_poses.csv "

@@ -8,31 +8,15 @@ declaration; the steps are in :mod:`robocal.rigs.mirror.workflow` and
 
 from __future__ import annotations
 
-import argparse
-import math
 from pathlib import Path
 
 from robocal.cli._common import examples_epilog
-from robocal.workflow import Option, Workflow
+from robocal.workflow import Option, Workflow, number_at_least
 
 __all__ = ["RIG"]
 
 EXAMPLES = Path("examples/mirror")
 _WF = "robocal.rigs.mirror.workflow"
-
-
-def _number(kind, minimum, strict):
-    """argparse type: a ``kind`` (int/float) >= minimum (> minimum when strict); bad values -> usage error."""
-    def parse(text):
-        try:
-            v = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-        if not math.isfinite(v) or v < minimum or (strict and v == minimum):
-            raise argparse.ArgumentTypeError(f"must be {'>' if strict else '>='} {minimum}, got {text}")
-        return v
-    parse.__name__ = kind.__name__
-    return parse
 
 
 RIG = Workflow(
@@ -62,8 +46,8 @@ RIG = Workflow(
                        "robocal mirror simulate --images --out mirror-sim   # rendered images, ArUco body tags",
                        "robocal mirror calibrate mirror-sim/mirror_input.yaml --out mirror-cal"),
     simulate_options=(
-        Option("--placements", type=_number(int, 1, False), default=1, help="number of mirror placements (images)"),
-        Option("--sigma", dest="sigma_px", type=_number(float, 0.0, False), default=0.5,
+        Option("--placements", type=number_at_least(int, 1), default=1, help="number of mirror placements (images)"),
+        Option("--sigma", dest="sigma_px", type=number_at_least(float, 0.0), default=0.5,
                help="pixel noise sigma [px] of point files; 0 = noise-free, sigma_px then left out of the file "
                     "(not used with --images: images get 0.6 px blur and grey-level noise 2)"),
         Option("--images", action="store_true",
