@@ -125,6 +125,33 @@ def test_simulate_calibrate_report_round_trip(name, tmp_path, capsys):
     assert check_page(cal / "report.html", width=1400) == []
 
 
+def _example_lines():
+    """Every ``calibrate`` example of every rig's help whose input files ship in ``examples/``."""
+    import shlex
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    for name in RIG_NAMES:
+        for line in _workflow(name).calibrate_examples:
+            words = shlex.split(line.split("#")[0])
+            files = [w for w in words[3:] if w.startswith("examples/")]
+            if files and all((root / f).is_file() for f in files):
+                yield pytest.param(name, [str(root / w) if w.startswith("examples/") else w for w in words[1:]],
+                                   id=" ".join(words[1:]).replace("examples/", ""))
+
+
+@pytest.mark.parametrize("name, argv", list(_example_lines()))
+def test_help_examples_calibrate_in_the_shared_vocabulary(name, argv, tmp_path, capsys):
+    # the examples a user copies from `robocal <rig> calibrate --help` work, and their results
+    # follow the schema (every rig's example result, issue 20)
+    if "--out" in argv:
+        argv = argv[: argv.index("--out")] + argv[argv.index("--out") + 2:]
+    code, out, err = _run([*argv, "--out", tmp_path / "cal"], capsys)
+    assert code == 0, err
+    res = load_result(tmp_path / "cal" / "result.json")
+    assert res.rig == name and check_result_vocabulary(res) == []
+
+
 @pytest.mark.parametrize("name", RIG_NAMES)
 def test_bad_input_is_one_line_exit_2(name, tmp_path, capsys):
     wf = _workflow(name)
