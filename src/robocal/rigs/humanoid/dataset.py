@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from robocal.camera import CameraModel, Checkerboard
+from robocal.camera import CameraModel, Checkerboard, camera_from_section
 from robocal.errors import FileFormatError, InconsistentDataError, InputError
 from robocal.io import atomic_write_text, load_document
 from robocal.rigs.humanoid.model import FEET, HumanoidModel
@@ -63,7 +63,9 @@ def load_dataset(path, *, detect: bool = True, progress: bool = False) -> tuple[
     inputs = [path]
     model_key = doc.raw("model", "default")
     tie = doc.bool("tie_hip_yaw_pitch", default=False)
-    camera = CameraModel.from_document(doc.sub("camera"))
+    camera = camera_from_section(doc.sub("camera"))  # inline, or {file: ...} in any format load_camera reads
+    if isinstance(doc.raw("camera"), dict) and isinstance(doc.raw("camera").get("file"), str):
+        inputs.append(_image_path(path, doc.raw("camera")["file"]))  # hashed with the result's inputs
     b = doc.sub("board", {})
     board = Checkerboard(b.int("rows", default=4, minimum=3), b.int("cols", default=6, minimum=3),
                          b.float("square", kind="length", positive=True) if "square" in b else 0.025)

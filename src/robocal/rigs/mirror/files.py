@@ -65,14 +65,13 @@ image file (ArUco path) and bounds the image points.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import yaml
 
-from robocal.camera import CameraModel, MarkerRectangle, camera_from_document, read_camera_file, read_image
+from robocal.camera import CameraModel, MarkerRectangle, camera_from_section, read_camera_file, read_image
 from robocal.errors import FileFormatError, RobocalError
 from robocal.geometry import transform_from
 from robocal.io import Document, atomic_write_text, load_document
@@ -124,22 +123,7 @@ def load_camera(doc: Document, *, base_dir=None) -> CameraModel:
     resolution, or width and height swapped). This adds ``file:`` (a
     calibration file; keys next to it override the file's).
     """
-    data = dict(doc.data)
-    source, prefix = doc.source, doc.prefix
-    if "file" in data:
-        raw = data.pop("file")
-        if not isinstance(raw, str):
-            raise doc.error("file", f"must be the path of a camera calibration file, got {type(raw).__name__}")
-        p = Path(raw)
-        if not p.is_absolute():
-            p = (Path(base_dir) if base_dir is not None else Path(source).parent) / p
-        if not p.exists():
-            raise doc.error("file", f"camera file {p} does not exist")
-        data = {**read_camera_file(p), **data}  # keys in the input file complete or override the file's
-        source, prefix = f"{os.path.normpath(p)} (camera.file of {doc.source})", ""
-    cdoc = Document(data, source, prefix, {**doc.units, "pixel": "px"}, doc.units_error)
-    # the core loader checks the distortion model and length, the camera matrix and the principal point
-    return camera_from_document(cdoc)
+    return camera_from_section(doc, base_dir=base_dir)  # the one core loader of every camera rig
 
 
 def load_input(path) -> MirrorInput:
