@@ -12,6 +12,8 @@ from robocal.camera._targets import *  # noqa: F401,F403
 from robocal.camera._render import *  # noqa: F401,F403
 from robocal.camera._detect import *  # noqa: F401,F403
 from robocal.camera._files import *  # noqa: F401,F403
+from robocal.camera._boards import *  # noqa: F401,F403
+from robocal.camera import _boards
 from robocal.camera._camera_files import *  # noqa: F401,F403
 from robocal.camera import _camera_files, _detect, _files, _model, _pnp, _render, _targets
 

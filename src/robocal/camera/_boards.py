@@ -1,0 +1,859 @@
+"""Calibration targets from a file, their detection in images with named view quality, and their rendering.
+
+Three target types (``type:`` in a target file, see :func:`load_target`):
+
+* ``chessboard`` — :class:`ChessboardTarget`: ``rows x cols`` **inner
+  corners**; board frame and corner order of :class:`Checkerboard` (corner
+  ``(i, j)`` at ``(j * square, i * square, 0)``, id ``i * cols + j``).
+* ``charuco`` — :class:`CharucoTarget`: ``rows x cols`` **squares** with ArUco
+  markers in the white squares (OpenCV's ``cv2.aruco.CharucoBoard((cols,
+  rows), square, marker, dictionary)``); the points are the ``(rows - 1) x
+  (cols - 1)`` inner chessboard corners, id ``k`` at ``((k % (cols - 1) + 1)
+  * square, (k // (cols - 1) + 1) * square, 0)`` (OpenCV's ids). Partial
+  views count: a detection lists the ids it found.
+* ``aruco_grid`` — :class:`ArucoGridTarget`: ``rows x cols`` **markers** of
+  side ``marker`` spaced by ``separation`` (``cv2.aruco.GridBoard``); the
+  points are the four corners of each marker, id ``4 * marker_index + k``
+  (``k``: top-left, top-right, bottom-right, bottom-left of the printed
+  marker).
+
+Board frame of ChArUco and grids: OpenCV's — origin at the board's top-left
+outer corner, x along the first row, y down the printed board, z = 0 on the
+board (z = x cross y points away from a camera seeing the printed face, as
+for :class:`Checkerboard`). Lengths in metres, image points in pixels
+(OpenCV pixel-centre convention).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Union
+
+import cv2
+import numpy as np
+
+from robocal.camera._detect import _grey, detect_checkerboard
+from robocal.camera._model import CameraModel
+from robocal.camera._render import add_blur_and_noise, render_planar_target
+from robocal.camera._targets import Checkerboard, PlaneTexture
+from robocal.errors import DetectionError, FileFormatError, InconsistentDataError, InputError
+
+__all__ = [
+    "ChessboardTarget",
+    "CharucoTarget",
+    "ArucoGridTarget",
+    "Target",
+    "TargetDetection",
+    "DetectionSet",
+    "load_target",
+    "target_from_document",
+    "aruco_dictionary",
+    "detect_target",
+    "detect_targets",
+    "render_target_view",
+    "visible_target_points",
+    "BLUR_LIMIT_PX",
+    "DUPLICATE_LIMIT_PX",
+]
+
+#: Edge blur [px] (Gaussian sigma estimated at the corners) above which a view is named "blurred":
+#: corner refinement error grows with the edge width, and 2.5 px is where
+#: a defocused view starts to pull a calibration (it also flags motion blur).
+BLUR_LIMIT_PX = 2.5
+#: Two views whose common corners are within this RMS distance [px] are duplicates (the second is dropped).
+DUPLICATE_LIMIT_PX = 2.0
+
+
+def aruco_dictionary(name: str, *, source: str | None = None):
+    """``cv2.aruco`` predefined dictionary by name (``DICT_5X5_100``, ``DICT_APRILTAG_36h11``; case-insensitive)."""
+    known = {n.upper(): n for n in dir(cv2.aruco) if n.startswith("DICT_")}
+    key = str(name).upper()
+    if not key.startswith("DICT_"):
+        key = "DICT_" + key
+    if key not in known:
+        close = sorted({n for n in known.values() if not any(c.islower() for c in n)})
+        raise InputError(f"unknown ArUco dictionary {name!r}; known: {', '.join(close)}", source=source)
+    return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, known[key]))
+
+
+def _dict_size(dictionary) -> int:
+    return int(dictionary.bytesList.shape[0])
+
+
+def _int_at_least(value, name: str, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise InputError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
+def _length(value, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) or not float(value) > 0:
+        raise InputError(f"{name} must be a length > 0 [m], got {value!r}")
+    return float(value)
+
+
+def _select(points: np.ndarray, ids, n: int, what: str) -> np.ndarray:
+    if ids is None:
+        return points.copy()
+    ids = np.asarray(ids)
+    if ids.ndim != 1 or not np.issubdtype(ids.dtype, np.integer) or (ids.size and (ids.min() < 0 or ids.max() >= n)):
+        raise InputError(f"{what} point ids must be integers in 0..{n - 1}, got {ids!r}")
+    return points[ids]
+
+
+@dataclass(frozen=True)
+class ChessboardTarget:
+    """Chessboard of ``rows x cols`` inner corners, squares of ``square`` [m] (see :class:`Checkerboard`)."""
+
+    rows: int
+    cols: int
+    square: float
+
+    kind = "chessboard"
+
+    def __post_init__(self):
+        object.__setattr__(self, "rows", _int_at_least(self.rows, "chessboard rows (inner corners)", 3))
+        object.__setattr__(self, "cols", _int_at_least(self.cols, "chessboard cols (inner corners)", 3))
+        object.__setattr__(self, "square", _length(self.square, "chessboard square"))
+
+    @property
+    def board(self) -> Checkerboard:
+        return Checkerboard(self.rows, self.cols, self.square)
+
+    @property
+    def n_points(self) -> int:
+        return self.rows * self.cols
+
+    #: A chessboard is only detected whole.
+    @property
+    def min_points(self) -> int:
+        return self.n_points
+
+    def object_points(self, ids=None) -> np.ndarray:
+        """Corners ``ids`` (default all, id = ``i * cols + j``) in the board frame, (N, 3) [m], z = 0."""
+        return _select(self.board.object_points(), ids, self.n_points, "chessboard")
+
+    def pattern(self):
+        """The planar pattern the renderer draws."""
+        return self.board
+
+    def describe(self) -> str:
+        return f"{self.rows}x{self.cols} chessboard (inner corners), {self.square * 1e3:g} mm squares"
+
+
+@dataclass(frozen=True)
+class CharucoTarget:
+    """ChArUco board of ``rows x cols`` squares of ``square`` [m], markers of side ``marker`` [m].
+
+    ``dictionary``: a ``cv2.aruco`` predefined dictionary name. ``legacy``:
+    OpenCV's pre-4.6 layout (for boards with an even number of rows printed by
+    old OpenCV). ``min_points``: fewest corners a view must show (default 6).
+    """
+
+    rows: int
+    cols: int
+    square: float
+    marker: float
+    dictionary: str = "DICT_5X5_100"
+    legacy: bool = False
+    min_points: int = 6
+
+    kind = "charuco"
+
+    def __post_init__(self):
+        object.__setattr__(self, "rows", _int_at_least(self.rows, "charuco rows (squares)", 2))
+        object.__setattr__(self, "cols", _int_at_least(self.cols, "charuco cols (squares)", 2))
+        if self.rows * self.cols < 5:
+            raise InputError(f"charuco board needs at least 5 squares, got {self.rows}x{self.cols}")
+        object.__setattr__(self, "square", _length(self.square, "charuco square"))
+        object.__setattr__(self, "marker", _length(self.marker, "charuco marker"))
+        if not self.marker < self.square:
+            raise InputError(
+                f"charuco marker ({self.marker * 1e3:g} mm) must be smaller than the square ({self.square * 1e3:g} mm)"
+            )
+        d = aruco_dictionary(self.dictionary)
+        need = (self.rows * self.cols) // 2
+        if need > _dict_size(d):
+            raise InputError(
+                f"a {self.rows}x{self.cols} charuco board needs {need} markers, "
+                f"dictionary {self.dictionary} has {_dict_size(d)}"
+            )
+        object.__setattr__(self, "min_points", _int_at_least(self.min_points, "charuco min_points", 4))
+
+    @property
+    def cv_board(self):
+        b = cv2.aruco.CharucoBoard((self.cols, self.rows), self.square, self.marker, aruco_dictionary(self.dictionary))
+        b.setLegacyPattern(bool(self.legacy))
+        return b
+
+    @property
+    def n_points(self) -> int:
+        return (self.rows - 1) * (self.cols - 1)
+
+    def object_points(self, ids=None) -> np.ndarray:
+        """Inner corners ``ids`` (default all) in the board frame, (N, 3) [m], z = 0."""
+        k = np.arange(self.n_points)
+        c = self.cols - 1
+        pts = np.stack([(k % c + 1) * self.square, (k // c + 1) * self.square, np.zeros(k.size)], axis=1)
+        return _select(pts, ids, self.n_points, "charuco")
+
+    def size_m(self) -> tuple[float, float]:
+        return (self.cols * self.square, self.rows * self.square)
+
+    def pattern(self, pixels_per_square: int = 64):
+        """The board image (``generateImage``) as a :class:`PlaneTexture`, with a white quiet zone of one square."""
+        return _texture(self.cv_board, self.size_m(), self.square, self.square / pixels_per_square)
+
+    def describe(self) -> str:
+        return (
+            f"{self.rows}x{self.cols} charuco (squares), {self.square * 1e3:g} mm squares, "
+            f"{self.marker * 1e3:g} mm markers, {self.dictionary}"
+        )
+
+
+@dataclass(frozen=True)
+class ArucoGridTarget:
+    """Grid of ``rows x cols`` ArUco/AprilTag markers of side ``marker`` [m] spaced by ``separation`` [m].
+
+    ``first_id``: the first marker's id in ``dictionary`` (markers are
+    numbered row by row from it). ``min_points``: fewest corners a view must
+    show (default 8, two markers).
+    """
+
+    rows: int
+    cols: int
+    marker: float
+    separation: float
+    dictionary: str = "DICT_APRILTAG_36h11"
+    first_id: int = 0
+    min_points: int = 8
+
+    kind = "aruco_grid"
+
+    def __post_init__(self):
+        object.__setattr__(self, "rows", _int_at_least(self.rows, "aruco_grid rows (markers)", 1))
+        object.__setattr__(self, "cols", _int_at_least(self.cols, "aruco_grid cols (markers)", 1))
+        object.__setattr__(self, "marker", _length(self.marker, "aruco_grid marker"))
+        object.__setattr__(self, "separation", _length(self.separation, "aruco_grid separation"))
+        object.__setattr__(self, "first_id", _int_at_least(self.first_id, "aruco_grid first_id", 0))
+        d = aruco_dictionary(self.dictionary)
+        last = self.first_id + self.rows * self.cols
+        if last > _dict_size(d):
+            raise InputError(
+                f"a {self.rows}x{self.cols} grid from id {self.first_id} needs ids up to {last - 1}, "
+                f"dictionary {self.dictionary} has {_dict_size(d)}"
+            )
+        object.__setattr__(self, "min_points", _int_at_least(self.min_points, "aruco_grid min_points", 4))
+
+    @property
+    def marker_ids(self) -> np.ndarray:
+        return np.arange(self.first_id, self.first_id + self.rows * self.cols)
+
+    @property
+    def cv_board(self):
+        return cv2.aruco.GridBoard(
+            (self.cols, self.rows), self.marker, self.separation, aruco_dictionary(self.dictionary), self.marker_ids
+        )
+
+    @property
+    def n_points(self) -> int:
+        return 4 * self.rows * self.cols
+
+    def object_points(self, ids=None) -> np.ndarray:
+        """Marker corners ``ids`` (default all; id = 4 * marker index + corner) in the board frame, (N, 3) [m]."""
+        m = np.arange(self.rows * self.cols)
+        pitch = self.marker + self.separation
+        x0, y0 = (m % self.cols) * pitch, (m // self.cols) * pitch
+        dx = np.array([0.0, 1.0, 1.0, 0.0]) * self.marker
+        dy = np.array([0.0, 0.0, 1.0, 1.0]) * self.marker
+        pts = np.stack([(x0[:, None] + dx).ravel(), (y0[:, None] + dy).ravel(), np.zeros(4 * m.size)], axis=1)
+        return _select(pts, ids, self.n_points, "aruco_grid")
+
+    def size_m(self) -> tuple[float, float]:
+        pitch = self.marker + self.separation
+        return (self.cols * pitch - self.separation, self.rows * pitch - self.separation)
+
+    def pattern(self, pixels_per_marker: int = 96):
+        """The board image as a :class:`PlaneTexture`, with a white quiet zone of one separation (>= 1 module)."""
+        bits = aruco_dictionary(self.dictionary).markerSize + 2
+        texel = self.marker / (bits * max(1, round(pixels_per_marker / bits)))
+        return _texture(self.cv_board, self.size_m(), max(self.separation, self.marker / bits), texel)
+
+    def describe(self) -> str:
+        return (
+            f"{self.rows}x{self.cols} {self.dictionary} grid, {self.marker * 1e3:g} mm markers, "
+            f"{self.separation * 1e3:g} mm apart"
+        )
+
+
+Target = Union[ChessboardTarget, CharucoTarget, ArucoGridTarget]
+_TARGETS = (ChessboardTarget, CharucoTarget, ArucoGridTarget)
+
+
+def _texture(cv_board, size_m, margin_m: float, texel_m: float) -> PlaneTexture:
+    """``cv_board.generateImage`` laid on the board plane; the board's outer corner at the origin.
+
+    The texel is chosen so the board size and margin are whole texels (the
+    image's edges then fall exactly where the board frame says; marker bits
+    may be rounded to a texel by ``generateImage`` when they do not divide).
+    """
+    w, h = size_m
+    nx, ny = round(w / texel_m), round(h / texel_m)
+    nm = max(1, round(margin_m / texel_m))
+    img = cv_board.generateImage((nx + 2 * nm, ny + 2 * nm), marginSize=nm, borderBits=1)
+    tx, ty = w / nx, h / ny
+    return PlaneTexture(img, ((nx + 2 * nm) * tx, (ny + 2 * nm) * ty), origin=(-nm * tx, -nm * ty))
+
+
+# -- target files ------------------------------------------------------------------------------------------
+
+_KEYS = {
+    "chessboard": ("type", "units", "rows", "cols", "square"),
+    "charuco": ("type", "units", "rows", "cols", "square", "marker", "dictionary", "legacy", "min_points"),
+    "aruco_grid": ("type", "units", "rows", "cols", "marker", "separation", "dictionary", "first_id", "min_points"),
+}
+
+
+def target_from_document(doc) -> Target:
+    """A target from a :class:`robocal.io.Document` (the schema of :func:`load_target`)."""
+    kind = doc.str("type", choices=tuple(_KEYS))
+    doc.require_known_keys(_KEYS[kind])
+    rows = doc.int("rows", minimum=1)
+    cols = doc.int("cols", minimum=1)
+
+    def length(key):
+        return doc.float(key, kind="length", positive=True)
+
+    try:
+        if kind == "chessboard":
+            return ChessboardTarget(rows, cols, length("square"))
+        if kind == "charuco":
+            kw = {}
+            if "min_points" in doc:
+                kw["min_points"] = doc.int("min_points", minimum=4)
+            return CharucoTarget(
+                rows, cols, length("square"), length("marker"), _dict_name(doc, "DICT_5X5_100"),
+                doc.bool("legacy", default=False), **kw,
+            )
+        kw = {}
+        if "min_points" in doc:
+            kw["min_points"] = doc.int("min_points", minimum=4)
+        return ArucoGridTarget(
+            rows, cols, length("marker"), length("separation"), _dict_name(doc, "DICT_APRILTAG_36h11"),
+            doc.int("first_id", default=0, minimum=0), **kw,
+        )
+    except InputError as exc:
+        if exc.source:
+            raise
+        raise FileFormatError(exc.message, source=doc.source) from None
+
+
+def _dict_name(doc, default: str) -> str:
+    name = doc.str("dictionary", default=default)
+    try:
+        aruco_dictionary(name)
+    except InputError as exc:
+        raise doc.error("dictionary", exc.message) from None
+    return name
+
+
+def load_target(path) -> Target:
+    """Read a target file (YAML or JSON).
+
+    Schema (lengths as ``{value: 25, unit: mm}`` or plain numbers with a
+    document-level ``units: {length: mm}``)::
+
+        type: chessboard        # rows x cols INNER CORNERS
+        rows: 6
+        cols: 9
+        square: {value: 25, unit: mm}
+
+        type: charuco           # rows x cols SQUARES; optional legacy: false, min_points: 6
+        rows: 7
+        cols: 5
+        square: {value: 40, unit: mm}
+        marker: {value: 30, unit: mm}
+        dictionary: DICT_5X5_100
+
+        type: aruco_grid        # rows x cols MARKERS; optional first_id: 0, min_points: 8
+        rows: 4
+        cols: 6
+        marker: {value: 40, unit: mm}
+        separation: {value: 10, unit: mm}
+        dictionary: DICT_APRILTAG_36h11
+
+    Errors name the file and the field (``FileFormatError``/``UnitError``).
+    """
+    from robocal.io import load_document
+
+    return target_from_document(load_document(Path(path)))
+
+
+# -- detection ---------------------------------------------------------------------------------------------
+
+
+@dataclass(eq=False)
+class TargetDetection:
+    """The target's points found in one image.
+
+    ``name``, ``object_points`` (N, 3) [m, board frame], ``image_points`` (N, 2)
+    [px] and ``ids`` (N,) are the fields of ``robocal.camera.TargetView``.
+    Quality: ``image_size`` (width, height) [px]; ``blur_px`` — edge blur
+    estimated at the points (Gaussian sigma [px], ~0.5 on a sharp render);
+    ``detector`` — what found it; ``issues`` — named reasons not to use the
+    view (``"too_few_points: ..."``, ``"collinear: ..."``, ``"blurred: ..."``,
+    ``"duplicate: ..."``), empty for a usable view; ``notes`` — things worth
+    saying that do not disqualify it.
+    """
+
+    name: str
+    object_points: np.ndarray
+    image_points: np.ndarray
+    ids: np.ndarray
+    image_size: tuple[int, int] = (0, 0)
+    blur_px: float = float("nan")
+    detector: str = ""
+    issues: list = field(default_factory=list)
+    notes: list = field(default_factory=list)
+
+    @property
+    def usable(self) -> bool:
+        return not self.issues
+
+    @property
+    def n_points(self) -> int:
+        return int(self.ids.size)
+
+    def reason(self) -> str:
+        """One line: why the view is not used ("" when it is)."""
+        return "; ".join(self.issues)
+
+
+def _edge_blur(img: np.ndarray, pts: np.ndarray, half: int) -> float:
+    """Median over points of the edge blur [px] in a ``(2 half + 1)^2`` patch around each.
+
+    An ideal step of contrast C blurred by a Gaussian of sigma s has a peak
+    gradient C / (s sqrt(2 pi)); so s = C / (sqrt(2 pi) max|grad|), with C
+    the patch's 2-98 % grey range. Pixel integration and the Sobel kernel
+    add ~0.5 px on a perfectly sharp edge.
+    """
+    f = img.astype(np.float32)
+    gx = cv2.Sobel(f, cv2.CV_32F, 1, 0, ksize=3) / 8.0
+    gy = cv2.Sobel(f, cv2.CV_32F, 0, 1, ksize=3) / 8.0
+    mag = np.hypot(gx, gy)
+    h, w = img.shape
+    out = []
+    for u, v in np.rint(pts).astype(int):
+        r0, r1, c0, c1 = max(v - half, 0), min(v + half + 1, h), max(u - half, 0), min(u + half + 1, w)
+        if r1 - r0 < 3 or c1 - c0 < 3:
+            continue
+        patch = f[r0:r1, c0:c1]
+        lo, hi = np.percentile(patch, [2, 98])
+        g = float(mag[r0:r1, c0:c1].max())
+        if hi - lo > 10 and g > 0:
+            out.append((hi - lo) / (np.sqrt(2 * np.pi) * g))
+    return float(np.median(out)) if out else float("nan")
+
+
+def _spacing(pts: np.ndarray) -> float:
+    """Median nearest-neighbour distance [px] between points."""
+    if len(pts) < 2:
+        return float("nan")
+    d = np.linalg.norm(pts[:, None] - pts[None], axis=-1)
+    np.fill_diagonal(d, np.inf)
+    return float(np.median(d.min(axis=1)))
+
+
+def _quality(det: TargetDetection, img: np.ndarray, target, blur_limit: float) -> None:
+    n = det.n_points
+    if n < target.min_points:
+        det.issues.append(f"too_few_points: {n} < {target.min_points}")
+        return
+    # Points on one line (a single charuco row, one marker edge) do not fix a homography.
+    obj = det.object_points[:, :2] - det.object_points[:, :2].mean(axis=0)
+    sv = np.linalg.svd(obj, compute_uv=False)
+    if sv[1] < 1e-6 * max(sv[0], 1e-12) or sv[1] < 1e-9:
+        det.issues.append(f"collinear: the {n} points lie on one line")
+    half = int(np.clip(0.4 * _spacing(det.image_points), 3, 12))
+    det.blur_px = _edge_blur(img, det.image_points, half)
+    if det.blur_px > blur_limit:
+        det.issues.append(f"blurred: edge blur {det.blur_px:.1f} px > {blur_limit:g} px")
+
+
+def _detect_chessboard(img, target: ChessboardTarget):
+    corners, info = detect_checkerboard(img, target.board, full_output=True)
+    ids = np.arange(target.n_points)
+    keep = np.ones(ids.size, dtype=bool)
+    keep[list(info["unrefined"])] = False
+    notes = []
+    if not keep.all():
+        notes.append(f"dropped {int((~keep).sum())} corners whose refinement wandered off")
+    return ids[keep], corners[keep], info["detector"], notes
+
+
+def _aruco_params():
+    p = cv2.aruco.DetectorParameters()
+    p.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+    return p
+
+
+def _detect_charuco(img, target: CharucoTarget):
+    cd = cv2.aruco.CharucoDetector(target.cv_board)
+    cd.setDetectorParameters(_aruco_params())
+    corners, ids, _, marker_ids = cd.detectBoard(img)
+    if ids is None or len(ids) == 0:
+        return None
+    ids = ids.reshape(-1).astype(int)
+    order = np.argsort(ids)
+    return ids[order], corners.reshape(-1, 2)[order].astype(float), "charuco", []
+
+
+def _refine_marker_edges(img: np.ndarray, quad: np.ndarray, bit_px: float) -> np.ndarray | None:
+    """Marker corners (4, 2) [px] as the intersections of its four outer edges, fitted to sub-pixel edge points.
+
+    ``cornerSubPix`` on an L-shaped corner (a marker's outer corner) is
+    pulled inwards by blur: measured 0.28 / 0.42 / 0.63 px RMS at blur
+    0 / 0.7 / 1.5 px (640x480, 40 mm 36h11 markers at 0.55 m, ~5.5 px per
+    bit). A symmetrically blurred step crosses the mid-level where the edge
+    is, so each side is located along its normal (middle 60 % of the side,
+    where the neighbouring sides do not interfere; mid-level between the
+    border bit's centre and half a bit outside), a line is fitted through it
+    and adjacent lines are intersected: 0.03 / 0.05 / 0.19 px RMS on the same
+    views (at 1.5 px blur the data bits next to the border leak into the
+    levels). Returns None when an edge
+    is not found (the caller keeps the detector's corners).
+    """
+    r = max(0.5 * bit_px, 1.0)
+    offs = np.linspace(-r, r, 2 * int(np.ceil(4 * r)) + 1)
+    lines = []
+    for k in range(4):
+        a, b = quad[k], quad[(k + 1) % 4]
+        length = float(np.linalg.norm(b - a))
+        if length < 8:
+            return None
+        t = (b - a) / length
+        n = np.array([-t[1], t[0]])
+        m = max(5, int(length / 2))
+        base = a + np.linspace(0.2, 0.8, m)[:, None] * (b - a)
+        pts = base[:, None, :] + offs[None, :, None] * n
+        val = cv2.remap(img, pts[..., 0].astype(np.float32), pts[..., 1].astype(np.float32), cv2.INTER_LINEAR,
+                        borderMode=cv2.BORDER_REPLICATE).astype(float)
+        # Mid-level crossing between the border bit's centre and the white beyond it: where a
+        # symmetrically blurred step is half-way (a gradient peak on bilinear samples is flat-topped).
+        dev = val - 0.5 * (val[:, :1] + val[:, -1:])
+        cross = np.signbit(dev[:, :-1]) != np.signbit(dev[:, 1:])
+        centre = np.abs(np.arange(cross.shape[1]) + 0.5 - 0.5 * (len(offs) - 1))
+        score = np.where(cross, centre, np.inf)
+        j = np.argmin(score, axis=1)
+        ok = np.isfinite(score[np.arange(len(j)), j]) & (np.abs(val[:, 0] - val[:, -1]) > 10)
+        if ok.sum() < 3:
+            return None
+        rows = np.flatnonzero(ok)
+        d0, d1 = dev[rows, j[ok]], dev[rows, j[ok] + 1]
+        s = offs[j[ok]] + d0 / (d0 - d1) * (offs[1] - offs[0])
+        edge = base[rows] + s[:, None] * n
+        c = edge.mean(axis=0)
+        _, _, vt = np.linalg.svd(edge - c)
+        lines.append((c, vt[0]))
+    out = np.empty((4, 2))
+    for k in range(4):
+        (p1, d1), (p2, d2) = lines[k - 1], lines[k]
+        A = np.column_stack([d1, -d2])
+        if abs(np.linalg.det(A)) < 1e-6:
+            return None
+        s1, _ = np.linalg.solve(A, p2 - p1)
+        out[k] = p1 + s1 * d1
+    return out
+
+
+def _detect_grid(img, target: ArucoGridTarget):
+    board = target.cv_board
+    det = cv2.aruco.ArucoDetector(aruco_dictionary(target.dictionary), _aruco_params())
+    corners, mids, rejected = det.detectMarkers(img)
+    if mids is None or len(mids) == 0:
+        return None
+    corners, mids, _, _ = det.refineDetectedMarkers(img, board, corners, mids, rejected)
+    mids = mids.reshape(-1)
+    index = {int(m): k for k, m in enumerate(target.marker_ids)}
+    bits = aruco_dictionary(target.dictionary).markerSize + 2
+    # Light smoothing so one noisy pixel does not make the gradient peak; symmetric, so edges stay put.
+    smooth = cv2.GaussianBlur(img.astype(np.float32), (0, 0), 0.7)
+    ids, uv = [], []
+    for c, m in zip(corners, mids):
+        k = index.get(int(m))
+        if k is None:
+            continue  # a marker of the dictionary that is not on this board
+        quad = c.reshape(4, 2).astype(float)
+        bit_px = np.sqrt(abs(cv2.contourArea(quad.astype(np.float32)))) / bits
+        fine = _refine_marker_edges(smooth, quad, bit_px)
+        # A refinement that moves a corner by more than half a bit met something else: keep the detector's.
+        if fine is not None and np.all(np.linalg.norm(fine - quad, axis=1) < 0.5 * bit_px):
+            quad = fine
+        ids.extend(4 * k + np.arange(4))
+        uv.append(quad)
+    if not ids:
+        return None
+    ids = np.asarray(ids)
+    uv = np.concatenate(uv).astype(float)
+    # A marker id seen twice (a reflection, another board) is ambiguous: drop both.
+    uniq, count = np.unique(ids, return_counts=True)
+    notes = []
+    if (count > 1).any():
+        bad = np.isin(ids, uniq[count > 1])
+        notes.append(f"dropped markers seen twice: {sorted({int(i) // 4 + target.first_id for i in ids[bad]})}")
+        ids, uv = ids[~bad], uv[~bad]
+    order = np.argsort(ids)
+    return ids[order], uv[order], "aruco", notes
+
+
+def detect_target(image, target: Target, *, name: str = "image", blur_limit: float = BLUR_LIMIT_PX):
+    """The points of ``target`` in ``image``; ``None`` when the target is not found at all.
+
+    Parameters
+    ----------
+    image : array_like, shape (H, W) or (H, W, 3)
+        Grey or BGR image (uint8, or float 0..255).
+    target : ChessboardTarget, CharucoTarget or ArucoGridTarget
+    name : str
+        The view's name (the image file) used in messages.
+    blur_limit : float
+        Edge blur [px] above which the view is named ``blurred``.
+
+    Returns
+    -------
+    TargetDetection or None
+        Points sorted by id. Chessboard: through :func:`detect_checkerboard`
+        (whole board, sub-pixel refined; corners whose refinement wandered off
+        are dropped and noted). ChArUco: ``cv2.aruco.CharucoDetector`` (any
+        subset of corners). Grid: ``cv2.aruco.ArucoDetector`` with sub-pixel
+        corner refinement and ``refineDetectedMarkers`` (four corners per
+        marker). A detection with ``issues`` is returned, not dropped: the
+        caller names it.
+    """
+    if not isinstance(target, _TARGETS):
+        raise InputError(f"target must be a ChessboardTarget, CharucoTarget or ArucoGridTarget, got {type(target).__name__}")
+    img = _grey(image)
+    if target.kind == "chessboard":
+        try:
+            found = _detect_chessboard(img, target)
+        except DetectionError:
+            found = None
+    elif target.kind == "charuco":
+        found = _detect_charuco(img, target)
+    else:
+        found = _detect_grid(img, target)
+    if found is None:
+        return None
+    ids, uv, detector, notes = found
+    det = TargetDetection(
+        name, target.object_points(ids), uv, ids, (img.shape[1], img.shape[0]), detector=detector, notes=notes
+    )
+    _quality(det, img, target, blur_limit)
+    return det
+
+
+@dataclass(eq=False)
+class DetectionSet:
+    """Detections over a set of images.
+
+    ``detections``: one per image in which the target was found (usable or
+    not); ``missing``: names of images without it; ``image_size``: (width,
+    height) shared by all; ``notes``: set-level findings (e.g. a chessboard
+    whose rows/cols look transposed).
+    """
+
+    detections: list
+    missing: list
+    image_size: tuple[int, int]
+    notes: list = field(default_factory=list)
+
+    @property
+    def views(self) -> list:
+        """The usable detections (``TargetView``-compatible)."""
+        return [d for d in self.detections if d.usable]
+
+    @property
+    def rejected(self) -> dict:
+        """``{name: reason}`` of every image not used (target missing or view unusable)."""
+        out = {n: "target not found" for n in self.missing}
+        out.update({d.name: d.reason() for d in self.detections if not d.usable})
+        return out
+
+
+def _mark_duplicates(dets: list, limit: float) -> None:
+    kept = []
+    for d in dets:
+        if not d.usable:
+            continue
+        for k in kept:
+            common, ia, ib = np.intersect1d(d.ids, k.ids, return_indices=True)
+            if common.size >= 0.8 * max(d.n_points, k.n_points):
+                rms = float(np.sqrt(np.mean(np.sum((d.image_points[ia] - k.image_points[ib]) ** 2, axis=1))))
+                if rms < limit:
+                    d.issues.append(f"duplicate: same corners as {k.name} (RMS {rms:.2f} px < {limit:g} px)")
+                    break
+        else:
+            kept.append(d)
+
+
+def _x_runs_down(d: TargetDetection, target: ChessboardTarget) -> bool:
+    """True when the board's x axis (along a row) runs more vertically than horizontally in the image."""
+    g = np.full((target.n_points, 2), np.nan)
+    g[d.ids] = d.image_points
+    g = g.reshape(target.rows, target.cols, 2)
+    vx = np.nanmean(g[:, -1] - g[:, 0], axis=0)
+    return bool(abs(vx[1]) > abs(vx[0]))
+
+
+def _chessboard_alternatives(target: ChessboardTarget):
+    r, c, s = target.rows, target.cols, target.square
+    yield (r - 1, c - 1), "rows/cols count squares, not inner corners"
+    yield (r + 1, c + 1), "rows/cols count one fewer than the inner corners"
+    yield (r - 1, c), "rows counts squares, not inner corners"
+    yield (r, c - 1), "cols counts squares, not inner corners"
+
+
+def _diagnose_not_found(images, names, target) -> str:
+    """When no image shows the target: try the likely slips on the first images and name the one that fits."""
+    if target.kind != "chessboard":
+        return ""
+    for img, name in list(zip(images, names))[:3]:
+        for (r, c), why in _chessboard_alternatives(target):
+            if r < 3 or c < 3:
+                continue
+            try:
+                detect_checkerboard(img, Checkerboard(r, c, target.square), method="classic", refine=False)
+            except DetectionError:
+                continue
+            return (
+                f"; {name} shows a {r}x{c} chessboard (inner corners) where the target says "
+                f"{target.rows}x{target.cols}: {why}?"
+            )
+    return ""
+
+
+def detect_targets(
+    images,
+    target: Target,
+    *,
+    names=None,
+    blur_limit: float = BLUR_LIMIT_PX,
+    duplicate_limit: float = DUPLICATE_LIMIT_PX,
+    progress_desc: str | None = None,
+) -> DetectionSet:
+    """Detect ``target`` in every image and judge the views as a set.
+
+    ``images``: iterable of arrays (or of ``(name, array)`` when ``names`` is
+    None and items are pairs). Images must all have the size of the first:
+    another size raises :class:`InconsistentDataError` naming the file.
+    Duplicates (>= 80 % of the points in common within ``duplicate_limit``
+    px RMS of an earlier usable view) are named. When the target is found
+    in no image, raises :class:`DetectionError`; for a chessboard it tries
+    the likely slips (squares counted instead of inner corners) and names
+    the one the images show. A chessboard found with its rows running down
+    the image in most views gets a note that rows/cols look transposed
+    (harmless for calibration: the board frame is turned by 90 degrees).
+    """
+    from robocal.progress import progress
+
+    images = list(images)
+    if names is None:
+        if images and all(isinstance(i, tuple) and len(i) == 2 for i in images):
+            names, images = [str(n) for n, _ in images], [i for _, i in images]
+        else:
+            names = [f"image {k}" for k in range(len(images))]
+    names = [str(n) for n in names]
+    if len(names) != len(images):
+        raise InputError(f"names must have one entry per image ({len(images)}), got {len(names)}")
+    if not images:
+        raise InputError("no images given")
+    size = None
+    dets, missing = [], []
+    for img, name in progress(list(zip(images, names)), desc=progress_desc or "detect", total=len(images)):
+        arr = np.asarray(img)
+        if arr.ndim < 2:
+            raise InputError(f"image must be 2-D (H, W) or (H, W, 3), got shape {arr.shape}", source=name)
+        here = (int(arr.shape[1]), int(arr.shape[0]))
+        if size is None:
+            size, first = here, name
+        elif here != size:
+            raise InconsistentDataError(
+                f"image size {here[0]}x{here[1]} differs from {size[0]}x{size[1]} of {first} "
+                "(one camera, one image size)",
+                source=name,
+            )
+        d = detect_target(arr, target, name=name, blur_limit=blur_limit)
+        (missing.append(name) if d is None else dets.append(d))
+    if not dets:
+        hint = _diagnose_not_found(images, names, target)
+        raise DetectionError(f"no {target.describe()} found in any of the {len(images)} images{hint}")
+    _mark_duplicates(dets, duplicate_limit)
+    out = DetectionSet(dets, missing, size)
+    if target.kind == "chessboard" and target.rows != target.cols:
+        down = [d for d in dets if d.usable and _x_runs_down(d, target)]
+        good = [d for d in dets if d.usable]
+        if good and len(down) > len(good) / 2:
+            out.notes.append(
+                f"transposed: the target says {target.rows} rows x {target.cols} cols of inner corners, but in "
+                f"{len(down)} of {len(good)} views the rows run down the image (the images show "
+                f"{target.cols} rows x {target.rows} cols); rows and cols look swapped in the target file "
+                "(calibration is unaffected: the board frame is turned by 90 degrees)"
+            )
+    return out
+
+
+# -- rendering ---------------------------------------------------------------------------------------------
+
+
+def visible_target_points(camera: CameraModel, target: Target, T_cam_board, *, margin: float = 0.0):
+    """Ids and true image points [px] of the target's points in front of ``camera`` and inside its image.
+
+    Returns ``(ids (N,), uv (N, 2))``, the truth a detection of a rendered view is compared with.
+    """
+    T = np.asarray(T_cam_board, dtype=float)
+    p = target.object_points() @ T[:3, :3].T + T[:3, 3]
+    ids = np.flatnonzero(p[:, 2] > 1e-9)
+    uv = camera.project(p[ids], check=False)
+    ok = camera.in_image(uv, margin=margin)
+    return ids[ok], uv[ok]
+
+
+def render_target_view(
+    camera: CameraModel,
+    target: Target,
+    T_cam_board,
+    rng: np.random.Generator | None = None,
+    *,
+    blur_sigma: float = 0.0,
+    noise_sigma: float = 0.0,
+    vignetting: float = 0.0,
+    background: float = 128.0,
+    black: float = 20.0,
+    white: float = 235.0,
+    supersample: int | None = None,
+) -> np.ndarray:
+    """Image of ``target`` at pose ``T_cam_board`` (board frame -> camera frame [m]), uint8 (height, width).
+
+    Drawn by :func:`render_planar_target` (exact under distortion): a
+    chessboard analytically, ChArUco and grid boards as their
+    ``cv2.aruco`` ``generateImage`` texture (area-sampled, white quiet zone).
+    Then ``vignetting`` (relative brightness loss at the image corners,
+    gain ``1 - vignetting * (r / r_corner)^2`` about the principal point),
+    Gaussian blur ``blur_sigma`` [px] and noise ``noise_sigma`` [grey levels]
+    drawn from ``rng`` (required when ``noise_sigma > 0``).
+    """
+    if not isinstance(target, _TARGETS):
+        raise InputError(f"target must be a ChessboardTarget, CharucoTarget or ArucoGridTarget, got {type(target).__name__}")
+    v = float(vignetting)
+    if not 0.0 <= v < 1.0:
+        raise InputError(f"vignetting must be in [0, 1), got {vignetting!r}")
+    img = render_planar_target(
+        camera, T_cam_board, target.pattern(), supersample=supersample, background=background, black=black, white=white
+    )
+    img = img.astype(np.float64)
+    if v > 0:
+        u, w = np.meshgrid(np.arange(camera.width) - camera.cx, np.arange(camera.height) - camera.cy)
+        corner = max(np.hypot(camera.cx, camera.cy), np.hypot(camera.width - camera.cx, camera.height - camera.cy))
+        img *= 1.0 - v * (u**2 + w**2) / corner**2
+    return add_blur_and_noise(img, blur_sigma=blur_sigma, noise_sigma=noise_sigma, rng=rng)
