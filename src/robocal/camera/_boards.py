@@ -33,7 +33,7 @@ from typing import Union
 import cv2
 import numpy as np
 
-from robocal.camera._detect import _grey, detect_checkerboard
+from robocal.camera._detect import REFINE_MAX_HALF_WINDOW, REFINE_SMOOTHING_PX, _grey, detect_checkerboard
 from robocal.camera._model import CameraModel
 from robocal.camera._render import add_blur_and_noise, render_planar_target
 from robocal.camera._targets import Checkerboard, PlaneTexture
@@ -506,7 +506,21 @@ def _detect_charuco(img, target: CharucoTarget):
         return None
     ids = ids.reshape(-1).astype(int)
     order = np.argsort(ids)
-    return ids[order], corners.reshape(-1, 2)[order].astype(float), "charuco", []
+    ids, uv = ids[order], corners.reshape(-1, 2)[order].astype(float)
+    # Re-refine as detect_checkerboard does (cornerSubPix on a 1 px Gaussian-smoothed image:
+    # unbiased on sharp saddles), with the half-window inside the white gap between a corner and
+    # the nearest marker edge so the markers do not pull the corner (measured on a close partial
+    # view: 0.17 px RMS with OpenCV's refinement alone).
+    gap = 0.5 * (target.square - target.marker) / target.square * _spacing(uv) * (1.0 if len(uv) > 1 else np.nan)
+    if np.isfinite(gap) and gap >= 3:
+        half = int(min(np.floor(0.8 * gap), REFINE_MAX_HALF_WINDOW))
+        smooth = cv2.GaussianBlur(img.astype(np.float32), (0, 0), REFINE_SMOOTHING_PX)
+        crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 100, 1e-5)
+        fine = cv2.cornerSubPix(smooth, uv.astype(np.float32).reshape(-1, 1, 2), (half, half), (-1, -1), crit)
+        fine = fine.reshape(-1, 2).astype(float)
+        moved = np.linalg.norm(fine - uv, axis=1) < 0.5 * gap
+        uv = np.where(moved[:, None], fine, uv)
+    return ids, uv, "charuco", []
 
 
 def _refine_marker_edges(img: np.ndarray, quad: np.ndarray, bit_px: float) -> np.ndarray | None:
