@@ -121,3 +121,54 @@ def test_transposed_rows_and_cols_are_said():
     assert s.notes[0].startswith("transposed: the target says 6 rows x 7 cols") and "7 rows x 6 cols" in s.notes[0]
     upright = detect_targets([("u.png", render_target_view(CAM, target, pose(target)))], target)
     assert upright.notes == []
+
+
+# -- a target file that does not describe the printed board is named, with the slip that explains it --
+
+
+@pytest.fixture(scope="module")
+def grid_images():
+    g = TARGETS["aruco_grid"]  # 3 x 4 markers, ids 0..11
+    return [(f"g{k}.png", render_target_view(CAM, g, pose(g, angles=a))) for k, a in enumerate([(15, -10, 5), (-20, 10, 40)])]
+
+
+def test_right_grid_layout_passes(grid_images):
+    s = detect_targets(grid_images, TARGETS["aruco_grid"])
+    assert len(s.views) == 2 and not s.notes
+
+
+@pytest.mark.parametrize(
+    "wrong, why",
+    [
+        (ArucoGridTarget(4, 3, 0.04, 0.01), "rows and cols are swapped in the target file"),
+        (ArucoGridTarget(3, 4, 0.04, 0.01, first_id=2), "the lowest marker id seen is 0: set first_id: 0"),
+        (ArucoGridTarget(3, 4, 0.04, 0.02), None),  # separation 20 mm where the print has 10 mm
+    ],
+)
+def test_wrong_grid_layout_is_named(grid_images, wrong, why):
+    s = detect_targets(grid_images, wrong)
+    assert not s.views  # every view refused: its object points would be wrong
+    assert all(r.startswith("layout: ") for r in s.rejected.values())
+    assert len(s.notes) == 1 and s.notes[0].startswith("layout: 2 of 2 views do not fit")
+    if why:
+        assert s.notes[0].endswith(why + "?")
+
+
+def test_transposed_charuco_is_named():
+    t = TARGETS["charuco"]  # 6 x 8 squares
+    img = render_target_view(CAM, t, pose(t))
+    with pytest.raises(DetectionError, match=r"c.png fits a 6x8 charuco .*: rows and cols are swapped in the target file"):
+        detect_targets([("c.png", img)], CharucoTarget(8, 6, 0.03, 0.022))
+
+
+def test_vignetting_darkens_the_corners_only():
+    g = TARGETS["chessboard"]
+    far = np.eye(4)
+    far[:3, 3] = [5.0, 5.0, 1.0]  # board out of view: a uniform background
+    flat = render_target_view(CAM, g, far, background=200.0).astype(float)
+    vig = render_target_view(CAM, g, far, background=200.0, vignetting=0.4).astype(float)
+    assert np.all(flat == 200.0)
+    cy, cx = int(round(CAM.cy)), int(round(CAM.cx))
+    assert vig[cy, cx] == 200.0
+    # the farthest corner from the principal point loses 40 % (uint8 rounding: 1 grey level)
+    assert vig[-1, 0] == pytest.approx(200.0 * 0.6, abs=1.0)
