@@ -1,0 +1,554 @@
+"""Intrinsic calibration: one joint least-squares problem over the intrinsics and every view's pose.
+
+The measurement model is OpenCV's (``cv2.projectPoints``): a planar target's
+corners ``P_j`` (target frame, metres) seen in view ``i`` at pose
+``T_cam_obj_i = (R(r_i), t_i)`` land at
+
+.. math::
+
+    q_{ij} = \\pi(K, d;\\; R(r_i) P_j + t_i) + e_{ij}, \\qquad e_{ij} \\sim N(0, \\sigma^2 I_2)
+
+with ``pi`` the pinhole + Brown-Conrady projection of
+:class:`~robocal.camera.CameraModel`. The estimate minimises
+``sum ||q - pi||^2`` over ``(fx, fy, cx, cy, k1, k2, p1, p2, k3)`` and every
+``(r_i, t_i)`` (Zhang, "A flexible new technique for camera calibration",
+IEEE PAMI 22(11), 2000, sec. 3.3), started from ``cv2.calibrateCamera`` on
+the same corners. Each view's residuals depend only on the intrinsics and
+its own pose (one residual term per view), so the Jacobian is block sparse;
+its analytic derivatives are OpenCV's (``cv2.projectPoints``' ``jacobian``).
+The covariance, outliers and identifiability are those of
+:func:`robocal.estimation.solve`; corner outliers are removed one at a
+time and the problem refitted.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from robocal.camera._model import CameraModel
+from robocal.diagnostics import Diagnostic
+from robocal.errors import InputError, NotEnoughDataError
+from robocal.validation import check_array
+
+__all__ = [
+    "TargetView",
+    "IntrinsicCalibration",
+    "calibrate_intrinsics",
+    "projection_uncertainty",
+    "ProjectionUncertainty",
+    "coverage",
+    "simulate_target_views",
+    "INTRINSIC_MODELS",
+    "MIN_CORNERS_PER_VIEW",
+    "MIN_VIEWS",
+    "CORRELATION_LIMIT",
+]
+
+#: Models :func:`calibrate_intrinsics` fits, with the intrinsic labels each estimates (OpenCV order).
+INTRINSIC_MODELS = {
+    "opencv4": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"),
+    "opencv5": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"),
+}
+#: A view needs this many corners: 6 pose parameters plus a share of the intrinsics from 2 residuals per corner.
+MIN_CORNERS_PER_VIEW = 6
+#: Fewer usable views than this cannot separate focal length from board distance (Zhang 2000, sec. 3.1).
+MIN_VIEWS = 3
+#: Intrinsics correlated beyond this are named ``weakly_determined`` (one is nearly a function of the other).
+CORRELATION_LIMIT = 0.99
+#: Beyond this many free parameters (~100 views) the joint problem is solved with a sparse Jacobian.
+SPARSE_ABOVE_PARAMS = 620
+_DIST_LABELS = ("k1", "k2", "p1", "p2", "k3")
+_ALL_LABELS = ("fx", "fy", "cx", "cy", *_DIST_LABELS)
+
+
+@dataclass(frozen=True, eq=False)
+class TargetView:
+    """The corners of a calibration target found in one image.
+
+    Attributes
+    ----------
+    name : str
+        The view's name (usually the image file), used in every message.
+    object_points : ndarray, shape (N, 3)
+        Corners in the target frame [m] (a planar target has ``z = 0``).
+    image_points : ndarray, shape (N, 2)
+        Where they were detected [px] (OpenCV pixel-centre convention).
+    ids : ndarray of int, shape (N,)
+        Corner ids on the target (default ``0..N-1``), used to name outliers.
+    """
+
+    name: str
+    object_points: np.ndarray
+    image_points: np.ndarray
+    ids: np.ndarray | None = None
+
+    def __post_init__(self):
+        p = check_array(self.object_points, f"view '{self.name}': object_points", shape=(None, 3))
+        q = check_array(self.image_points, f"view '{self.name}': image_points", shape=(None, 2))
+        if p.shape[0] != q.shape[0]:
+            raise InputError(f"view '{self.name}': {p.shape[0]} object points but {q.shape[0]} image points")
+        ids = np.arange(p.shape[0]) if self.ids is None else np.asarray(self.ids).reshape(-1)
+        if ids.shape[0] != p.shape[0] or not np.issubdtype(ids.dtype, np.integer):
+            raise InputError(f"view '{self.name}': ids must be {p.shape[0]} integers, got {ids.shape[0]} of "
+                             f"dtype {ids.dtype}")
+        for name, v in (("object_points", p), ("image_points", q), ("ids", ids.astype(int))):
+            v = np.array(v, dtype=float if name != "ids" else int)
+            v.flags.writeable = False
+            object.__setattr__(self, name, v)
+        object.__setattr__(self, "name", str(self.name))
+
+    def __len__(self) -> int:
+        return self.object_points.shape[0]
+
+    def subset(self, keep) -> "TargetView":
+        """The view with only the corners selected by ``keep`` (mask or indices)."""
+        return TargetView(self.name, self.object_points[keep], self.image_points[keep], self.ids[keep])
+
+
+@dataclass(eq=False)
+class IntrinsicCalibration:
+    """Result of :func:`calibrate_intrinsics`.
+
+    Attributes
+    ----------
+    camera : CameraModel
+        The estimate.
+    model : str
+        Key of :data:`INTRINSIC_MODELS`.
+    labels : tuple of str
+        ``fx, fy, cx, cy, k1, k2, p1, p2, k3``: the order of ``cov``.
+    values : ndarray, shape (9,)
+    cov : ndarray, shape (9, 9)
+        Covariance of the intrinsics [px^2, px, 1] (rows/columns of fixed
+        terms zero, NaN for unidentifiable ones), scaled by the residual
+        variance (the pixel noise is estimated from the fit).
+    std : dict of str to float or None
+        Of every label (0 for fixed terms, None where not identifiable).
+    free : tuple of str
+        The labels estimated (the rest held at their start value).
+    poses : dict of str to ndarray (4, 4)
+        ``T_cam_obj`` of every used view, by view name.
+    pose_std : dict of str to ndarray (6,)
+        Std of ``(rx, ry, rz)`` [rad] (rotation vector) and ``(tx, ty, tz)`` [m].
+    views : list of TargetView
+        The views used, with the corners used (outliers removed).
+    residuals : dict of str to ndarray (N, 2)
+        ``observed - projected`` [px] of the corners used, by view.
+    view_rms : dict of str to float
+        RMS [px] of each used view's residual components.
+    rms : float
+        RMS [px] of every used residual component.
+    sigma_px : float
+        Pixel noise estimated from the fit, ``sqrt(sum r^2 / (m - n))``.
+    opencv_rms : float
+        RMS [px] of ``cv2.calibrateCamera``'s start on the same corners
+        (``sqrt(sum r^2 / N)`` of corners, OpenCV's definition).
+    outliers : list of (str, int)
+        ``(view name, corner id)`` removed, in order of removal.
+    dropped : list of str
+        Views skipped (too few usable corners).
+    warnings : list of Diagnostic
+    lsq : LSQResult
+        The final solve (cost history, Jacobian analysis, ...).
+    """
+
+    camera: CameraModel
+    model: str
+    labels: tuple
+    values: np.ndarray
+    cov: np.ndarray
+    std: dict
+    free: tuple
+    poses: dict
+    pose_std: dict
+    views: list
+    residuals: dict
+    view_rms: dict
+    rms: float
+    sigma_px: float
+    opencv_rms: float
+    outliers: list = field(default_factory=list)
+    dropped: list = field(default_factory=list)
+    warnings: list = field(default_factory=list)
+    lsq: object = None
+
+    @property
+    def std_array(self) -> np.ndarray:
+        """Std of ``values`` in ``labels`` order (NaN where not identifiable)."""
+        return np.array([np.nan if self.std[k] is None else self.std[k] for k in self.labels])
+
+    def warning_codes(self) -> list[str]:
+        return [w.code for w in self.warnings]
+
+
+def _check_views(views) -> list[TargetView]:
+    if not isinstance(views, (list, tuple)) or not views:
+        raise InputError(f"views must be a non-empty list of TargetView, got {type(views).__name__}")
+    out = []
+    for i, v in enumerate(views):
+        if not isinstance(v, TargetView):
+            raise InputError(f"views[{i}] must be a TargetView, got {type(v).__name__}")
+        out.append(v)
+    names = [v.name for v in out]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise InputError(f"view names must be unique (they name outliers and poses), repeated: {dup}")
+    return out
+
+
+def _rodrigues(rvec) -> np.ndarray:
+    import cv2
+
+    return cv2.Rodrigues(np.asarray(rvec, dtype=float).reshape(3, 1))[0]
+
+
+def _project_view(intr, pose, obj, *, jacobian: bool = False):
+    """``cv2.projectPoints`` of one view; ``intr`` the 9 intrinsics, ``pose`` (rvec, tvec)."""
+    import cv2
+
+    K = np.array([[intr[0], 0.0, intr[2]], [0.0, intr[1], intr[3]], [0.0, 0.0, 1.0]])
+    uv, J = cv2.projectPoints(obj.reshape(-1, 1, 3), pose[:3].copy(), pose[3:].copy(), K, intr[4:9].copy())
+    uv = uv.reshape(-1, 2)
+    if not jacobian:
+        return uv
+    # cv2's columns: rvec(3), tvec(3), (fx, fy), (cx, cy), dist(5); rows interleaved u0, v0, u1, ...
+    return uv, J[:, 6:15], J[:, 0:6]
+
+
+def _fit(views, x0, poses0, fixed, image_size, *, outlier_sigma):
+    from robocal.estimation import Problem, solve
+
+    prob = Problem()
+    prob.add_block("intrinsics", x0, fixed=fixed, labels=list(_ALL_LABELS),
+                   unit=["px"] * 4 + [None] * 5)
+    for v, p0 in zip(views, poses0):
+        prob.add_block(f"pose:{v.name}", p0,
+                       labels=[f"{v.name}.{k}" for k in ("rx", "ry", "rz", "tx", "ty", "tz")],
+                       unit=["rad"] * 3 + ["m"] * 3)
+
+        def fun(params, v=v):
+            return v.image_points - _project_view(params["intrinsics"], params[f"pose:{v.name}"], v.object_points)
+
+        def jac(params, v=v):
+            _, Ji, Jp = _project_view(params["intrinsics"], params[f"pose:{v.name}"], v.object_points,
+                                      jacobian=True)
+            return {"intrinsics": -Ji, f"pose:{v.name}": -Jp}
+
+        prob.add_residuals(fun, name=v.name, blocks=["intrinsics", f"pose:{v.name}"], jacobian=jac,
+                           residual_dim=2)
+    # x_scale='jac': pixels, radians and metres differ by orders of magnitude; let the Jacobian balance them.
+    # weak_vif: the principal point trades against every view's rotation (variance inflation 1e4-1e5 on a
+    # good set of 15 views), so the generic 1e4 would fire on every calibration; _overparameterisation
+    # names what matters for a camera model (std > value, correlation > CORRELATION_LIMIT).
+    # sparse: the block structure is declared above either way; SciPy's sparse path (LSMR, inexact steps)
+    # crawls near the optimum at tight tolerances (measured: 9900 evaluations after one corner was
+    # removed), so the exact dense solver is used up to SPARSE_ABOVE_PARAMS (J: 2 N x n, ~50 MB at 100 views).
+    n = x0.size + 6 * len(views)
+    return prob, solve(prob, method="trf", x_scale="jac", outlier_sigma=outlier_sigma, ftol=1e-12, xtol=1e-12,
+                       gtol=1e-12, weak_vif=1e7, sparse=n > SPARSE_ABOVE_PARAMS, max_nfev=200)
+
+
+def _opencv_start(views, image_size, model, fixed):
+    import cv2
+
+    flags = 0
+    fix_flags = {"k1": cv2.CALIB_FIX_K1, "k2": cv2.CALIB_FIX_K2, "k3": cv2.CALIB_FIX_K3}
+    for lab, fl in fix_flags.items():
+        if fixed[_ALL_LABELS.index(lab)]:
+            flags |= fl
+    if fixed[_ALL_LABELS.index("p1")] and fixed[_ALL_LABELS.index("p2")]:
+        flags |= cv2.CALIB_ZERO_TANGENT_DIST
+    obj = [v.object_points.astype(np.float32) for v in views]
+    img = [v.image_points.astype(np.float32) for v in views]
+    try:
+        rms, K, dist, rvecs, tvecs = cv2.calibrateCamera(obj, img, tuple(int(s) for s in image_size), None, None,
+                                                         flags=flags)
+    except cv2.error as exc:
+        raise NotEnoughDataError(f"cv2.calibrateCamera could not initialise the calibration from "
+                                 f"{len(views)} views: {str(exc).strip().splitlines()[-1]}") from None
+    d = np.zeros(5)
+    dist = np.asarray(dist, dtype=float).reshape(-1)
+    d[:min(5, dist.size)] = dist[:5]
+    x0 = np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2], *d])
+    x0[fixed] = 0.0  # only distortion terms can be fixed: they start (and stay) at 0
+    poses = [np.concatenate([np.ravel(r), np.ravel(t)]) for r, t in zip(rvecs, tvecs)]
+    return float(rms), x0, poses
+
+
+def calibrate_intrinsics(views, image_size, *, model: str = "opencv5", fix=(), max_outliers: int | None = None,
+                         outlier_sigma: float | None = None,
+                         min_corners: int = MIN_CORNERS_PER_VIEW) -> IntrinsicCalibration:
+    """Estimate a camera's intrinsics and distortion from target views (joint least squares).
+
+    Parameters
+    ----------
+    views : list of TargetView
+        Corners per image (target frame [m] and pixels [px]); names unique.
+    image_size : (int, int)
+        ``(width, height)`` [px], OpenCV's ``imageSize`` order.
+    model : str
+        ``'opencv5'`` (``k1, k2, p1, p2, k3``, default) or ``'opencv4'``
+        (``k3 = 0``); see :data:`INTRINSIC_MODELS`.
+    fix : iterable of str
+        Distortion terms held at zero (any of ``k1, k2, p1, p2, k3``).
+    max_outliers : int, optional
+        Corners that may be removed (default: 5 % of all corners).
+    outlier_sigma : float, optional
+        Threshold [sigma] beyond which the worst corner is removed; default
+        :func:`robocal.estimation.outlier_sigma` of the number of corners
+        (Bonferroni: 1 % chance of removing any corner of a clean data set).
+    min_corners : int
+        Views with fewer usable corners are skipped (named in ``dropped``).
+
+    Returns
+    -------
+    IntrinsicCalibration
+        Warnings: ``dropped`` (views skipped), ``outliers`` (corners removed,
+        by view and corner id), ``weakly_determined`` (a distortion term
+        whose std exceeds its magnitude, or two intrinsics correlated beyond
+        :data:`CORRELATION_LIMIT`: the model has more terms than the data
+        determine), and the solver's own (``rank_deficient``, ...).
+
+    Raises
+    ------
+    NotEnoughDataError
+        Fewer than :data:`MIN_VIEWS` usable views.
+    InputError
+        Unknown model or term, bad views.
+    """
+    from robocal.estimation import outlier_sigma as bonferroni
+
+    if model not in INTRINSIC_MODELS:
+        raise InputError(f"model must be one of {', '.join(INTRINSIC_MODELS)}, got {model!r}")
+    size = check_array(image_size, "image_size", shape=(2,))
+    if not np.all(size >= 1) or not np.all(size == np.round(size)):
+        raise InputError(f"image_size must be (width, height), integers >= 1 [px], got {size.tolist()}")
+    width, height = (int(s) for s in size)
+    fix = tuple(fix)
+    bad = [f for f in fix if f not in _DIST_LABELS]
+    if bad:
+        raise InputError(f"fix: unknown distortion terms {bad}; terms are {', '.join(_DIST_LABELS)}")
+    fixed = np.array([lab not in INTRINSIC_MODELS[model] or lab in fix for lab in _ALL_LABELS])
+    views = _check_views(views)
+    warnings: list[Diagnostic] = []
+
+    dropped = [v.name for v in views if len(v) < min_corners]
+    used = [v for v in views if len(v) >= min_corners]
+
+    def _need_views():
+        if len(used) < MIN_VIEWS:
+            raise NotEnoughDataError(f"{len(used)} usable views (with >= {min_corners} corners), at least "
+                                     f"{MIN_VIEWS} are needed; skipped: {dropped}")
+
+    _need_views()
+    cv_rms, x0, poses0 = _opencv_start(used, (width, height), model, fixed)
+    n_corners = sum(len(v) for v in used)
+    if max_outliers is None:
+        max_outliers = int(0.05 * n_corners)
+    thr_sigma = bonferroni(n_corners) if outlier_sigma is None else float(outlier_sigma)
+
+    outliers: list[tuple[str, int]] = []
+    prob, res = _fit(used, x0, poses0, fixed, (width, height), outlier_sigma=thr_sigma)
+    while res.outliers.size and len(outliers) < max_outliers:
+        worst = int(res.outliers[np.argmax(res.observation_scores[res.outliers])])
+        vname, k = res.locate_observation(worst)
+        vi = next(i for i, v in enumerate(used) if v.name == vname)
+        outliers.append((vname, int(used[vi].ids[k])))
+        keep = np.ones(len(used[vi]), bool)
+        keep[k] = False
+        used[vi] = used[vi].subset(keep)
+        x0 = res.params["intrinsics"]
+        poses0 = [res.params[f"pose:{v.name}"] for v in used]
+        if len(used[vi]) < min_corners:
+            dropped.append(vname)
+            del used[vi], poses0[vi]
+            _need_views()
+        prob, res = _fit(used, x0, poses0, fixed, (width, height), outlier_sigma=thr_sigma)
+
+    if dropped:
+        warnings.append(Diagnostic("dropped", f"{len(dropped)} view(s) skipped with fewer than {min_corners} "
+                                   f"usable corners: {', '.join(dropped)}", params=tuple(dropped)))
+    if outliers:
+        txt = ", ".join(f"{n}#{i}" for n, i in outliers)
+        warnings.append(Diagnostic("outliers", f"{len(outliers)} corner(s) removed beyond {thr_sigma:.2f} sigma "
+                                   f"(view#corner id): {txt}", params=tuple(sorted({n for n, _ in outliers}))))
+    # the solver's own warnings, less its outlier list: what was left is below max_outliers' budget or named above
+    warnings += [w for w in res.warnings if w.code != "outliers"]
+    if res.outliers.size:
+        names = [f"{res.locate_observation(int(i))[0]}#{i}" for i in res.outliers[:8]]
+        warnings.append(Diagnostic("outliers", f"{res.outliers.size} corner(s) still beyond {thr_sigma:.2f} sigma "
+                                   f"after removing max_outliers = {max_outliers}: {names}",
+                                   indices=tuple(int(i) for i in res.outliers)))
+
+    intr = np.asarray(res.params["intrinsics"], dtype=float)
+    free = tuple(lab for lab, f in zip(_ALL_LABELS, fixed) if not f)
+    idx = [res.free_labels.index(lab) for lab in free]
+    cov = np.zeros((9, 9))
+    sub = res.cov[np.ix_(idx, idx)]
+    fi = [i for i, f in enumerate(fixed) if not f]
+    cov[np.ix_(fi, fi)] = sub
+    std = {lab: (0.0 if fixed[i] else res.std[lab]) for i, lab in enumerate(_ALL_LABELS)}
+    warnings += _overparameterisation(free, intr, std, cov)
+
+    camera = CameraModel(intr[0], intr[1], intr[2], intr[3], intr[4:9], width, height)
+    poses, pose_std, residuals, view_rms = {}, {}, {}, {}
+    for v in used:
+        p = res.params[f"pose:{v.name}"]
+        T = np.eye(4)
+        T[:3, :3] = _rodrigues(p[:3])
+        T[:3, 3] = p[3:]
+        poses[v.name] = T
+        pose_std[v.name] = res.block_std(f"pose:{v.name}")
+        r = res.obs_residuals(v.name)
+        residuals[v.name] = r
+        view_rms[v.name] = float(np.sqrt(np.mean(r ** 2)))
+    all_r = np.concatenate([r.ravel() for r in residuals.values()])
+    return IntrinsicCalibration(
+        camera=camera, model=model, labels=_ALL_LABELS, values=intr, cov=cov, std=std, free=free, poses=poses,
+        pose_std=pose_std, views=used, residuals=residuals, view_rms=view_rms,
+        rms=float(np.sqrt(np.mean(all_r ** 2))), sigma_px=float(np.sqrt(res.residual_variance)),
+        opencv_rms=cv_rms, outliers=outliers, dropped=dropped, warnings=warnings, lsq=res)
+
+
+def _overparameterisation(free, values, std, cov) -> list:
+    out = []
+    weak = [lab for lab in free if lab in _DIST_LABELS and std[lab] is not None
+            and std[lab] > abs(values[_ALL_LABELS.index(lab)])]
+    if weak:
+        txt = ", ".join(f"{lab} = {values[_ALL_LABELS.index(lab)]:.3g} +- {std[lab]:.2g}" for lab in weak)
+        out.append(Diagnostic("weakly_determined", f"distortion term(s) with std above their magnitude: {txt}; "
+                              "the data do not determine them: fix them (fix=...) or use a smaller model",
+                              params=tuple(weak)))
+    d = np.sqrt(np.diag(cov))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(d, d)
+    pairs = []
+    for a in range(9):
+        for b in range(a + 1, 9):
+            if _ALL_LABELS[a] in free and _ALL_LABELS[b] in free and abs(corr[a, b]) > CORRELATION_LIMIT:
+                pairs.append((_ALL_LABELS[a], _ALL_LABELS[b], float(corr[a, b])))
+    if pairs:
+        txt = ", ".join(f"{a}/{b} {c:+.4f}" for a, b, c in pairs)
+        out.append(Diagnostic("weakly_determined", f"intrinsics correlated beyond {CORRELATION_LIMIT}: {txt}; the "
+                              "views do not separate them (tilt the board more, fill the corners of the image) "
+                              "or the model has more terms than the data determine",
+                              params=tuple(sorted({x for a, b, _ in pairs for x in (a, b)}))))
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class ProjectionUncertainty:
+    """Std [px] of where a ray lands, on a pixel grid (see :func:`projection_uncertainty`).
+
+    ``u`` (nu,), ``v`` (nv,): grid pixel coordinates; ``std`` (nv, nu): worst
+    direction std [px] (sqrt of the largest eigenvalue of the 2x2
+    covariance); ``cov`` (nv, nu, 2, 2) [px^2]. Draw with
+    ``plt.pcolormesh(u, v, std)`` or ``plt.contourf``.
+    """
+
+    u: np.ndarray
+    v: np.ndarray
+    std: np.ndarray
+    cov: np.ndarray
+
+
+def projection_uncertainty(calibration: IntrinsicCalibration, grid_step_px: float = 20.0) -> ProjectionUncertainty:
+    """mrcal-style map of the projection uncertainty over the image.
+
+    For each grid pixel ``q``, the ray ``v = pi^-1(q)`` of the estimated
+    camera is re-projected with the intrinsics' covariance ``C``:
+    ``Cov(q) = J C J^T``, ``J = d pi(v; theta) / d theta``. The ray is held
+    fixed in the camera frame, i.e. the point is at infinity (equivalently at
+    any distance: only the intrinsics vary, and a ray's projection does not
+    depend on the distance along it). Unlike mrcal (Kogan, mrcal docs,
+    "Projection uncertainty"), no compensating camera rotation is fitted
+    from the board poses, so where a shift of the principal point trades
+    against a rotation this map is conservative (larger). Grid points whose
+    ray cannot be found (outside the invertible region) are NaN.
+    """
+    import cv2
+
+    if not isinstance(calibration, IntrinsicCalibration):
+        raise InputError(f"calibration must be an IntrinsicCalibration, got {type(calibration).__name__}")
+    if not grid_step_px > 0:
+        raise InputError(f"grid_step_px must be > 0 [px], got {grid_step_px!r}")
+    cam = calibration.camera
+    u = np.arange(0.0, cam.width - 0.5, grid_step_px)
+    v = np.arange(0.0, cam.height - 0.5, grid_step_px)
+    uu, vv = np.meshgrid(u, v)
+    xy = cam.undistort_points(np.stack([uu, vv], axis=-1))
+    ok = np.isfinite(xy[..., 0])
+    rays = np.concatenate([xy[ok], np.ones((int(ok.sum()), 1))], axis=1)
+    _, J = cv2.projectPoints(rays.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), cam.K, np.asarray(cam.dist))
+    J = J[:, 6:15].reshape(-1, 2, 9)
+    C = np.nan_to_num(calibration.cov)  # unidentifiable terms contribute nothing (they are named in warnings)
+    cq = np.einsum("nij,jk,nlk->nil", J, C, J)
+    cov = np.full(uu.shape + (2, 2), np.nan)
+    cov[ok] = cq
+    std = np.full(uu.shape, np.nan)
+    std[ok] = np.sqrt(np.maximum(np.linalg.eigvalsh(cq)[:, -1], 0.0))
+    return ProjectionUncertainty(u, v, std, cov)
+
+
+def coverage(calibration_or_views, image_size=None, *, cell_px: float = 40.0):
+    """Where corners fell: counts per ``cell_px`` x ``cell_px`` cell of the image.
+
+    Accepts an :class:`IntrinsicCalibration` (its used corners) or a list of
+    :class:`TargetView` with ``image_size = (width, height)``. Returns
+    ``(u_edges, v_edges, counts)`` with ``counts`` shape (nv, nu), for
+    ``plt.pcolormesh(u_edges, v_edges, counts)``. Empty cells, mostly at the
+    image corners, are where the distortion is extrapolated.
+    """
+    if isinstance(calibration_or_views, IntrinsicCalibration):
+        views = calibration_or_views.views
+        image_size = calibration_or_views.camera.size
+    else:
+        views = _check_views(list(calibration_or_views))
+        if image_size is None:
+            raise InputError("coverage: image_size (width, height) is needed with a list of views")
+    w, h = image_size
+    ue = np.arange(-0.5, w - 0.5 + cell_px, cell_px)
+    ve = np.arange(-0.5, h - 0.5 + cell_px, cell_px)
+    q = np.concatenate([v.image_points for v in views]) if views else np.zeros((0, 2))
+    counts, _, _ = np.histogram2d(q[:, 1], q[:, 0], bins=[ve, ue])
+    return ue, ve, counts.astype(int)
+
+
+def simulate_target_views(camera: CameraModel, object_points, n_views: int, rng: np.random.Generator, *,
+                          noise_px: float = 0.0, distance=(0.35, 0.8), tilt_rad: float = 0.6,
+                          margin_px: float = 2.0) -> tuple[list, list]:
+    """Synthetic corners of a planar target seen in random poses, for tests and Monte Carlo.
+
+    The target's centre is placed on the ray of a uniformly drawn pixel at a
+    uniform distance in ``distance`` [m], tilted about its x and y axes by up
+    to ``tilt_rad`` and turned about z by up to ``tilt_rad / 2`` [rad]
+    (uniform). Corners outside the image (less ``margin_px``) are left out
+    (partial views); ``noise_px`` is the std of the isotropic Gaussian pixel
+    noise. Returns ``(views, poses)``: :class:`TargetView` named
+    ``view000, ...`` and the true ``T_cam_obj`` (4, 4) of each.
+    """
+    if not isinstance(rng, np.random.Generator):
+        raise InputError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+    obj = check_array(object_points, "object_points", shape=(None, 3))
+    centre = obj.mean(axis=0)
+    views, poses = [], []
+    while len(views) < n_views:
+        pix = rng.uniform([0.1 * camera.width, 0.1 * camera.height], [0.9 * camera.width, 0.9 * camera.height])
+        ray = np.append(camera.undistort_points(pix), 1.0)
+        c = ray / np.linalg.norm(ray) * rng.uniform(*distance)
+        rvec = rng.uniform(-1, 1, 3) * np.array([tilt_rad, tilt_rad, tilt_rad / 2])
+        R = _rodrigues(rvec)
+        T = np.eye(4)
+        T[:3, :3] = R
+        T[:3, 3] = c - R @ centre
+        uv = camera.project_points(obj, T, check=False)
+        ok = camera.in_image(uv, margin_px)
+        if ok.sum() < max(MIN_CORNERS_PER_VIEW, obj.shape[0] // 2):
+            continue
+        uv = uv + rng.normal(0.0, noise_px, uv.shape) if noise_px > 0 else uv
+        ids = np.flatnonzero(ok)
+        views.append(TargetView(f"view{len(views):03d}", obj[ok], uv[ok], ids))
+        poses.append(T)
+    return views, poses
