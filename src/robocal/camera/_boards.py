@@ -433,6 +433,12 @@ class TargetDetection:
         """One line: why the view is not used ("" when it is)."""
         return "; ".join(self.issues)
 
+    def to_view(self):
+        """This detection as the estimator's ``robocal.camera.TargetView`` (name, points, ids)."""
+        from robocal.camera._calibrate import TargetView
+
+        return TargetView(self.name, self.object_points, self.image_points, self.ids)
+
 
 def _edge_blur(img: np.ndarray, pts: np.ndarray, half: int) -> float:
     """Median over points of the edge blur [px] in a ``(2 half + 1)^2`` patch around each.
@@ -730,6 +736,10 @@ class DetectionSet:
     def views(self) -> list:
         """The usable detections (``TargetView``-compatible)."""
         return [d for d in self.detections if d.usable]
+
+    def target_views(self) -> list:
+        """The usable views as ``TargetView`` objects, for :func:`robocal.camera.calibrate_intrinsics`."""
+        return [d.to_view() for d in self.views]
 
     @property
     def rejected(self) -> dict:
