@@ -192,3 +192,22 @@ def test_detections_feed_the_estimator():
     got = cal.camera
     np.testing.assert_allclose([got.fx, got.fy, got.cx, got.cy], [CAM.fx, CAM.fy, CAM.cx, CAM.cy], atol=1.0)
     assert cal.rms < 0.05
+
+
+def test_image_files_read_one_by_one_and_a_damaged_one_named(tmp_path):
+    import cv2
+
+    from robocal.errors import FileFormatError
+
+    target = TARGETS["chessboard"]
+    paths = []
+    for k, a in enumerate([(10, 5, 0), (-15, 10, 20)]):
+        p = tmp_path / f"v{k}.png"
+        cv2.imwrite(str(p), render_target_view(CAM, target, pose(target, angles=a)))
+        paths.append(p)
+    s = detect_targets(paths, target)
+    assert [d.name for d in s.views] == [str(p) for p in paths]
+    bad = tmp_path / "cut.png"
+    bad.write_bytes(paths[0].read_bytes()[:200])
+    with pytest.raises(FileFormatError, match=r"cut.png"):
+        detect_targets([*paths, bad], target)
