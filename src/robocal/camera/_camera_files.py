@@ -105,11 +105,22 @@ def _check_size(doc, layout: str) -> None:
                     "images this camera was calibrated on; the camera matrix alone does not give it)")
 
 
+def _check_intrinsics_present(doc) -> None:
+    """A file with none of the intrinsics' spellings: name the field of the file's own layout, not ``fx``."""
+    if any(k in doc for k in ("camera_matrix", "K", "k", "fx", "fy", "cx", "cy")):
+        return  # present, or partly present: camera_from_document names the missing one
+    raise doc.error("camera_matrix", "is missing: expected camera_matrix (OpenCV, ROS camera_info), K / k "
+                    "(a CameraInfo message) or fx, fy, cx, cy (robocal); keys found: "
+                    f"{', '.join(map(str, list(doc.keys())[:8])) or 'none'}")
+
+
 def _check_distortion_model(doc) -> None:
     model = doc.raw("distortion_model", default=None)
     if model is None:
         return
-    name = str(model).lower()
+    if not isinstance(model, str):
+        raise doc.error("distortion_model", f"must be a name such as plumb_bob, got a {type(model).__name__}")
+    name = model.lower()
     if name in BROWN_CONRADY_MODELS or name in _OTHER_KNOWN_MODELS:
         return  # Brown-Conrady, or a model camera_from_document judges (fisheye: refused until it is implemented)
     raise doc.error("distortion_model", f"unknown distortion model {model!r}: expected one of ROS's "
@@ -132,6 +143,7 @@ def camera_from_mapping(data: dict, source: str = "<camera>", *, prefix: str = "
                               source=source)
     layout = _layout(data)
     doc = Document(dict(data), source, prefix, {**(units or {}), "pixel": "px"}, units_error)
+    _check_intrinsics_present(doc)
     _check_distortion_model(doc)
     _check_size(doc, layout)
     if layout == "ros2":

@@ -25,6 +25,9 @@ _YAML_DIRECTIVE = re.compile(r"^%YAML[: ]1\.[0-9]+[ \t]*$", re.M)
 # "!!opencv-matrix" is an unknown tag to a safe YAML loader; without it the
 # matrix is a plain {rows, cols, dt, data} mapping, which camera_from_document reads.
 _OPENCV_TAG = re.compile(r"!!opencv-(?:nd-)?matrix")
+# cv2.FileStorage spells NaN ".Nan", which YAML 1.1 does not know (.nan, .NaN, .NAN): a string to PyYAML,
+# refused as "a string" instead of as the NaN it is.
+_OPENCV_NAN = re.compile(r"(?<![\w.])\.Nan(?![\w.])")
 
 
 def _mapping_from_filestorage(path: Path) -> dict:
@@ -102,8 +105,11 @@ def read_camera_file(path) -> dict:
     if suffix == ".xml":
         return _mapping_from_filestorage(path)
     if suffix != ".json":
+        opencv = _YAML_DIRECTIVE.search(text) is not None or _OPENCV_TAG.search(text) is not None
         text = _YAML_DIRECTIVE.sub("", text, count=1)
         text = _OPENCV_TAG.sub("", text)
+        if opencv:
+            text = _OPENCV_NAN.sub(".nan", text)
     from robocal.io import parse_document
 
     data = parse_document(text, suffix=suffix, source=src).data
