@@ -50,6 +50,8 @@ __all__ = [
 INTRINSIC_MODELS = {
     "opencv4": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"),
     "opencv5": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"),
+    "opencv8": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"),
+    "opencv12": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4"),
 }
 #: A view needs this many corners: 6 pose parameters plus a share of the intrinsics from 2 residuals per corner.
 MIN_CORNERS_PER_VIEW = 6
@@ -59,8 +61,12 @@ MIN_VIEWS = 3
 CORRELATION_LIMIT = 0.99
 #: Beyond this many free parameters (~100 views) the joint problem is solved with a sparse Jacobian.
 SPARSE_ABOVE_PARAMS = 620
-_DIST_LABELS = ("k1", "k2", "p1", "p2", "k3")
-_ALL_LABELS = ("fx", "fy", "cx", "cy", *_DIST_LABELS)
+_DIST_LABELS = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4")
+
+
+def _model_labels(model: str) -> tuple:
+    """Labels of the intrinsics block: opencv4 is opencv5 with k3 held at 0 (a CameraModel has >= 5 terms)."""
+    return INTRINSIC_MODELS["opencv5" if model == "opencv4" else model]
 
 
 @dataclass(frozen=True, eq=False)
@@ -118,9 +124,10 @@ class IntrinsicCalibration:
     model : str
         Key of :data:`INTRINSIC_MODELS`.
     labels : tuple of str
-        ``fx, fy, cx, cy, k1, k2, p1, p2, k3``: the order of ``cov``.
-    values : ndarray, shape (9,)
-    cov : ndarray, shape (9, 9)
+        ``fx, fy, cx, cy, k1, k2, p1, p2, k3[, k4, k5, k6[, s1..s4]]``: the
+        order of ``values`` and ``cov`` (n = 9, 12 or 16 by model).
+    values : ndarray, shape (n,)
+    cov : ndarray, shape (n, n)
         Covariance of the intrinsics [px^2, px, 1] (rows/columns of fixed
         terms zero, NaN for unidentifiable ones), scaled by the residual
         variance (the pixel noise is estimated from the fit).
@@ -209,20 +216,19 @@ def _project_view(intr, pose, obj, *, jacobian: bool = False):
     import cv2
 
     K = np.array([[intr[0], 0.0, intr[2]], [0.0, intr[1], intr[3]], [0.0, 0.0, 1.0]])
-    uv, J = cv2.projectPoints(obj.reshape(-1, 1, 3), pose[:3].copy(), pose[3:].copy(), K, intr[4:9].copy())
+    uv, J = cv2.projectPoints(obj.reshape(-1, 1, 3), pose[:3].copy(), pose[3:].copy(), K, intr[4:].copy())
     uv = uv.reshape(-1, 2)
     if not jacobian:
         return uv
-    # cv2's columns: rvec(3), tvec(3), (fx, fy), (cx, cy), dist(5); rows interleaved u0, v0, u1, ...
-    return uv, J[:, 6:15], J[:, 0:6]
+    # cv2's columns: rvec(3), tvec(3), (fx, fy), (cx, cy), dist(n); rows interleaved u0, v0, u1, ...
+    return uv, J[:, 6:6 + intr.size], J[:, 0:6]
 
 
-def _fit(views, x0, poses0, fixed, image_size, *, outlier_sigma):
+def _fit(views, x0, poses0, fixed, labels, *, outlier_sigma):
     from robocal.estimation import Problem, solve
 
     prob = Problem()
-    prob.add_block("intrinsics", x0, fixed=fixed, labels=list(_ALL_LABELS),
-                   unit=["px"] * 4 + [None] * 5)
+    prob.add_block("intrinsics", x0, fixed=fixed, labels=list(labels), unit=["px"] * 4 + [None] * (len(labels) - 4))
     for v, p0 in zip(views, poses0):
         prob.add_block(f"pose:{v.name}", p0,
                        labels=[f"{v.name}.{k}" for k in ("rx", "ry", "rz", "tx", "ty", "tz")],
@@ -253,16 +259,19 @@ def _fit(views, x0, poses0, fixed, image_size, *, outlier_sigma):
                        max_nfev=200 if sparse else None)
 
 
-def _opencv_start(views, image_size, model, fixed):
+def _opencv_start(views, image_size, fixed, labels):
     import cv2
 
-    flags = 0
-    fix_flags = {"k1": cv2.CALIB_FIX_K1, "k2": cv2.CALIB_FIX_K2, "k3": cv2.CALIB_FIX_K3}
-    for lab, fl in fix_flags.items():
-        if fixed[_ALL_LABELS.index(lab)]:
-            flags |= fl
-    if fixed[_ALL_LABELS.index("p1")] and fixed[_ALL_LABELS.index("p2")]:
+    n = len(labels) - 4
+    flags = (cv2.CALIB_RATIONAL_MODEL if n >= 8 else 0) | (cv2.CALIB_THIN_PRISM_MODEL if n >= 12 else 0)
+    fixed = dict(zip(labels, fixed))
+    for lab in ("k1", "k2", "k3", "k4", "k5", "k6"):
+        if fixed.get(lab):
+            flags |= getattr(cv2, f"CALIB_FIX_{lab.upper()}")
+    if fixed["p1"] and fixed["p2"]:
         flags |= cv2.CALIB_ZERO_TANGENT_DIST
+    if n >= 12 and all(fixed[f"s{i}"] for i in range(1, 5)):
+        flags |= cv2.CALIB_FIX_S1_S2_S3_S4
     obj = [v.object_points.astype(np.float32) for v in views]
     img = [v.image_points.astype(np.float32) for v in views]
     try:
@@ -271,11 +280,11 @@ def _opencv_start(views, image_size, model, fixed):
     except cv2.error as exc:
         raise NotEnoughDataError(f"cv2.calibrateCamera could not initialise the calibration from "
                                  f"{len(views)} views: {str(exc).strip().splitlines()[-1]}") from None
-    d = np.zeros(5)
+    d = np.zeros(n)
     dist = np.asarray(dist, dtype=float).reshape(-1)
-    d[:min(5, dist.size)] = dist[:5]
+    d[:min(n, dist.size)] = dist[:n]
     x0 = np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2], *d])
-    x0[fixed] = 0.0  # only distortion terms can be fixed: they start (and stay) at 0
+    x0[list(fixed.values())] = 0.0  # only distortion terms can be fixed: they start (and stay) at 0
     poses = [np.concatenate([np.ravel(r), np.ravel(t)]) for r, t in zip(rvecs, tvecs)]
     return float(rms), x0, poses
 
@@ -292,10 +301,12 @@ def calibrate_intrinsics(views, image_size, *, model: str = "opencv5", fix=(), m
     image_size : (int, int)
         ``(width, height)`` [px], OpenCV's ``imageSize`` order.
     model : str
-        ``'opencv5'`` (``k1, k2, p1, p2, k3``, default) or ``'opencv4'``
-        (``k3 = 0``); see :data:`INTRINSIC_MODELS`.
+        ``'opencv5'`` (``k1, k2, p1, p2, k3``, default), ``'opencv4'``
+        (``k3 = 0``), ``'opencv8'`` (+ rational ``k4, k5, k6``) or
+        ``'opencv12'`` (+ thin prism ``s1..s4``); see :data:`INTRINSIC_MODELS`.
+        (OpenCV's 14-term tilted model is not implemented.)
     fix : iterable of str
-        Distortion terms held at zero (any of ``k1, k2, p1, p2, k3``).
+        Distortion terms of the model held at zero (e.g. ``("k3",)``).
     max_outliers : int, optional
         Corners that may be removed (default: 5 % of all corners).
     outlier_sigma : float, optional
@@ -330,10 +341,12 @@ def calibrate_intrinsics(views, image_size, *, model: str = "opencv5", fix=(), m
         raise InputError(f"image_size must be (width, height), integers >= 1 [px], got {size.tolist()}")
     width, height = (int(s) for s in size)
     fix = tuple(fix)
-    bad = [f for f in fix if f not in _DIST_LABELS]
+    labels = _model_labels(model)
+    bad = [f for f in fix if f not in labels[4:]]
     if bad:
-        raise InputError(f"fix: unknown distortion terms {bad}; terms are {', '.join(_DIST_LABELS)}")
-    fixed = np.array([lab not in INTRINSIC_MODELS[model] or lab in fix for lab in _ALL_LABELS])
+        raise InputError(f"fix: unknown distortion terms {bad}; the terms of model {model!r} are "
+                         f"{', '.join(labels[4:])}")
+    fixed = np.array([lab not in INTRINSIC_MODELS[model] or lab in fix for lab in labels])
     views = _check_views(views)
     warnings: list[Diagnostic] = []
 
@@ -346,14 +359,14 @@ def calibrate_intrinsics(views, image_size, *, model: str = "opencv5", fix=(), m
                                      f"{MIN_VIEWS} are needed; skipped: {dropped}")
 
     _need_views()
-    cv_rms, x0, poses0 = _opencv_start(used, (width, height), model, fixed)
+    cv_rms, x0, poses0 = _opencv_start(used, (width, height), fixed, labels)
     n_corners = sum(len(v) for v in used)
     if max_outliers is None:
         max_outliers = int(0.05 * n_corners)
     thr_sigma = bonferroni(n_corners) if outlier_sigma is None else float(outlier_sigma)
 
     outliers: list[tuple[str, int]] = []
-    prob, res = _fit(used, x0, poses0, fixed, (width, height), outlier_sigma=thr_sigma)
+    prob, res = _fit(used, x0, poses0, fixed, labels, outlier_sigma=thr_sigma)
     while res.outliers.size and len(outliers) < max_outliers:
         worst = int(res.outliers[np.argmax(res.observation_scores[res.outliers])])
         vname, k = res.locate_observation(worst)
@@ -368,7 +381,7 @@ def calibrate_intrinsics(views, image_size, *, model: str = "opencv5", fix=(), m
             dropped.append(vname)
             del used[vi], poses0[vi]
             _need_views()
-        prob, res = _fit(used, x0, poses0, fixed, (width, height), outlier_sigma=thr_sigma)
+        prob, res = _fit(used, x0, poses0, fixed, labels, outlier_sigma=thr_sigma)
 
     if dropped:
         warnings.append(Diagnostic("dropped", f"{len(dropped)} view(s) skipped with fewer than {min_corners} "
@@ -386,16 +399,16 @@ def calibrate_intrinsics(views, image_size, *, model: str = "opencv5", fix=(), m
                                    indices=tuple(int(i) for i in res.outliers)))
 
     intr = np.asarray(res.params["intrinsics"], dtype=float)
-    free = tuple(lab for lab, f in zip(_ALL_LABELS, fixed) if not f)
+    free = tuple(lab for lab, f in zip(labels, fixed) if not f)
     idx = [res.free_labels.index(lab) for lab in free]
-    cov = np.zeros((9, 9))
+    cov = np.zeros((len(labels), len(labels)))
     sub = res.cov[np.ix_(idx, idx)]
     fi = [i for i, f in enumerate(fixed) if not f]
     cov[np.ix_(fi, fi)] = sub
-    std = {lab: (0.0 if fixed[i] else res.std[lab]) for i, lab in enumerate(_ALL_LABELS)}
-    warnings += _overparameterisation(free, intr, std, cov)
+    std = {lab: (0.0 if fixed[i] else res.std[lab]) for i, lab in enumerate(labels)}
+    warnings += _overparameterisation(labels, free, intr, std, cov)
 
-    camera = CameraModel(intr[0], intr[1], intr[2], intr[3], intr[4:9], width, height)
+    camera = CameraModel(intr[0], intr[1], intr[2], intr[3], intr[4:], width, height)
     poses, pose_std, residuals, view_rms = {}, {}, {}, {}
     for v in used:
         p = res.params[f"pose:{v.name}"]
@@ -409,18 +422,18 @@ def calibrate_intrinsics(views, image_size, *, model: str = "opencv5", fix=(), m
         view_rms[v.name] = float(np.sqrt(np.mean(r ** 2)))
     all_r = np.concatenate([r.ravel() for r in residuals.values()])
     return IntrinsicCalibration(
-        camera=camera, model=model, labels=_ALL_LABELS, values=intr, cov=cov, std=std, free=free, poses=poses,
+        camera=camera, model=model, labels=labels, values=intr, cov=cov, std=std, free=free, poses=poses,
         pose_std=pose_std, views=used, residuals=residuals, view_rms=view_rms,
         rms=float(np.sqrt(np.mean(all_r ** 2))), sigma_px=float(np.sqrt(res.residual_variance)),
         opencv_rms=cv_rms, outliers=outliers, dropped=dropped, warnings=warnings, lsq=res)
 
 
-def _overparameterisation(free, values, std, cov) -> list:
+def _overparameterisation(labels, free, values, std, cov) -> list:
     out = []
     weak = [lab for lab in free if lab in _DIST_LABELS and std[lab] is not None
-            and std[lab] > abs(values[_ALL_LABELS.index(lab)])]
+            and std[lab] > abs(values[labels.index(lab)])]
     if weak:
-        txt = ", ".join(f"{lab} = {values[_ALL_LABELS.index(lab)]:.3g} +- {std[lab]:.2g}" for lab in weak)
+        txt = ", ".join(f"{lab} = {values[labels.index(lab)]:.3g} +- {std[lab]:.2g}" for lab in weak)
         out.append(Diagnostic("weakly_determined", f"distortion term(s) with std above their magnitude: {txt}; "
                               "the data do not determine them: fix them (fix=...) or use a smaller model",
                               params=tuple(weak)))
@@ -428,10 +441,10 @@ def _overparameterisation(free, values, std, cov) -> list:
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(d, d)
     pairs = []
-    for a in range(9):
-        for b in range(a + 1, 9):
-            if _ALL_LABELS[a] in free and _ALL_LABELS[b] in free and abs(corr[a, b]) > CORRELATION_LIMIT:
-                pairs.append((_ALL_LABELS[a], _ALL_LABELS[b], float(corr[a, b])))
+    for a in range(len(labels)):
+        for b in range(a + 1, len(labels)):
+            if labels[a] in free and labels[b] in free and abs(corr[a, b]) > CORRELATION_LIMIT:
+                pairs.append((labels[a], labels[b], float(corr[a, b])))
     if pairs:
         txt = ", ".join(f"{a}/{b} {c:+.4f}" for a, b, c in pairs)
         out.append(Diagnostic("weakly_determined", f"intrinsics correlated beyond {CORRELATION_LIMIT}: {txt}; the "
@@ -485,7 +498,8 @@ def projection_uncertainty(calibration: IntrinsicCalibration, grid_step_px: floa
     ok = np.isfinite(xy[..., 0])
     rays = np.concatenate([xy[ok], np.ones((int(ok.sum()), 1))], axis=1)
     _, J = cv2.projectPoints(rays.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), cam.K, np.asarray(cam.dist))
-    J = J[:, 6:15].reshape(-1, 2, 9)
+    n = len(calibration.labels)
+    J = J[:, 6:6 + n].reshape(-1, 2, n)
     C = np.nan_to_num(calibration.cov)  # unidentifiable terms contribute nothing (they are named in warnings)
     cq = np.einsum("nij,jk,nlk->nil", J, C, J)
     cov = np.full(uu.shape + (2, 2), np.nan)

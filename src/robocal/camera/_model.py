@@ -14,6 +14,11 @@ OpenCV: the centre of the top-left pixel is ``(0, 0)``, ``u`` to the right,
     u = f_x x_d + c_x, \\quad v = f_y y_d + c_y
 
 which is what ``cv2.projectPoints`` computes for 5 distortion coefficients.
+With 8 or 12 coefficients (OpenCV's rational and thin-prism models) the
+radial factor is ``(1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 + k5 r^4 +
+k6 r^6)`` and ``x_d += s1 r^2 + s2 r^4``, ``y_d += s3 r^2 + s4 r^4``, as in
+OpenCV's ``projectPoints`` (14 coefficients: only with ``tau_x = tau_y = 0``,
+the tilted sensor is not implemented).
 """
 
 from __future__ import annotations
@@ -147,9 +152,11 @@ class CameraModel:
         Focal lengths [px].
     cx, cy : float
         Principal point [px] (OpenCV pixel-centre convention).
-    dist : array_like, shape (4,) or (5,)
-        ``(k1, k2, p1, p2[, k3])``, OpenCV order; stored as a read-only
-        ``(5,)`` float array (``k3 = 0`` when four are given).
+    dist : array_like, shape (4,), (5,), (8,), (12,) or (14,)
+        ``(k1, k2, p1, p2[, k3[, k4, k5, k6[, s1, s2, s3, s4[, tau_x, tau_y]]]])``,
+        OpenCV order; stored read-only, as ``(5,)`` when four or five are
+        given (``k3 = 0`` when four), else as given (14 terms: the tilt
+        ``tau_x, tau_y`` must be 0).
     width, height : int
         Image size [px].
 
@@ -183,10 +190,14 @@ class CameraModel:
                                  f"{np.degrees(1000 / FOCAL_MAX_PX):.2g} deg over 1000 px), got "
                                  f"{getattr(self, name):.6g}: a focal length in other units, or not a focal length")
         dist = check_array(self.dist, "CameraModel.dist")
-        if dist.ndim != 1 or dist.shape[0] not in (4, 5):
+        if dist.ndim != 1 or dist.shape[0] not in OPENCV_DIST_TERMS:
             raise InputError(
-                f"CameraModel.dist must be (k1, k2, p1, p2[, k3]) with shape (4,) or (5,), got shape {dist.shape}"
+                f"CameraModel.dist must be (k1, k2, p1, p2[, k3]) with shape (4,) or (5,), got shape {dist.shape} "
+                "(OpenCV's longer vectors, 8, 12 or 14 terms, are accepted too)"
             )
+        if dist.shape[0] == 14 and np.any(dist[12:] != 0.0):
+            raise InputError(f"CameraModel.dist: the tilted-sensor terms tau_x, tau_y (CALIB_TILTED_MODEL) are not "
+                             f"implemented, they must be 0, got {dist[12:].tolist()}")
         if dist.shape[0] == 4:
             dist = np.append(dist, 0.0)
         dist = dist.copy()
@@ -258,25 +269,29 @@ class CameraModel:
     def distort_normalized(self, xy) -> np.ndarray:
         """Apply the distortion to normalised coordinates, shape (..., 2) -> (..., 2)."""
         xy = np.asarray(xy, dtype=float)
-        k1, k2, p1, p2, k3 = self.dist
-        x, y = xy[..., 0], xy[..., 1]
-        r2 = x * x + y * y
-        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-        yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+        xd, yd = self._distort_with_jacobian(xy[..., 0], xy[..., 1])[:2]
         return np.stack([xd, yd], axis=-1)
 
     def _distort_with_jacobian(self, x, y):
-        k1, k2, p1, p2, k3 = self.dist
+        d = np.zeros(12)
+        d[:min(12, self.dist.size)] = self.dist[:12]
+        k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = d
         r2 = x * x + y * y
-        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        drad = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)  # d radial / d r2
-        xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-        yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-        dxd_dx = radial + 2.0 * x * x * drad + 2.0 * p1 * y + 6.0 * p2 * x
-        dxd_dy = 2.0 * x * y * drad + 2.0 * p1 * x + 2.0 * p2 * y
-        dyd_dx = 2.0 * x * y * drad + 2.0 * p1 * x + 2.0 * p2 * y
-        dyd_dy = radial + 2.0 * y * y * drad + 6.0 * p1 * y + 2.0 * p2 * x
+        num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
+        radial = num / den
+        # d radial / d r2 (quotient rule; den = 1 without the rational terms)
+        dnum = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
+        dden = k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2)
+        drad = (dnum * den - num * dden) / (den * den)
+        xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) + r2 * (s1 + s2 * r2)
+        yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y + r2 * (s3 + s4 * r2)
+        dpx = s1 + 2.0 * s2 * r2  # d (thin prism x) / d r2
+        dpy = s3 + 2.0 * s4 * r2
+        dxd_dx = radial + 2.0 * x * x * drad + 2.0 * p1 * y + 6.0 * p2 * x + 2.0 * x * dpx
+        dxd_dy = 2.0 * x * y * drad + 2.0 * p1 * x + 2.0 * p2 * y + 2.0 * y * dpx
+        dyd_dx = 2.0 * x * y * drad + 2.0 * p1 * x + 2.0 * p2 * y + 2.0 * x * dpy
+        dyd_dy = radial + 2.0 * y * y * drad + 6.0 * p1 * y + 2.0 * p2 * x + 2.0 * y * dpy
         return xd, yd, dxd_dx, dxd_dy, dyd_dx, dyd_dy
 
     def pixel_from_normalized(self, xy) -> np.ndarray:
