@@ -221,6 +221,9 @@ def _ros_matrix(name: str, rows: int, cols: int, values) -> str:
 
 def _ros_text(camera: CameraModel, camera_name: str) -> str:
     dist = np.asarray(camera.dist, dtype=float).ravel()
+    if dist.size not in (4, 5, 8):  # sensor_msgs/distortion_models.h: plumb_bob 5, rational_polynomial 8
+        raise InputError(f"ROS's distortion models hold 5 (plumb_bob) or 8 (rational_polynomial) coefficients, "
+                         f"this camera has {dist.size}: write it as format='opencv' or 'json'")
     model = "plumb_bob" if dist.size <= 5 else "rational_polynomial"
     P = np.hstack([camera.K, np.zeros((3, 1))])
     return (f"image_width: {camera.width}\nimage_height: {camera.height}\ncamera_name: {camera_name}\n"

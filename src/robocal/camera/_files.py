@@ -2,8 +2,9 @@
 and image files checked before they are decoded.
 
 The readers are shared by every rig that takes ``camera: {file: ...}`` or
-images; the layouts inside the camera mapping are read and checked by
-:func:`robocal.camera.camera_from_document`.
+images; :func:`robocal.camera.load_camera` turns a camera file into a
+:class:`~robocal.camera.CameraModel` (the layouts inside the mapping are read
+and checked by :func:`robocal.camera.camera_from_document`).
 """
 
 from __future__ import annotations

@@ -5,7 +5,8 @@ Format (YAML or JSON; units explicit, see ``docs/rigs/humanoid.md``)::
     format: robocal.humanoid-data/1
     model: default                  # or a URDF path, relative to this file
     tie_hip_yaw_pitch: false
-    camera: {fx: 562.5, fy: 562.5, cx: 324, cy: 189, width: 640, height: 480}
+    camera: {fx: 562.5, fy: 562.5, cx: 324, cy: 189, width: 640, height: 480}   # or {file: cam.yaml}: OpenCV,
+                                    # ROS camera_info or robocal JSON (robocal.camera.load_camera)
     board: {rows: 4, cols: 6, square: {value: 25, unit: mm},
             centre: {value: [170, 0, 0], unit: mm}}
     joint_resolution: {value: 0.1, unit: deg}
