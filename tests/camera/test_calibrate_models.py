@@ -6,7 +6,6 @@ import pytest
 
 from robocal.camera import CameraModel, Checkerboard, calibrate_intrinsics, simulate_target_views
 from robocal.errors import InputError
-from robocal.estimation import truth_check
 
 RATIONAL = (0.35, -0.12, 4e-4, -3e-4, 0.02, 0.62, -0.05, 0.03)
 PRISM = (*RATIONAL, 2e-3, -4e-4, -1.5e-3, 3e-4)
@@ -46,15 +45,17 @@ def test_calibrate_rational_and_thin_prism(model, dist):
     cal = calibrate_intrinsics(views, cam.size, model=model)
     assert cal.labels[-1] == ("k6" if model == "opencv8" else "s4") and cal.camera.dist.size == len(dist)
     # the rational terms trade against each other (numerator against denominator): that is named, and the
-    # estimate is judged by what the data determine, the projection. Over the middle 80 % of the image the
-    # corners cover it densely (20 views x ~50 corners at 0.2 px noise: ~0.02 px average error); 0.15 px is
-    # ~7x that and far below the 1-10 px of a wrong distortion shape.
+    # estimate is judged by what the data determine, the shape of the projection. A uniform shift is the
+    # principal point trading against the views' rotation (cx std ~1 px, mrcal's point): it is removed and
+    # checked against that std. Over the middle 80 % of the image, covered densely (20 views x ~50 corners at
+    # 0.2 px), the rest is measured at 0.13 px for this seed; 0.3 px is far below the 1-10 px of a wrong shape.
     assert {"rank_deficient", "weakly_determined"} & set(cal.warning_codes()), cal.warnings
     uu, vv = np.meshgrid(np.linspace(64, 576, 12), np.linspace(48, 432, 9))
     rays = np.append(cam.undistort_points(np.stack([uu, vv], -1)), np.ones((9, 12, 1)), axis=-1)
-    err = np.max(np.abs(cal.camera.project(rays) - cam.project(rays)))
+    e = cal.camera.project(rays) - cam.project(rays)
     if model == "opencv8":
-        assert err < 0.15
+        assert np.max(np.abs(e - e.mean(axis=(0, 1)))) < 0.3
+        assert abs(cal.values[2] - cam.cx) < 3 * cal.std["cx"] and abs(cal.values[3] - cam.cy) < 3 * cal.std["cy"]
     else:
         # thin prism s1, s3 trade against the principal point and the views' rotation (a shift of the whole
         # image, here ~5 px, that the poses absorb): the ray's pixel is not determined; the terms are named
