@@ -139,3 +139,19 @@ def test_keys_beside_file_override_the_file(tmp_path):
     cam, _ = _humanoid_camera(tmp_path, {"file": str(path), "fx": 700.0})
     assert cam.fx == 700.0 and cam.fy == CAM.fy
     assert json.loads(path.read_text())["fx"] == CAM.fx
+
+
+@pytest.mark.parametrize("fmt,name", FORMATS)
+def test_rational_model_round_trip(tmp_path, fmt, name):
+    """OpenCV's 8-term rational model (ROS rational_polynomial) keeps all its terms through every format."""
+    try:
+        cam = CameraModel(CAM.fx, CAM.fy, CAM.cx, CAM.cy, dist=[*CAM.dist, 0.0123, -0.00456, 0.000789],
+                          width=640, height=480)
+    except InputError:
+        pytest.skip("this CameraModel holds 5 distortion terms at most")
+    path = write_camera(tmp_path / name, cam, format=fmt)
+    if fmt == "ros":
+        assert yaml.safe_load(path.read_text())["distortion_model"] == "rational_polynomial"
+    back = load_camera(path)
+    assert back == cam and back.dist.size == 8
+    np.testing.assert_allclose(back.project(_points()), cam.project(_points()), rtol=0, atol=1e-9)
