@@ -52,6 +52,7 @@ INTRINSIC_MODELS = {
     "opencv5": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"),
     "opencv8": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"),
     "opencv12": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4"),
+    "fisheye": ("fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"),
 }
 #: A view needs this many corners: 6 pose parameters plus a share of the intrinsics from 2 residuals per corner.
 MIN_CORNERS_PER_VIEW = 6
@@ -62,6 +63,10 @@ CORRELATION_LIMIT = 0.99
 #: Beyond this many free parameters (~100 views) the joint problem is solved with a sparse Jacobian.
 SPARSE_ABOVE_PARAMS = 620
 _DIST_LABELS = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4")
+
+
+def _is_fisheye(labels) -> bool:
+    return "p1" not in labels
 
 
 def _model_labels(model: str) -> tuple:
@@ -119,7 +124,7 @@ class IntrinsicCalibration:
 
     Attributes
     ----------
-    camera : CameraModel
+    camera : CameraModel or FisheyeCamera
         The estimate.
     model : str
         Key of :data:`INTRINSIC_MODELS`.
@@ -211,11 +216,17 @@ def _rodrigues(rvec) -> np.ndarray:
     return cv2.Rodrigues(np.asarray(rvec, dtype=float).reshape(3, 1))[0]
 
 
-def _project_view(intr, pose, obj, *, jacobian: bool = False):
+def _project_view(intr, pose, obj, *, jacobian: bool = False, fisheye: bool = False):
     """``cv2.projectPoints`` of one view; ``intr`` the 9 intrinsics, ``pose`` (rvec, tvec)."""
     import cv2
 
     K = np.array([[intr[0], 0.0, intr[2]], [0.0, intr[1], intr[3]], [0.0, 0.0, 1.0]])
+    if fisheye:
+        uv, J = cv2.fisheye.projectPoints(obj.reshape(-1, 1, 3), pose[:3].copy(), pose[3:].copy(), K,
+                                          intr[4:].copy())
+        uv = uv.reshape(-1, 2)
+        # cv2.fisheye's columns: (fx, fy), (cx, cy), k(4), rvec(3), tvec(3), skew
+        return uv if not jacobian else (uv, J[:, 0:8], J[:, 8:14])
     uv, J = cv2.projectPoints(obj.reshape(-1, 1, 3), pose[:3].copy(), pose[3:].copy(), K, intr[4:].copy())
     uv = uv.reshape(-1, 2)
     if not jacobian:
@@ -228,6 +239,7 @@ def _fit(views, x0, poses0, fixed, labels, *, outlier_sigma):
     from robocal.estimation import Problem, solve
 
     prob = Problem()
+    fish = _is_fisheye(labels)
     prob.add_block("intrinsics", x0, fixed=fixed, labels=list(labels), unit=["px"] * 4 + [None] * (len(labels) - 4))
     for v, p0 in zip(views, poses0):
         prob.add_block(f"pose:{v.name}", p0,
@@ -235,11 +247,12 @@ def _fit(views, x0, poses0, fixed, labels, *, outlier_sigma):
                        unit=["rad"] * 3 + ["m"] * 3)
 
         def fun(params, v=v):
-            return v.image_points - _project_view(params["intrinsics"], params[f"pose:{v.name}"], v.object_points)
+            return v.image_points - _project_view(params["intrinsics"], params[f"pose:{v.name}"], v.object_points,
+                                                  fisheye=fish)
 
         def jac(params, v=v):
             _, Ji, Jp = _project_view(params["intrinsics"], params[f"pose:{v.name}"], v.object_points,
-                                      jacobian=True)
+                                      jacobian=True, fisheye=fish)
             return {"intrinsics": -Ji, f"pose:{v.name}": -Jp}
 
         prob.add_residuals(fun, name=v.name, blocks=["intrinsics", f"pose:{v.name}"], jacobian=jac,
@@ -262,6 +275,8 @@ def _fit(views, x0, poses0, fixed, labels, *, outlier_sigma):
 def _opencv_start(views, image_size, fixed, labels):
     import cv2
 
+    if _is_fisheye(labels):
+        return _fisheye_start(views, image_size, fixed, labels)
     n = len(labels) - 4
     flags = (cv2.CALIB_RATIONAL_MODEL if n >= 8 else 0) | (cv2.CALIB_THIN_PRISM_MODEL if n >= 12 else 0)
     fixed = dict(zip(labels, fixed))
@@ -289,6 +304,28 @@ def _opencv_start(views, image_size, fixed, labels):
     return float(rms), x0, poses
 
 
+def _fisheye_start(views, image_size, fixed, labels):
+    import cv2
+
+    flags = cv2.fisheye.CALIB_RECOMPUTE_EXTRINSIC | cv2.fisheye.CALIB_FIX_SKEW
+    for i, lab in enumerate(labels[4:]):
+        if fixed[4 + i]:
+            flags |= getattr(cv2.fisheye, f"CALIB_FIX_{lab.upper()}")
+    obj = [v.object_points.reshape(1, -1, 3).astype(np.float64) for v in views]
+    img = [v.image_points.reshape(1, -1, 2).astype(np.float64) for v in views]
+    try:
+        rms, K, D, rvecs, tvecs = cv2.fisheye.calibrate(
+            obj, img, tuple(int(s) for s in image_size), None, None, flags=flags,
+            criteria=(cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 100, 1e-10))
+    except cv2.error as exc:
+        raise NotEnoughDataError(f"cv2.fisheye.calibrate could not initialise the calibration from "
+                                 f"{len(views)} views: {str(exc).strip().splitlines()[-1]}") from None
+    x0 = np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2], *np.ravel(D)[:4]])
+    x0[np.asarray(fixed)] = 0.0
+    poses = [np.concatenate([np.ravel(r), np.ravel(t)]) for r, t in zip(rvecs, tvecs)]
+    return float(rms), x0, poses
+
+
 def calibrate_intrinsics(views, image_size, *, model: str = "opencv5", fix=(), max_outliers: int | None = None,
                          outlier_sigma: float | None = None,
                          min_corners: int = MIN_CORNERS_PER_VIEW) -> IntrinsicCalibration:
@@ -303,7 +340,10 @@ def calibrate_intrinsics(views, image_size, *, model: str = "opencv5", fix=(), m
     model : str
         ``'opencv5'`` (``k1, k2, p1, p2, k3``, default), ``'opencv4'``
         (``k3 = 0``), ``'opencv8'`` (+ rational ``k4, k5, k6``) or
-        ``'opencv12'`` (+ thin prism ``s1..s4``); see :data:`INTRINSIC_MODELS`.
+        ``'opencv12'`` (+ thin prism ``s1..s4``), or ``'fisheye'`` (OpenCV's
+        ``cv2.fisheye`` equidistant model, ``k1..k4``, started from
+        ``cv2.fisheye.calibrate``; ``camera`` is then a
+        :class:`~robocal.camera.FisheyeCamera`); see :data:`INTRINSIC_MODELS`.
         (OpenCV's 14-term tilted model is not implemented.)
     fix : iterable of str
         Distortion terms of the model held at zero (e.g. ``("k3",)``).
@@ -408,7 +448,12 @@ def calibrate_intrinsics(views, image_size, *, model: str = "opencv5", fix=(), m
     std = {lab: (0.0 if fixed[i] else res.std[lab]) for i, lab in enumerate(labels)}
     warnings += _overparameterisation(labels, free, intr, std, cov)
 
-    camera = CameraModel(intr[0], intr[1], intr[2], intr[3], intr[4:], width, height)
+    if _is_fisheye(labels):
+        from robocal.camera._fisheye import FisheyeCamera
+
+        camera = FisheyeCamera(intr[0], intr[1], intr[2], intr[3], intr[4:], width, height)
+    else:
+        camera = CameraModel(intr[0], intr[1], intr[2], intr[3], intr[4:], width, height)
     poses, pose_std, residuals, view_rms = {}, {}, {}, {}
     for v in used:
         p = res.params[f"pose:{v.name}"]
@@ -497,9 +542,13 @@ def projection_uncertainty(calibration: IntrinsicCalibration, grid_step_px: floa
     xy = cam.undistort_points(np.stack([uu, vv], axis=-1))
     ok = np.isfinite(xy[..., 0])
     rays = np.concatenate([xy[ok], np.ones((int(ok.sum()), 1))], axis=1)
-    _, J = cv2.projectPoints(rays.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), cam.K, np.asarray(cam.dist))
     n = len(calibration.labels)
-    J = J[:, 6:6 + n].reshape(-1, 2, n)
+    if _is_fisheye(calibration.labels):
+        _, J = cv2.fisheye.projectPoints(rays.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), cam.K, np.asarray(cam.k))
+        J = J[:, 0:8].reshape(-1, 2, n)
+    else:
+        _, J = cv2.projectPoints(rays.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), cam.K, np.asarray(cam.dist))
+        J = J[:, 6:6 + n].reshape(-1, 2, n)
     C = np.nan_to_num(calibration.cov)  # unidentifiable terms contribute nothing (they are named in warnings)
     cq = np.einsum("nij,jk,nlk->nil", J, C, J)
     cov = np.full(uu.shape + (2, 2), np.nan)
