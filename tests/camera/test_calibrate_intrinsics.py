@@ -174,3 +174,16 @@ def test_coverage_counts_every_used_corner(cal):
     assert counts.shape == (len(ve) - 1, len(ue) - 1)
     assert counts.sum() == sum(len(v) for v in cal.views)
     assert isinstance(cal, IntrinsicCalibration)
+
+
+def test_corners_outside_the_image_size_are_refused(data):
+    with pytest.raises(InputError, match="outside the 480 x 640 px image_size.*swapped"):
+        calibrate_intrinsics(data[0], (480, 640))
+
+
+def test_to_dict_is_json(cal):
+    import json
+
+    d = json.loads(json.dumps(cal.to_dict()))
+    assert d["labels"] == list(cal.labels) and len(d["views"]) == len(cal.poses)
+    assert d["values"][0] == cal.values[0] and d["camera"]["fx"] == cal.camera.fx

@@ -194,6 +194,20 @@ class IntrinsicCalibration:
     def warning_codes(self) -> list[str]:
         return [w.code for w in self.warnings]
 
+    def to_dict(self) -> dict:
+        """JSON-safe summary: camera, model, intrinsics with std and covariance, per-view pose and RMS, warnings."""
+        from robocal.estimation._result import _json
+
+        return _json({
+            "camera": self.camera.to_dict(), "model": self.model, "labels": list(self.labels),
+            "values": self.values, "std": dict(self.std), "cov": self.cov, "free": list(self.free),
+            "rms_px": self.rms, "sigma_px": self.sigma_px, "opencv_rms_px": self.opencv_rms,
+            "views": {n: {"T_cam_obj": self.poses[n], "pose_std": self.pose_std[n], "rms_px": self.view_rms[n],
+                          "corners": int(self.residuals[n].shape[0])} for n in self.poses},
+            "outliers": [[n, int(i)] for n, i in self.outliers], "dropped": list(self.dropped),
+            "warnings": [w.to_dict() for w in self.warnings],
+        })
+
 
 def _check_views(views) -> list[TargetView]:
     if not isinstance(views, (list, tuple)) or not views:
@@ -388,6 +402,14 @@ def calibrate_intrinsics(views, image_size, *, model: str = "opencv5", fix=(), m
                          f"{', '.join(labels[4:])}")
     fixed = np.array([lab not in INTRINSIC_MODELS[model] or lab in fix for lab in labels])
     views = _check_views(views)
+    for v in views:
+        q = v.image_points
+        # 1 px beyond the pixel edges: sub-pixel refinement may push a corner on the border slightly out
+        out = (q[:, 0] < -1.5) | (q[:, 1] < -1.5) | (q[:, 0] > width + 0.5) | (q[:, 1] > height + 0.5)
+        if np.any(out):
+            raise InputError(f"view '{v.name}': corner(s) at {q[out][0].round(1).tolist()} px lie outside the "
+                             f"{width} x {height} px image_size: an image of another size, or width and height "
+                             "swapped (cv2's imageSize is (width, height))")
     warnings: list[Diagnostic] = []
 
     dropped = [v.name for v in views if len(v) < min_corners]
