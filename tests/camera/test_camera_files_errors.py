@@ -122,6 +122,12 @@ def test_ros_writer_refuses_a_vector_ros_has_no_model_for(tmp_path):
     assert not (tmp_path / "ros.yaml").exists()
 
 
+@pytest.mark.parametrize("key", ["distortion_coefficents", "dist_coefs", "distortion"])
+def test_a_misspelt_distortion_key_is_not_read_as_no_distortion(tmp_path, key):
+    text = OCV.format(K=GOOD_K).replace("distortion_coefficients:", f"{key}:")
+    assert f"field '{key}': unknown key (did you mean" in _error(tmp_path, text)
+
+
 def test_error_in_a_file_named_by_a_rig_input_names_both(tmp_path):
     from robocal.camera import camera_from_section
     from robocal.io import Document

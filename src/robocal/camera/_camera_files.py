@@ -23,6 +23,7 @@ row other than ``[0, 0, 1]``), a distortion model ROS does not know.
 
 from __future__ import annotations
 
+import difflib
 import json
 import os
 from pathlib import Path
@@ -114,6 +115,27 @@ def _check_intrinsics_present(doc) -> None:
                     f"{', '.join(map(str, list(doc.keys())[:8])) or 'none'}")
 
 
+#: Every spelling of the distortion vector the loaders read (camera_from_document's, and ROS 2's ``d``).
+_DIST_SPELLINGS = ("dist", "dist_coeffs", "distortion_coefficients", "D", "d")
+
+
+def _check_distortion_key(doc) -> None:
+    """A misspelt distortion key would leave the camera without distortion, silently: name it.
+
+    (``distortion_coefficents``, one letter short, is in files copied from a ROS tutorial.)
+    """
+    if any(k in doc for k in _DIST_SPELLINGS):
+        return
+    for key in doc.keys():
+        name = str(key)
+        lower = name.lower()
+        close = difflib.get_close_matches(lower, _DIST_SPELLINGS[:3], n=1, cutoff=0.75)
+        if name != "distortion_model" and (close or lower.startswith(("dist_", "distortion"))):
+            hint = close[0] if close else "distortion_coefficients"
+            raise doc.error(name, f"unknown key (did you mean {hint!r}?): the distortion would be read as none; "
+                            f"the distortion vector is {', '.join(_DIST_SPELLINGS[:-1])} or d (ROS 2)")
+
+
 def _check_distortion_model(doc) -> None:
     model = doc.raw("distortion_model", default=None)
     if model is None:
@@ -144,6 +166,7 @@ def camera_from_mapping(data: dict, source: str = "<camera>", *, prefix: str = "
     layout = _layout(data)
     doc = Document(dict(data), source, prefix, {**(units or {}), "pixel": "px"}, units_error)
     _check_intrinsics_present(doc)
+    _check_distortion_key(doc)
     _check_distortion_model(doc)
     _check_size(doc, layout)
     if layout == "ros2":
