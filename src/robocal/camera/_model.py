@@ -72,23 +72,25 @@ def _where(mask: np.ndarray, limit: int = 8) -> str:
 
 
 def dist_from_opencv(values) -> np.ndarray:
-    """``(k1, k2, p1, p2, k3)`` (5,) from an OpenCV distortion vector of any of OpenCV's lengths.
+    """robocal's distortion vector from an OpenCV one of any of OpenCV's lengths.
 
-    OpenCV writes 4, 5, 8, 12 or 14 coefficients (:data:`OPENCV_DIST_TERMS`);
-    robocal's model has the first five. Longer vectors are accepted when the
-    extra terms are exactly zero. Raises :class:`~robocal.errors.InputError`
-    for any other length, and for non-zero extra terms, naming the
-    ``cv2.calibrateCamera`` flag that produced them.
+    OpenCV writes 4, 5, 8, 12 or 14 coefficients (:data:`OPENCV_DIST_TERMS`).
+    Returns ``(k1, k2, p1, p2, k3)`` (5,) when the terms beyond k3 are all
+    zero (or absent), else the 8 or 12 terms as given (rational ``k4..k6``,
+    thin prism ``s1..s4``; a 14-term vector shortened to 12 when its tilt is
+    zero). Raises :class:`~robocal.errors.InputError` for any other length and
+    for a non-zero tilt ``tau_x, tau_y`` (CALIB_TILTED_MODEL, not implemented).
     """
     d = check_array(values, "dist").reshape(-1)
     n = d.shape[0]
     if n not in OPENCV_DIST_TERMS:
         raise InputError(f"an OpenCV distortion vector has 4, 5, 8, 12 or 14 values (k1, k2, p1, p2[, k3[, ...]]), "
                          f"got {n} values")
+    if n == 14 and np.any(d[12:] != 0.0):
+        raise InputError(f"14 coefficients with non-zero tilt tau_x, tau_y (CALIB_TILTED_MODEL): robocal's camera "
+                         f"model has no tilted sensor; calibrate without that flag (got {d[12:].tolist()})")
     if n > 5 and np.any(d[5:] != 0.0):
-        raise InputError(f"{n} coefficients with non-zero {OPENCV_DIST_TERMS[n]}: robocal's camera model has k1, k2, "
-                         "p1, p2, k3 only; calibrate without that flag (extra terms that are exactly zero are "
-                         f"accepted; got {d[5:].tolist()})")
+        return d[:12].copy() if n == 14 else d.copy()
     return np.append(d, 0.0) if n == 4 else d[:5].copy()
 
 
