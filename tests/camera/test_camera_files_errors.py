@@ -8,7 +8,7 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from robocal.camera import CameraModel, load_camera, write_camera
+from robocal.camera import CameraModel, FisheyeCamera, load_camera, write_camera
 from robocal.errors import InputError, RobocalError
 
 OCV = """%YAML:1.0
@@ -91,7 +91,9 @@ def test_missing_camera_matrix(tmp_path):
 @pytest.mark.parametrize("model,expected", [
     ("pinhole_radial", "unknown distortion model 'pinhole_radial': expected one of ROS's plumb_bob, "
                        "rational_polynomial"),
-    ("equidistant", "field 'distortion_model': 'equidistant' is not supported"),
+    # a fisheye file whose vector is not the equidistant model's (4 terms)
+    ("equidistant", "field 'distortion_coefficients': an equidistant (fisheye) camera has 4 coefficients k1, k2, "
+                    "k3, k4 (cv2.fisheye), got 5"),
 ])
 def test_ros_distortion_model_robocal_cannot_represent(tmp_path, model, expected):
     path = write_camera(tmp_path / "ros.yaml", CameraModel(600, 600, 320, 240), format="ros")
@@ -142,12 +144,12 @@ def test_error_in_a_file_named_by_a_rig_input_names_both(tmp_path):
 
 # -- fuzzing: any mapping of plausible keys and awkward values is a camera or one RobocalError line ------------
 _KEYS = ["camera_matrix", "K", "k", "fx", "fy", "cx", "cy", "dist", "dist_coeffs", "distortion_coefficients", "D",
-         "d", "image_width", "image_height", "width", "height", "image_size", "distortion_model", "units"]
+         "d", "image_width", "image_height", "width", "height", "image_size", "distortion_model", "units", "model"]
 _num = st.one_of(st.floats(allow_nan=True, allow_infinity=True, width=64), st.integers(-10**6, 10**6),
                  st.sampled_from([0, 1, 320, 480, 600.0, 640, -1]))
 _val = st.recursive(
     st.one_of(_num, st.none(), st.booleans(), st.text(max_size=5),
-              st.sampled_from(["plumb_bob", "equidistant", "px", "mm"])),
+              st.sampled_from(["plumb_bob", "equidistant", "fisheye-kannala-brandt", "px", "mm"])),
     lambda inner: st.one_of(st.lists(inner, max_size=10), st.lists(st.lists(_num, min_size=3, max_size=3),
                                                                    min_size=3, max_size=3),
                             st.fixed_dictionaries({"rows": st.integers(0, 4), "cols": st.integers(0, 4),
@@ -174,6 +176,6 @@ def test_fuzzed_files_load_or_fail_in_one_line(tmp_path, changes, drop, as_json)
         # (length unbounded: robocal.io's Document echoes a bad value whole, as the user wrote it)
         assert "\n" not in msg and msg.startswith(f"{path}: field '"), msg
         return
-    assert isinstance(cam, CameraModel)
+    assert isinstance(cam, (CameraModel, FisheyeCamera))
     assert np.all(np.isfinite([cam.fx, cam.fy, cam.cx, cam.cy])) and np.all(np.isfinite(cam.dist))
     assert cam.fx > 0 and cam.fy > 0 and cam.width >= 1 and cam.height >= 1

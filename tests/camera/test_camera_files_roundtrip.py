@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import yaml
 
-from robocal.camera import CameraModel, camera_file_text, load_camera, write_camera
+from robocal.camera import CameraModel, FisheyeCamera, camera_file_text, load_camera, write_camera
 from robocal.errors import InputError
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
@@ -155,3 +155,36 @@ def test_rational_model_round_trip(tmp_path, fmt, name):
     back = load_camera(path)
     assert back == cam and back.dist.size == 8
     np.testing.assert_allclose(back.project(_points()), cam.project(_points()), rtol=0, atol=1e-9)
+
+
+FISH = FisheyeCamera(400.123456789, 401.5, 639.25, 479.75, k=[0.05, -0.01, 0.002, -3e-4], width=1280, height=960)
+
+
+@pytest.mark.parametrize("fmt,name", FORMATS)
+def test_fisheye_round_trip(tmp_path, fmt, name):
+    """An equidistant camera comes back as one (OpenCV files carry distortion_model: equidistant, as ROS's)."""
+    import cv2
+
+    path = write_camera(tmp_path / name, FISH, format=fmt)
+    back = load_camera(path)
+    assert isinstance(back, FisheyeCamera) and back == FISH
+    # up to ~60 deg off axis; bit-identical parameters, so 1e-9 px is rounding margin as above
+    p = np.column_stack([np.random.default_rng(0).uniform(-1.5, 1.5, (20, 2)), np.ones(20)])
+    np.testing.assert_allclose(back.project(p), FISH.project(p), rtol=0, atol=1e-9)
+    if fmt == "opencv":  # and cv2.fisheye projects what cv2.FileStorage read to the same pixels
+        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+        K, D = fs.getNode("camera_matrix").mat(), fs.getNode("distortion_coefficients").mat()
+        fs.release()
+        uv, _ = cv2.fisheye.projectPoints(p.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), K, D.reshape(4, 1))
+        np.testing.assert_allclose(uv.reshape(-1, 2), FISH.project(p), rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("fmt,name", [("ros", "cam.yaml"), ("json", "cam.json")])
+def test_rigs_refuse_a_fisheye_camera_in_one_line(tmp_path, fmt, name):
+    """The humanoid and mirror rigs project with the pinhole model: a fisheye file is named, not misread."""
+    path = write_camera(tmp_path / name, FISH, format=fmt)
+    with pytest.raises(InputError, match=r"camera.file of .*: field '(distortion_model|model)': an equidistant "
+                                         r"\(fisheye\) camera; this rig takes OpenCV's pinhole camera"):
+        _humanoid_camera(tmp_path, {"file": str(path)})
+    with pytest.raises(InputError, match="an equidistant .fisheye. camera; this rig takes"):
+        _mirror_camera(tmp_path, {"file": str(path)})

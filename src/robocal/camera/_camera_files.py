@@ -31,26 +31,29 @@ from pathlib import Path
 import numpy as np
 
 from robocal.camera._files import read_camera_file
+from robocal.camera._fisheye import FisheyeCamera
 from robocal.camera._model import BROWN_CONRADY_MODELS, CameraModel, camera_from_document
 from robocal.errors import FileFormatError, InputError
 
-__all__ = ["CAMERA_FILE_FORMATS", "load_camera", "camera_from_file", "camera_from_mapping", "camera_from_section",
+__all__ = ["CAMERA_FILE_FORMATS", "FISHEYE_MODELS", "load_camera", "camera_from_file", "camera_from_mapping", "camera_from_section",
            "camera_file_text", "write_camera"]
 
 #: Formats :func:`write_camera` writes, with the file suffixes each may have.
 CAMERA_FILE_FORMATS = {"opencv": (".yaml", ".yml", ".xml"), "ros": (".yaml", ".yml"), "json": (".json",)}
 
+#: ``distortion_model`` values (ROS, kalibr) and robocal ``model`` names of the equidistant fisheye (Kannala-Brandt).
+FISHEYE_MODELS = ("equidistant", "fisheye", "kannala_brandt", "kannala-brandt", "equi", "fisheye-kannala-brandt")
+
 #: ``distortion_model`` values of ROS's ``sensor_msgs/distortion_models.h`` (and kalibr's names) that are not
 #: Brown-Conrady; :func:`camera_from_document` says whether robocal represents them.
-_OTHER_KNOWN_MODELS = ("equidistant", "fisheye", "kannala_brandt", "kannala-brandt", "equi", "double_sphere",
-                       "omni", "fov")
+_OTHER_KNOWN_MODELS = ("double_sphere", "omni", "fov")
 
 
 def _layout(data: dict) -> str:
     """Which family a mapping is written in: 'ros2' (k, d), 'opencv' (camera_matrix / K) or 'robocal' (fx, ...)."""
     if "camera_matrix" in data or "K" in data:
         return "opencv"
-    if "k" in data:
+    if "k" in data and "fx" not in data:  # robocal's FisheyeCamera writes k = (k1..k4) beside fx
         return "ros2"
     return "robocal"
 
@@ -143,10 +146,36 @@ def _check_distortion_model(doc) -> None:
     if not isinstance(model, str):
         raise doc.error("distortion_model", f"must be a name such as plumb_bob, got a {type(model).__name__}")
     name = model.lower()
-    if name in BROWN_CONRADY_MODELS or name in _OTHER_KNOWN_MODELS:
-        return  # Brown-Conrady, or a model camera_from_document judges (fisheye: refused until it is implemented)
+    if name in BROWN_CONRADY_MODELS or name in FISHEYE_MODELS or name in _OTHER_KNOWN_MODELS:
+        return  # Brown-Conrady, fisheye, or a model camera_from_document refuses by name
     raise doc.error("distortion_model", f"unknown distortion model {model!r}: expected one of ROS's "
                     f"{', '.join(BROWN_CONRADY_MODELS[:2])} (OpenCV's pinhole model) or equidistant", InputError)
+
+
+def _is_fisheye(doc) -> bool:
+    names = (doc.raw("distortion_model", default=None), doc.raw("model", default=None))
+    return any(isinstance(n, str) and n.lower() in FISHEYE_MODELS for n in names)
+
+
+def _fisheye_from(doc, layout: str) -> FisheyeCamera:
+    """An equidistant camera: the camera matrix and size as any camera's, ``(k1, k2, k3, k4)`` as its distortion."""
+    from robocal.io import Document
+
+    dist_keys = ("k",) if layout == "robocal" else ("d",) if layout == "ros2" else _DIST_SPELLINGS
+    key = next((k for k in dist_keys if k in doc), None)
+    if key is None:
+        raise doc.error(dist_keys[-1] if layout != "opencv" else "distortion_coefficients",
+                        "is missing: an equidistant (fisheye) camera needs its 4 coefficients k1, k2, k3, k4")
+    raw = doc.raw(key)
+    k = Document({key: raw.get("data") if isinstance(raw, dict) else raw}, doc.source, doc.prefix, doc.units
+                 ).array(key).reshape(-1)
+    if k.size != 4:
+        raise doc.error(key, f"an equidistant (fisheye) camera has 4 coefficients k1, k2, k3, k4 "
+                        f"(cv2.fisheye), got {k.size}", InputError)
+    # the matrix, size and principal point are checked as a pinhole camera's, without the fisheye's terms
+    rest = {n: v for n, v in doc.data.items() if n not in (key, "distortion_model", "model")}
+    pin = camera_from_mapping(rest, doc.source, prefix=doc.prefix, units=doc.units, units_error=doc.units_error)
+    return FisheyeCamera(pin.fx, pin.fy, pin.cx, pin.cy, k, pin.width, pin.height)
 
 
 def camera_from_mapping(data: dict, source: str = "<camera>", *, prefix: str = "", units=None,
@@ -169,6 +198,8 @@ def camera_from_mapping(data: dict, source: str = "<camera>", *, prefix: str = "
     _check_distortion_key(doc)
     _check_distortion_model(doc)
     _check_size(doc, layout)
+    if _is_fisheye(doc):
+        return _fisheye_from(doc, layout)
     if layout == "ros2":
         _check_camera_matrix(doc, "k")
         # ros2 topic echo spells CameraInfo's K and D in lower case; the core reads the upper-case ones
@@ -182,8 +213,12 @@ def camera_from_mapping(data: dict, source: str = "<camera>", *, prefix: str = "
     return camera_from_document(doc)
 
 
-def load_camera(path) -> CameraModel:
+def load_camera(path) -> CameraModel | FisheyeCamera:
     """Read a camera calibration file: OpenCV FileStorage YAML/XML, ROS ``camera_info`` YAML, or robocal JSON/YAML.
+
+    A :class:`FisheyeCamera` when the file says so (``distortion_model:
+    equidistant`` (ROS), ``fisheye``, or robocal's ``model: fisheye-kannala-brandt``),
+    else a :class:`CameraModel`.
 
     The file's suffix must be ``.yaml``, ``.yml``, ``.json`` or ``.xml``; the
     layout is recognised from the keys (module docstring). Every problem is
@@ -197,13 +232,16 @@ def load_camera(path) -> CameraModel:
 camera_from_file = load_camera
 
 
-def camera_from_section(doc, *, base_dir=None) -> CameraModel:
+def camera_from_section(doc, *, base_dir=None, fisheye: bool = False) -> CameraModel:
     """The ``camera`` section of a rig's input file: inline, or ``{file: PATH}`` plus keys that override the file's.
 
     ``doc``: the section as a :class:`robocal.io.Document`. A relative
     ``file`` is resolved against ``base_dir`` (default: the folder of the
     input file). Errors in the camera file name it and the input file:
     ``cam.yaml (camera.file of input.yaml): field 'camera_matrix': ...``.
+    ``fisheye``: whether the rig takes a :class:`FisheyeCamera`; when not, an
+    equidistant camera is one line naming the field (its 4 coefficients would
+    otherwise be read as ``k1, k2, p1, p2``).
     """
     data = doc.data
     if not isinstance(data, dict):
@@ -222,7 +260,14 @@ def camera_from_section(doc, *, base_dir=None) -> CameraModel:
             raise doc.error("file", f"camera file {p} does not exist")
         data = {**read_camera_file(p), **data}  # keys in the input file complete or override the file's
         source, prefix = f"{os.path.normpath(p)} (camera.file of {doc.source})", ""
-    return camera_from_mapping(data, source, prefix=prefix, units=doc.units, units_error=doc.units_error)
+    cam = camera_from_mapping(data, source, prefix=prefix, units=doc.units, units_error=doc.units_error)
+    if isinstance(cam, FisheyeCamera) and not fisheye:
+        key = "model" if "model" in data and not isinstance(data.get("distortion_model"), str) else "distortion_model"
+        where = f"{prefix}.{key}" if prefix else key
+        raise InputError(f"field '{where}': an equidistant (fisheye) camera; this rig takes OpenCV's pinhole "
+                         "camera (plumb_bob, rational_polynomial): calibrate it with that model, or undistort the "
+                         "images first", source=source)
+    return cam
 
 
 def _opencv_text(camera: CameraModel, suffix: str) -> str:
@@ -233,8 +278,15 @@ def _opencv_text(camera: CameraModel, suffix: str) -> str:
     fs.write("image_width", int(camera.width))
     fs.write("image_height", int(camera.height))
     fs.write("camera_matrix", camera.K)
-    fs.write("distortion_coefficients", np.asarray(camera.dist, dtype=float).reshape(1, -1))
+    fs.write("distortion_coefficients", np.asarray(_dist(camera), dtype=float).reshape(1, -1))
+    if isinstance(camera, FisheyeCamera):
+        # OpenCV has no key for the model; without one the 4 coefficients would read as k1, k2, p1, p2
+        fs.write("distortion_model", "equidistant")
     return fs.releaseAndGetString()
+
+
+def _dist(camera) -> np.ndarray:
+    return camera.k if isinstance(camera, FisheyeCamera) else camera.dist
 
 
 def _ros_matrix(name: str, rows: int, cols: int, values) -> str:
@@ -243,11 +295,14 @@ def _ros_matrix(name: str, rows: int, cols: int, values) -> str:
 
 
 def _ros_text(camera: CameraModel, camera_name: str) -> str:
-    dist = np.asarray(camera.dist, dtype=float).ravel()
-    if dist.size not in (4, 5, 8):  # sensor_msgs/distortion_models.h: plumb_bob 5, rational_polynomial 8
+    dist = np.asarray(_dist(camera), dtype=float).ravel()
+    if isinstance(camera, FisheyeCamera):
+        model = "equidistant"
+    elif dist.size not in (4, 5, 8):  # sensor_msgs/distortion_models.h: plumb_bob 5, rational_polynomial 8
         raise InputError(f"ROS's distortion models hold 5 (plumb_bob) or 8 (rational_polynomial) coefficients, "
                          f"this camera has {dist.size}: write it as format='opencv' or 'json'")
-    model = "plumb_bob" if dist.size <= 5 else "rational_polynomial"
+    else:
+        model = "plumb_bob" if dist.size <= 5 else "rational_polynomial"
     P = np.hstack([camera.K, np.zeros((3, 1))])
     return (f"image_width: {camera.width}\nimage_height: {camera.height}\ncamera_name: {camera_name}\n"
             + _ros_matrix("camera_matrix", 3, 3, camera.K)
@@ -266,8 +321,8 @@ def camera_file_text(camera: CameraModel, *, format: str = "opencv", suffix: str
     if suffix not in CAMERA_FILE_FORMATS[format]:
         raise InputError(f"a {format} camera file is {' or '.join(CAMERA_FILE_FORMATS[format])}, got "
                          f"{suffix or 'no suffix'!r}")
-    if not isinstance(camera, CameraModel):
-        raise InputError(f"camera must be a CameraModel, got {type(camera).__name__}")
+    if not isinstance(camera, (CameraModel, FisheyeCamera)):
+        raise InputError(f"camera must be a CameraModel or FisheyeCamera, got {type(camera).__name__}")
     if format == "opencv":
         return _opencv_text(camera, suffix)
     if format == "ros":
@@ -287,7 +342,10 @@ def write_camera(path, camera: CameraModel, *, format: str = "opencv", camera_na
     * ``"ros"``: the YAML of ROS's ``camera_calibration_parsers`` (what
       ``camera_info_manager`` loads), ``camera_name`` as given, an identity
       rectification and projection matrix ``[K | 0]`` (a monocular camera);
-    * ``"json"``: :meth:`CameraModel.to_dict`.
+    * ``"json"``: :meth:`CameraModel.to_dict` / :meth:`FisheyeCamera.to_dict`.
+
+    A :class:`FisheyeCamera` is written with ``distortion_model: equidistant``
+    (ROS's name; in the OpenCV file too, where OpenCV has no key for it).
 
     Numbers are written with 17 significant digits (OpenCV) or Python's
     shortest round-trip repr, so a camera read back is bit-identical.
