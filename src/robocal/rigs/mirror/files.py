@@ -54,10 +54,10 @@ as written by ``cv2.FileStorage`` (YAML with ``%YAML:1.0`` and
 ``CameraInfo`` echo: ``width``, ``height``, ``K`` as 9 numbers, ``D``,
 ``distortion_model``) or by a JSON dump of ``cv2.calibrateCamera``'s
 ``mtx.tolist()`` and ``dist.tolist()``.
-Checked: the distortion vector has 4, 5, 8, 12 or 14 values and only
-``k1, k2, p1, p2, k3`` may be non-zero (the rational, thin-prism and tilted
-models are refused by name); a ``distortion_model`` other than ``plumb_bob``
-/ ``rational_polynomial`` (e.g. ``equidistant``, a fisheye) is refused; the
+Read by the core loader (:func:`robocal.camera.camera_from_section`, any file
+:func:`robocal.camera.load_camera` reads). Checked: the distortion vector has
+4, 5, 8, 12 or 14 values (the tilted model's ``tau_x, tau_y`` must be 0,
+refused by name); an equidistant (fisheye) camera is refused; the
 principal point must lie inside the ``width x height`` image. The image size
 must be that of the images the points come from: it is compared with each
 image file (ArUco path) and bounds the image points.
