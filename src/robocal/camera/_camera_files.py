@@ -35,8 +35,8 @@ from robocal.camera._fisheye import FisheyeCamera
 from robocal.camera._model import BROWN_CONRADY_MODELS, CameraModel, camera_from_document
 from robocal.errors import FileFormatError, InputError
 
-__all__ = ["CAMERA_FILE_FORMATS", "FISHEYE_MODELS", "load_camera", "camera_from_file", "camera_from_mapping", "camera_from_section",
-           "camera_file_text", "write_camera"]
+__all__ = ["CAMERA_FILE_FORMATS", "FISHEYE_MODELS", "load_camera", "camera_from_file", "camera_from_mapping",
+           "camera_from_section", "camera_file_text", "write_camera"]
 
 #: Formats :func:`write_camera` writes, with the file suffixes each may have.
 CAMERA_FILE_FORMATS = {"opencv": (".yaml", ".yml", ".xml"), "ros": (".yaml", ".yml"), "json": (".json",)}
@@ -44,8 +44,8 @@ CAMERA_FILE_FORMATS = {"opencv": (".yaml", ".yml", ".xml"), "ros": (".yaml", ".y
 #: ``distortion_model`` values (ROS, kalibr) and robocal ``model`` names of the equidistant fisheye (Kannala-Brandt).
 FISHEYE_MODELS = ("equidistant", "fisheye", "kannala_brandt", "kannala-brandt", "equi", "fisheye-kannala-brandt")
 
-#: ``distortion_model`` values of ROS's ``sensor_msgs/distortion_models.h`` (and kalibr's names) that are not
-#: Brown-Conrady; :func:`camera_from_document` says whether robocal represents them.
+#: Other camera models' names (kalibr's) that are neither Brown-Conrady nor equidistant: known, so
+#: :func:`camera_from_document` refuses them as models robocal does not represent, not as unknown names.
 _OTHER_KNOWN_MODELS = ("double_sphere", "omni", "fov")
 
 
