@@ -5,7 +5,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from robocal.camera import CameraModel
-from robocal.camera._boards import (
+from robocal.camera import (
     ArucoGridTarget,
     CharucoTarget,
     ChessboardTarget,
