@@ -60,6 +60,8 @@ MIN_CORNERS_PER_VIEW = 6
 MIN_VIEWS = 3
 #: Intrinsics correlated beyond this are named ``weakly_determined`` (one is nearly a function of the other).
 CORRELATION_LIMIT = 0.99
+#: Residual evaluations of one solve (see _fit).
+MAX_NFEV = 100
 #: Beyond this many free parameters (~100 views) the joint problem is solved with a sparse Jacobian.
 SPARSE_ABOVE_PARAMS = 620
 _DIST_LABELS = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4")
@@ -281,9 +283,13 @@ def _fit(views, x0, poses0, fixed, labels, *, outlier_sigma):
     # faster than dense 'trf', whose SVD per step suffers most from BLAS threads on a shared CPU.
     n = x0.size + 6 * len(views)
     sparse = n > SPARSE_ABOVE_PARAMS
+    # max_nfev: from cv2's start a well-posed model converges in 2-10 steps; an over-parameterised one
+    # (rational terms on a mild lens) crawls along its degenerate valley for 10^4 evaluations at these
+    # tolerances (~0.1 s each at 30 views, mostly the estimation layer's Jacobian assembly). Stopping is
+    # reported (not_converged next to rank_deficient); LM only accepts steps that lower the cost, so the
+    # result is never worse than cv2's start.
     return prob, solve(prob, method="trf" if sparse else "lm", x_scale="jac", outlier_sigma=outlier_sigma,
-                       ftol=1e-12, xtol=1e-12, gtol=1e-12, weak_vif=1e7, sparse=sparse,
-                       max_nfev=200 if sparse else None)
+                       ftol=1e-12, xtol=1e-12, gtol=1e-12, weak_vif=1e7, sparse=sparse, max_nfev=MAX_NFEV)
 
 
 def _opencv_start(views, image_size, fixed, labels):
