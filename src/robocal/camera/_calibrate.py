@@ -324,13 +324,24 @@ def _opencv_start(views, image_size, fixed, labels):
     return float(rms), x0, poses
 
 
+def fisheye_flag(name: str) -> int:
+    """``cv2.fisheye.calibrate``'s flag ``name``: in ``cv2.fisheye`` on OpenCV 4, in ``cv2`` on OpenCV 5.
+
+    OpenCV 5 moved the fisheye flags into the common calibration namespace
+    with other values (``CALIB_FIX_SKEW``: 8 in 4.x, 1 << 25 in 5.0).
+    """
+    import cv2
+
+    return int(getattr(cv2.fisheye, name, None) if hasattr(cv2.fisheye, name) else getattr(cv2, name))
+
+
 def _fisheye_start(views, image_size, fixed, labels):
     import cv2
 
-    flags = cv2.fisheye.CALIB_RECOMPUTE_EXTRINSIC | cv2.fisheye.CALIB_FIX_SKEW
+    flags = fisheye_flag("CALIB_RECOMPUTE_EXTRINSIC") | fisheye_flag("CALIB_FIX_SKEW")
     for i, lab in enumerate(labels[4:]):
         if fixed[4 + i]:
-            flags |= getattr(cv2.fisheye, f"CALIB_FIX_{lab.upper()}")
+            flags |= fisheye_flag(f"CALIB_FIX_{lab.upper()}")
     obj = [v.object_points.reshape(1, -1, 3).astype(np.float64) for v in views]
     img = [v.image_points.reshape(1, -1, 2).astype(np.float64) for v in views]
     try:
