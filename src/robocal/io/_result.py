@@ -48,8 +48,8 @@ from robocal.diagnostics import Diagnostic
 from robocal.errors import FileFormatError
 from robocal.io._atomic import atomic_write_text, sha256_file
 
-__all__ = ["SCHEMA", "READABLE_SCHEMAS", "CalibrationResult", "PoseEstimate", "to_jsonable", "write_result", "load_result", "hash_inputs",
-           "set_command_line"]
+__all__ = ["SCHEMA", "READABLE_SCHEMAS", "CalibrationResult", "PoseEstimate", "to_jsonable", "write_result",
+           "load_result", "hash_inputs", "set_command_line"]
 
 SCHEMA = "robocal.result/2"
 #: Older schemas :func:`load_result` still reads.
