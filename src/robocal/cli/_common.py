@@ -10,9 +10,7 @@ import argparse
 from pathlib import Path
 
 from robocal.io import prepare_out_dir, write_run  # noqa: F401 - re-exported: the CLI's helpers, library-level
-from robocal.workflow import ACCEPT_IMPLAUSIBLE_HELP, seed_value
-
-_seed = seed_value  # the old private name (rigs' plan --seed used it)
+from robocal.workflow import seed_value
 
 __all__ = [
     "add_out_argument",
@@ -22,7 +20,6 @@ __all__ = [
     "examples_epilog",
     "RawHelp",
     "OneLineErrorParser",
-    "add_accept_implausible_argument",
 ]
 
 
@@ -77,7 +74,3 @@ def add_out_argument(parser: argparse.ArgumentParser, *, help: str | None = None
 def add_seed_argument(parser: argparse.ArgumentParser, default: int = 0) -> None:
     parser.add_argument("--seed", type=seed_value, default=default, help="seed of the random generator (>= 0)")
 
-
-def add_accept_implausible_argument(parser: argparse.ArgumentParser) -> None:
-    """``--accept-implausible``: go on when the answer is implausible (see :mod:`robocal.plausibility`)."""
-    parser.add_argument("--accept-implausible", action="store_true", help=ACCEPT_IMPLAUSIBLE_HELP)

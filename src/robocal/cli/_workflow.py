@@ -13,10 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from robocal.cli._common import (RawHelp, add_accept_implausible_argument, add_out_argument, add_seed_argument,
+from robocal.cli._common import (RawHelp, add_out_argument, add_seed_argument,
                                  examples_epilog, prepare_out_dir, write_run)
 from robocal.errors import InputError, RobocalError
-from robocal.workflow import Command, Option, Workflow
+from robocal.workflow import Command, Option, Workflow, accept_implausible_option
 
 __all__ = ["add_workflow_commands", "add_report_command", "run_simulate", "run_calibrate", "rebuild_report",
            "calibrate_files"]
@@ -59,7 +59,7 @@ def add_workflow_commands(parser: argparse.ArgumentParser, wf: Workflow) -> None
             o.add_to(p)
         for o in opts:
             o.add_to(p)
-        add_accept_implausible_argument(p)
+        accept_implausible_option().add_to(p)
         add_out_argument(p)
         p.set_defaults(func=lambda a, wf=wf, opts=opts: run_calibrate(wf, a, opts))
     if wf.build_report is not None:

@@ -97,7 +97,7 @@ RIG = Workflow(
                        help="one HipYawPitch motor (tied joints) in the default model (with --data, the file's "
                             "tie_hip_yaw_pitch decides)"),
                 Option("--corner-sigma", type=float, default=0.3, help="expected corner noise [px]"),
-                # the type add_seed_argument gives every other --seed (a whole number >= 0)
+                # the type every other --seed has (robocal.workflow.seed_value) (a whole number >= 0)
                 Option("--seed", type=seed_value, default=0, help="seed of the random generator (>= 0)"),
             ),
         ),
