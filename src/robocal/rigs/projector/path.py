@@ -2,23 +2,8 @@
 
 The names of :mod:`.trajectory` (one projector) and :mod:`.handover` (several), in one place.
 
-A world path is given as waypoints plus a speed (:func:`sample_polyline`) or
-as timed samples. Each sample goes through seed eqs. (1) and (8) to joint
-angles, and the spot velocity through eqs. (2) and (9)^-1 to joint rates. A
-sample is infeasible when the spot is outside the reachable floor, within
-``nadir_margin`` of the nadir singularity (the pan rate is unbounded there),
-or when a joint would exceed its speed limit; infeasible samples are grouped
-into segments with their reason and the slow-down factor that would fix a
-speed violation. A path through the nadir is followed on the other IK branch
-``(theta1 + pi, -theta2)`` (constant pan, the tilt through zero) when the
-model's ``tilt_min < 0`` allows negative tilt; see :func:`joint_trajectory`.
-
-With several projectors (the seed's room has A and B), every sample is served
-by a projector that reaches it, whose beam is not blocked by a wall (walls
-are floor-to-ceiling partitions given as 2D segments; the beam's floor
-projection runs from the projector's nadir to the spot), and that stays
-feasible; the current projector is kept while it can serve (few hand-overs),
-otherwise the one farthest from its singular set and tilt limit takes over.
+How a path becomes timed joint commands on one projector: :mod:`.trajectory`'s docstring;
+which projector serves each sample and when it hands over: :mod:`.handover`'s.
 """
 
 from __future__ import annotations
