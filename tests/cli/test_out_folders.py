@@ -27,7 +27,7 @@ def _writer_rig(name="toy"):
 def _write(args, label):
     print("working")  # the expensive part a command does before it claims its folder
     out = prepare_out_dir(args.out, label)
-    for f in args.files.split(","):
+    for f in filter(None, args.files.split(",")):
         if f == "result.json":
             write_result(out / f, CalibrationResult(rig="toy", method="m", estimate={"x": 1.0}))
         else:
@@ -158,6 +158,20 @@ def test_a_failed_or_interrupted_run_leaves_incomplete_and_its_result_is_refused
     # the same command again cleans up and finishes
     assert run("toy", "first", "--out", out)[0] == 0
     assert not (out / INCOMPLETE).exists() and read_manifest(out)["state"] == "complete"
+
+
+def test_a_failed_run_that_wrote_nothing_leaves_no_folder_it_made(tmp_path, run, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    # the default time-stamped folder and a new --out: gone with the error
+    code, _, err = run("toy", "first", "--files", "", "--then", "error")
+    assert code == 2 and err.count("\n") == 1
+    assert list(tmp_path.iterdir()) == []
+    assert run("toy", "first", "--files", "", "--then", "error", "--out", tmp_path / "new")[0] == 2
+    assert not (tmp_path / "new").exists()
+    # a folder that existed before the run stays, with the record of the failure
+    (tmp_path / "mine").mkdir()
+    assert run("toy", "first", "--files", "", "--then", "error", "--out", tmp_path / "mine")[0] == 2
+    assert read_manifest(tmp_path / "mine")["state"] == "failed" and (tmp_path / "mine" / INCOMPLETE).is_file()
 
 
 def test_a_killed_run_that_recorded_no_files_still_owns_them(tmp_path, run):

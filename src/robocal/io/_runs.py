@@ -123,13 +123,23 @@ class RunFolder:
     label: str
     manifest: dict
     kept: set[str] = field(default_factory=set)
+    created: bool = False
 
     def close(self, state: str, error: str | None = None) -> None:
         """Record the run's end: its files, ``state``; remove ``INCOMPLETE`` when ``state == 'complete'``.
 
-        Best effort: a folder that became unwritable keeps its ``INCOMPLETE``.
+        A failed run that made the folder and wrote nothing into it removes
+        the folder: a mistyped input must not leave an empty
+        ``robocal-out-*`` folder behind per attempt (the error line is the
+        record). Best effort: a folder that became unwritable keeps its
+        ``INCOMPLETE``.
         """
         try:
+            if state != "complete" and self.created and not _files(self.path):
+                for name in (INCOMPLETE, MANIFEST):
+                    (self.path / name).unlink(missing_ok=True)
+                self.path.rmdir()
+                return
             self.write(state, error)
             if state == "complete":
                 (self.path / INCOMPLETE).unlink(missing_ok=True)
@@ -284,6 +294,7 @@ def claim_folder(out: Path, label: str, *, force: bool | None = None) -> Path:
     run = active_run()
     out = Path(out)
     _refuse_a_file(out)
+    created = not out.exists()
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -306,7 +317,7 @@ def claim_folder(out: Path, label: str, *, force: bool | None = None) -> Path:
         (out / INCOMPLETE).write_text(
             f"robocal: the `{run.command or label}` run started {manifest['started']} has not finished; "
             f"its files are not a result (see {MANIFEST}).\n", encoding="utf-8")
-        folder = RunFolder(out, label, manifest, kept)
+        folder = RunFolder(out, label, manifest, kept, created=created)
         folder.write("running")
     except OSError as exc:
         raise InputError(f"cannot write into {out} ({exc.strerror or exc})", source="--out") from None
