@@ -39,6 +39,9 @@ The steps, with the keywords the core passes (a rig's function may take
 ``build_report(result, *, base_dir) -> Report``
     The report, from the result alone (``base_dir``: the result's folder, for
     files it names), so that ``robocal report`` rebuilds the same page.
+``write_outputs(result, out_dir) -> list[Path]``, optional
+    Files of the rig's own beside ``result.json`` (the camera rig's camera in
+    OpenCV, ROS and JSON form), written from the result alone, atomically.
 ``summary(result) -> str``, optional
     The lines printed after ``calibrate`` (default: the residual RMS).
 ``demo(ctx: DemoContext) -> DemoOutcome``
@@ -65,7 +68,7 @@ __all__ = ["Workflow", "Option", "Command", "DemoContext", "DemoOutcome", "STEPS
            "ACCEPT_IMPLAUSIBLE_HELP", "accept_implausible_option", "number_at_least"]
 
 #: The steps a workflow may declare, in the order the core runs them.
-STEPS = ("simulate", "load_input", "calibrate", "to_result", "build_report", "summary", "demo")
+STEPS = ("simulate", "load_input", "calibrate", "to_result", "build_report", "write_outputs", "summary", "demo")
 
 
 def resolve(step: Callable | str | None) -> Callable | None:
@@ -241,14 +244,15 @@ class Workflow:
         ``robocal <name> ...``; also the ``rig`` field of its result files.
     help, description : str
         One line for ``robocal --help``; the text of ``robocal <name> --help``.
-    simulate, load_input, calibrate, to_result, build_report, summary, demo
+    simulate, load_input, calibrate, to_result, build_report, write_outputs, summary, demo
         The steps (callables or ``"module:attr"``); ``None`` where the rig has
         no such step (its command is then not built).
     simulate_options, calibrate_options : tuple of Option
         The options of the two core-built commands.
     input_arguments : tuple of Option
         The positional inputs of ``calibrate`` (default: one ``input`` file),
-        handed to ``load_input`` in order.
+        handed to ``load_input`` in order (an argument with ``nargs`` hands
+        each of its values).
     simulate_help, calibrate_help, calibrate_description, simulate_description : str
         Help texts of the core-built commands.
     simulate_examples, calibrate_examples : tuple of str
@@ -272,6 +276,7 @@ class Workflow:
     calibrate: Callable | str | None = None
     to_result: Callable | str | None = None
     build_report: Callable | str | None = None
+    write_outputs: Callable | str | None = None
     summary: Callable | str | None = None
     demo: Callable | str | None = None
     simulate_options: tuple = ()

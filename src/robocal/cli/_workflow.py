@@ -109,7 +109,8 @@ def calibrate_files(wf: Workflow, paths, *, out_dir: Path, input_options=None, c
     """
     from robocal.io import hash_inputs
 
-    paths = [Path(p) for p in paths]
+    # an input argument with nargs (IMAGES...) arrives as a list: each of its values is one input
+    paths = [Path(p) for v in paths for p in (v if isinstance(v, (list, tuple)) else [v])]
     try:
         inp = wf.step("load_input")(*paths, **(input_options or {}))
         cal = wf.step("calibrate")(inp, out_dir=Path(out_dir), progress=progress,
@@ -136,6 +137,9 @@ def run_calibrate(wf: Workflow, args, options=()) -> int:
         calibrate_options=_options_for(options, args, "calibrate"),
         accept_implausible=args.accept_implausible, progress=True)
     write_run(out, result, report)
+    extra = wf.step("write_outputs")
+    for p in (extra(result, out) if extra is not None else None) or ():
+        print(f"wrote {p}")
     print(summary_text(wf, result))
     return 0
 
