@@ -211,3 +211,59 @@ def test_image_files_read_one_by_one_and_a_damaged_one_named(tmp_path):
     bad.write_bytes(paths[0].read_bytes()[:200])
     with pytest.raises(FileFormatError, match=r"cut.png"):
         detect_targets([*paths, bad], target)
+
+
+def _edge_blur_per_point(img, pts, half):
+    """The blur estimate written point by point on the whole image's gradient (the definition)."""
+    import cv2
+
+    f = img.astype(np.float32)
+    mag = np.hypot(cv2.Sobel(f, cv2.CV_32F, 1, 0, ksize=3) / 8.0, cv2.Sobel(f, cv2.CV_32F, 0, 1, ksize=3) / 8.0)
+    h, w = img.shape
+    out = []
+    for u, v in np.rint(pts).astype(int):
+        r0, r1, c0, c1 = max(v - half, 0), min(v + half + 1, h), max(u - half, 0), min(u + half + 1, w)
+        if r1 - r0 < 3 or c1 - c0 < 3:
+            continue
+        lo, hi = np.percentile(f[r0:r1, c0:c1], [2, 98])
+        g = float(mag[r0:r1, c0:c1].max())
+        if hi - lo > 10 and g > 0:
+            out.append((hi - lo) / (np.sqrt(2 * np.pi) * g))
+    return float(np.median(out)) if out else float("nan")
+
+
+def test_edge_blur_on_the_board_region_equals_the_whole_image_definition():
+    from robocal.camera._board_detect import _edge_blur
+
+    target = TARGETS["chessboard"]
+    img = render_target_view(CAM, target, pose(target), np.random.default_rng(2), blur_sigma=1.0, noise_sigma=2.0)
+    ids, uv = visible_target_points(CAM, target, pose(target))
+    rng = np.random.default_rng(3)
+    # the corners, and points anywhere (patches cut by the image's edge, or wholly outside it)
+    for pts in (uv, rng.uniform([-20, -20], [660, 500], (40, 2))):
+        for half in (3, 7, 12):
+            # same float32 pixels and gradients, gathered instead of cropped: equal to rounding
+            assert _edge_blur(img, pts, half) == pytest.approx(_edge_blur_per_point(img, pts, half), rel=1e-6)
+    assert np.isnan(_edge_blur(img, np.array([[-100.0, -100.0]]), 5))
+
+
+def test_duplicates_need_most_points_in_common_and_name_the_first_view():
+    from robocal.camera._board_detect import TargetDetection, _mark_duplicates
+
+    target = TARGETS["charuco"]
+    uv = np.random.default_rng(0).uniform(0, 600, (target.n_points, 2))
+
+    def det(name, ids, shift=0.0):
+        ids = np.asarray(ids)
+        return TargetDetection(name, target.object_points(ids), uv[ids] + shift, ids)
+
+    dets = [det("a", range(0, 30)), det("b", range(0, 30), 0.5), det("c", range(10, 35), 0.3),
+            det("d", range(0, 28), 0.1), det("f", range(6, 35), [2.5, 0.0]), det("e", range(3, 33), [1.25, 0.0])]
+    dets[3].issues.append("blurred: ...")  # an unusable view is neither judged nor compared with
+    _mark_duplicates(dets, 2.0)
+    assert dets[1].issues == ["duplicate: same corners as a (RMS 0.71 px < 2 px)"]
+    assert dets[2].issues == []  # 20 of 30 in common: < 80 %
+    assert dets[3].issues == ["blurred: ..."]
+    assert dets[4].issues == []  # 24 of 30 in common but 2.5 px away
+    # within 1.25 px of both a and f, with >= 80 % in common: the first kept view is named
+    assert dets[5].issues == ["duplicate: same corners as a (RMS 1.25 px < 2 px)"]

@@ -151,3 +151,51 @@ def test_detection_failures_are_clear():
     with pytest.raises(InputError, match="expected_uv"):
         img = render_planar_target(CAM, _poses(1, 1)[0], BOARD)
         detect_checkerboard(img, BOARD, expected_uv=np.zeros((5, 2)))
+
+
+# -- a large image is searched reduced, refined at full size --
+
+CAM2 = CameraModel(1200.0, 1210.0, 642.6, 477.4, (-0.28, 0.11, 8e-4, -6e-4, -0.02), 1280, 960)
+
+
+@pytest.fixture(scope="module")
+def large_view():
+    T = _poses(1, 11)[0]
+    img = render_planar_target(CAM2, T, BOARD, blur_sigma=0.7, noise_sigma=2.0, rng=np.random.default_rng(5))
+    return img, CAM2.project_points(BOARD.object_points(), T)
+
+
+def test_large_image_is_searched_reduced_and_refined_at_full_size(large_view, monkeypatch):
+    from robocal.camera import _detect
+
+    img, truth = large_view
+    uv, info = detect_checkerboard(img, BOARD, full_output=True)
+    assert info["scale"] == 2 and info["detector"] == "classic" and info["unrefined"] == ()
+    # The same noise-limited accuracy as at 640x480 (test_render_detect_recovers_corners_and_pose).
+    assert _rms(uv, truth) < 0.06
+    # the reduced search only seeds the refinement: from the full-size detector's corners it converges to
+    # the same saddle points (cornerSubPix stops at a 1e-5 px step; measured max difference 3e-5 px,
+    # float32 coordinates of a 1280 px image resolve 6e-5 px)
+    monkeypatch.setattr(_detect, "DETECT_MAX_SIDE", 10**6)
+    full, info_full = detect_checkerboard(img, BOARD, full_output=True)
+    assert info_full["scale"] == 1
+    assert np.max(np.linalg.norm(uv - full, axis=1)) < 2e-3
+    # refine=False is the detector's own output: never the reduced search
+    assert detect_checkerboard(img, BOARD, method="classic", refine=False, full_output=True)[1]["scale"] == 1
+
+
+def test_board_not_found_reduced_is_searched_at_full_size(large_view, monkeypatch):
+    import cv2
+
+    img, truth = large_view
+    real = cv2.findChessboardCorners
+    seen = []
+
+    def blind_when_small(image, *a, **k):  # a board too small to be seen in the reduced image
+        seen.append(image.shape)
+        return (False, None) if image.shape[1] < 1000 else real(image, *a, **k)
+
+    monkeypatch.setattr(cv2, "findChessboardCorners", blind_when_small)
+    uv, info = detect_checkerboard(img, BOARD, full_output=True)
+    assert seen == [(480, 640), (960, 1280)] and info["scale"] == 1 and info["detector"] == "classic"
+    assert _rms(uv, truth) < 0.06

@@ -99,22 +99,40 @@ def _edge_blur(img: np.ndarray, pts: np.ndarray, half: int) -> float:
     for a Gaussian blur of 0 / 0.7 / 1.5 / 2.5 / 4 px (rendered chessboard,
     noise 2 grey levels; ChArUco and grid within 0.15 px of it).
     """
-    f = img.astype(np.float32)
-    gx = cv2.Sobel(f, cv2.CV_32F, 1, 0, ksize=3) / 8.0
-    gy = cv2.Sobel(f, cv2.CV_32F, 0, 1, ksize=3) / 8.0
-    mag = np.hypot(gx, gy)
     h, w = img.shape
-    out = []
-    for u, v in np.rint(pts).astype(int):
-        r0, r1, c0, c1 = max(v - half, 0), min(v + half + 1, h), max(u - half, 0), min(u + half + 1, w)
-        if r1 - r0 < 3 or c1 - c0 < 3:
-            continue
-        patch = f[r0:r1, c0:c1]
-        lo, hi = np.percentile(patch, [2, 98])
-        g = float(mag[r0:r1, c0:c1].max())
-        if hi - lo > 10 and g > 0:
-            out.append((hi - lo) / (np.sqrt(2 * np.pi) * g))
-    return float(np.median(out)) if out else float("nan")
+    u, v = np.rint(pts).astype(int).T
+    r0, r1 = np.maximum(v - half, 0), np.minimum(v + half + 1, h)
+    c0, c1 = np.maximum(u - half, 0), np.minimum(u + half + 1, w)
+    ok = (r1 - r0 >= 3) & (c1 - c0 >= 3)
+    if not ok.any():
+        return float("nan")
+    # The gradient only where the patches are, plus the Sobel kernel's pixel: the same values as on
+    # the whole image (a crop edge inside the image is never read; one on the image's edge is its edge).
+    R0, R1 = max(int(r0[ok].min()) - 1, 0), min(int(r1[ok].max()) + 1, h)
+    C0, C1 = max(int(c0[ok].min()) - 1, 0), min(int(c1[ok].max()) + 1, w)
+    f = img[R0:R1, C0:C1].astype(np.float32)
+    gx = cv2.Sobel(f, cv2.CV_32F, 1, 0, ksize=3)
+    gy = cv2.Sobel(f, cv2.CV_32F, 0, 1, ksize=3)
+    r0, r1, c0, c1 = r0 - R0, r1 - R0, c0 - C0, c1 - C0
+    full = ok & (r1 - r0 == 2 * half + 1) & (c1 - c0 == 2 * half + 1)
+    lo, hi, g = [], [], []
+    if full.any():
+        # all whole patches at once: (n, (2 half + 1)^2) gathered by index; the gradient (Sobel / 8,
+        # the central difference's scale) only there
+        d = np.arange(2 * half + 1)
+        rows = (r0[full][:, None, None] + d[None, :, None]) * f.shape[1]
+        idx = (rows + c0[full][:, None, None] + d[None, None, :]).reshape(int(full.sum()), -1)
+        q = np.percentile(f.ravel()[idx], [2, 98], axis=1)
+        lo.append(q[0]), hi.append(q[1])
+        g.append(np.hypot(gx.ravel()[idx] / 8.0, gy.ravel()[idx] / 8.0).max(axis=1))
+    for k in np.flatnonzero(ok & ~full):  # patches cut by the image's edge
+        sl = np.s_[r0[k]:r1[k], c0[k]:c1[k]]
+        q = np.percentile(f[sl], [2, 98])
+        lo.append(q[:1]), hi.append(q[1:]), g.append([np.hypot(gx[sl] / 8.0, gy[sl] / 8.0).max()])
+    lo, hi, g = np.concatenate(lo), np.concatenate(hi), np.concatenate(g).astype(float)
+    keep = (hi - lo > 10) & (g > 0)
+    out = (hi - lo)[keep] / (np.sqrt(2 * np.pi) * g[keep])
+    return float(np.median(out)) if out.size else float("nan")
 
 
 def _spacing(pts: np.ndarray) -> float:
@@ -401,19 +419,31 @@ class DetectionSet:
 
 
 def _mark_duplicates(dets: list, limit: float) -> None:
-    kept = []
-    for d in dets:
-        if not d.usable:
-            continue
-        for k in kept:
-            common, ia, ib = np.intersect1d(d.ids, k.ids, return_indices=True)
-            if common.size >= 0.8 * max(d.n_points, k.n_points):
-                rms = float(np.sqrt(np.mean(np.sum((d.image_points[ia] - k.image_points[ib]) ** 2, axis=1))))
-                if rms < limit:
-                    d.issues.append(f"duplicate: same corners as {k.name} (RMS {rms:.2f} px < {limit:g} px)")
-                    break
-        else:
-            kept.append(d)
+    """Name each usable view whose corners repeat an earlier kept view's (see :func:`detect_targets`)."""
+    usable = [d for d in dets if d.usable and d.n_points]
+    if not usable:
+        return
+    n = 1 + max(int(d.ids.max()) for d in usable)
+    # each kept view's points by id (NaN where unseen): one comparison against all kept views at once
+    grid = np.full((len(usable), n, 2), np.nan)
+    counts, kept = np.zeros(len(usable)), []
+    for d in usable:
+        k = len(kept)
+        uv = np.full((n, 2), np.nan)
+        uv[d.ids] = d.image_points
+        if k:
+            both = ~np.isnan(grid[:k, :, 0]) & ~np.isnan(uv[:, 0])
+            common = both.sum(axis=1)
+            sq = np.where(both, np.sum((grid[:k] - uv) ** 2, axis=-1), 0.0).sum(axis=1)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                rms = np.sqrt(sq / common)
+            dup = (common >= 0.8 * np.maximum(d.n_points, counts[:k])) & (rms < limit)
+            if dup.any():
+                j = int(np.argmax(dup))  # the first kept view it repeats
+                d.issues.append(f"duplicate: same corners as {kept[j].name} (RMS {rms[j]:.2f} px < {limit:g} px)")
+                continue
+        grid[k], counts[k] = uv, d.n_points
+        kept.append(d)
 
 
 def _x_runs_down(d: TargetDetection, target: ChessboardTarget) -> bool:
