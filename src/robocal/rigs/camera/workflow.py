@@ -70,30 +70,47 @@ def _declared_unit(target_file) -> str | None:
     return None
 
 
+def _length_text(x: float) -> str:
+    return f"{x * 1e3:.3g} mm" if x < 1.0 else f"{x:.3g} m"
+
+
 def check_target_scale(target, *, target_source: str, declared: str | None, accept: bool = False):
     """Judge the target's physical size; name the unit slip when it is implausible.
 
     The reprojection residual of a planar target does not depend on its scale
-    (board and distances scale together), so the figure judged is the board's
-    size against :data:`BOARD_SIZE_RANGE_M` and the slips tried are the other
-    length units (:func:`robocal.plausibility.length_slips`): ``square: 25``
-    read as metres makes a 225 m board; ``/1000`` makes it 0.225 m.
-    Returns ``None`` or an ``implausible_input`` :class:`Diagnostic` (``accept``).
+    (board and distances scale together), so no residual can tell a wrong
+    unit: the figure judged is the board's size against
+    :data:`BOARD_SIZE_RANGE_M`, and the slip named is the other length unit
+    (:data:`robocal.plausibility.LENGTH_UNITS`) that brings it into the range
+    (``square: {value: 25, unit: m}`` makes a 225 m board; read as mm it is
+    0.225 m). Returns ``None``, or an ``implausible_input`` :class:`Diagnostic`
+    with ``accept``; raises :class:`ImplausibleInputError` otherwise.
     """
-    from robocal.plausibility import check_slips, length_slips
+    from robocal.errors import ImplausibleInputError
+    from robocal.plausibility import IMPLAUSIBLE_CODE, LENGTH_UNITS
 
     lo, hi = BOARD_SIZE_RANGE_M
     size = _board_size(target)
-
-    def excess(s):  # how many times the size is beyond the plausible range (1 inside it)
-        return max(s / hi, lo / s, 1.0)
-
+    if lo <= size <= hi:
+        return None
     key = "square" if target.kind != "aruco_grid" else "marker"
-    slips = length_slips(key, declared or "m", lambda k: excess(size * k))
-    return check_slips(what="board size's excess over the plausible 3 mm-5 m", residual=excess(size), unit="x",
-                       plausible=lo <= size <= hi,
-                       reason=f"the {target.describe()} is {size:.4g} m across, outside the plausible 3 mm-5 m",
-                       slips=slips, accept=accept, source=f"{target_source}: {key}", threshold=1.0)
+    declared = declared if declared in LENGTH_UNITS else "m"
+    msg = (f"the {target.describe()} would be {_length_text(size)} across; a calibration target is "
+           f"{_length_text(lo)}-{_length_text(hi)}")
+    # the other units that bring the board into the range; of two (25 "m" as cm: 2 m, as mm: 0.2 m) the one
+    # nearer a typical printed target (0.3 m) is named
+    fits = [(abs(np.log(size * f / LENGTH_UNITS[declared] / 0.3)), u, size * f / LENGTH_UNITS[declared])
+            for u, f in LENGTH_UNITS.items() if u != declared and lo <= size * f / LENGTH_UNITS[declared] <= hi]
+    slip = None
+    if fits:
+        _, unit, fixed = min(fits)
+        slip = f"{key}_{unit}_as_{declared}"
+        msg = f"`{key}` looks like {unit}, not {declared}: {msg}; read as {unit} it is {_length_text(fixed)}"
+    if accept:
+        return Diagnostic(IMPLAUSIBLE_CODE, f"accepted with --accept-implausible: {msg}",
+                          params=(slip,) if slip else ())
+    raise ImplausibleInputError(f"{msg} (fix the unit in the target file, or pass --accept-implausible to go on "
+                                "with it as given)", source=f"{target_source}: {key}", slip=slip)
 
 
 def _detection_warnings(inp) -> list[Diagnostic]:
