@@ -48,6 +48,8 @@ CASES = {
     "flow_cal": f"flow calibrate {E}/flow/calibration/run.yaml",
     "lp_fpdp": f"lineprofiler calibrate {E}/lineprofiler/fpdp_input.yaml",
     "lp_mct": f"lineprofiler calibrate {E}/lineprofiler/mct_input.yaml",
+    "camera_session": f"camera calibrate {E}/camera/camera_input.yaml",
+    "camera_folder": f"camera calibrate {E}/camera/images --target {E}/camera/target.yaml",
     "handeye": f"handeye calibrate {E}/lineprofiler/gripper_poses.csv {E}/lineprofiler/target_poses.csv",
 }
 

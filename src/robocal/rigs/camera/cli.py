@@ -62,6 +62,8 @@ RIG = Workflow(
         Option("--blur", type=number_at_least(float, 0.0), default=0.7, help="Gaussian blur sigma [px]"),
         Option("--noise", type=number_at_least(float, 0.0), default=2.0, help="grey-level noise std (0-255)"),
         Option("--vignetting", type=float, default=0.3, help="brightness loss at the image corners, 0-1"),
+        Option("--image-format", choices=("png", "jpg"), default="png",
+               help="lossless PNG or JPEG (quality 90, a quarter of the size)"),
         Option("--defects", action="store_true",
                help="add a defocused view and a duplicate shot (calibrate names and skips both)"),
     ),

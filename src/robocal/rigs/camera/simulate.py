@@ -107,7 +107,8 @@ class SimulatedSession:
 
 def simulate_session(out_dir, rng: np.random.Generator, *, views: int = 12, target: str = "chessboard",
                      width: int = 640, height: int = 480, blur: float = 0.7, noise: float = 2.0,
-                     vignetting: float = 0.3, defects: bool = False, progress: bool = False) -> SimulatedSession:
+                     vignetting: float = 0.3, defects: bool = False, image_format: str = "png",
+                     progress: bool = False) -> SimulatedSession:
     """Render ``views`` images of a target with the known :func:`default_camera`; write the session.
 
     Parameters
@@ -126,6 +127,9 @@ def simulate_session(out_dir, rng: np.random.Generator, *, views: int = 12, targ
         Add two views a real session has: one badly defocused (blur 4 px) and
         a second shot of the first pose (a duplicate); calibrate names and
         skips both.
+    image_format : {"png", "jpg"}
+        Lossless PNG, or JPEG of quality 90 (a quarter of the size; its
+        compression adds ~0.005 px to the corner noise; the shipped examples).
     """
     import cv2
     import yaml
@@ -137,6 +141,8 @@ def simulate_session(out_dir, rng: np.random.Generator, *, views: int = 12, targ
 
     if not isinstance(rng, np.random.Generator):
         raise InputError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+    if image_format not in ("png", "jpg"):
+        raise InputError(f"image_format: must be 'png' or 'jpg', got {image_format!r}")
     if int(views) < 3:
         raise InputError(f"views: a calibration needs >= 3 views, got {views}")
     for name, v in (("blur", blur), ("noise", noise)):
@@ -150,22 +156,23 @@ def simulate_session(out_dir, rng: np.random.Generator, *, views: int = 12, targ
     defect_names = {}
     if defects:
         shots.append((poses[0], 4.0))
-        defect_names[f"view_{len(shots) - 1:03d}.png"] = "defocused (blur 4 px)"
+        defect_names[f"view_{len(shots) - 1:03d}.{image_format}"] = "defocused (blur 4 px)"
         shots.append((poses[1], blur))
-        defect_names[f"view_{len(shots) - 1:03d}.png"] = "a second shot of view_001.png"
+        defect_names[f"view_{len(shots) - 1:03d}.{image_format}"] = f"a second shot of view_001.{image_format}"
     (out_dir / "images").mkdir(parents=True, exist_ok=True)
     images = []
     for k, (T, b) in enumerate(_progress(shots, desc="render", enabled=progress)):
         img = render_target_view(cam, tgt, T, rng, blur_sigma=b, noise_sigma=noise, vignetting=vignetting)
-        ok, buf = cv2.imencode(".png", img)
-        path = out_dir / "images" / f"view_{k:03d}.png"
+        params = [cv2.IMWRITE_JPEG_QUALITY, 90] if image_format == "jpg" else []
+        ok, buf = cv2.imencode(f".{image_format}", img, params)
+        path = out_dir / "images" / f"view_{k:03d}.{image_format}"
         atomic_write_bytes(path, buf.tobytes())
         images.append(path)
     target_file = out_dir / "target.yaml"
     atomic_write_text(target_file, "# robocal camera simulate: the rendered target\n"
                       + yaml.safe_dump(target_mapping(tgt), sort_keys=False))
     truth_file = write_camera(out_dir / "camera_truth.yaml", cam)
-    session = write_session(out_dir / INPUT_NAME, "images/*.png", target_file, truth_file=truth_file,
+    session = write_session(out_dir / INPUT_NAME, f"images/*.{image_format}", target_file, truth_file=truth_file,
                             comment=f"robocal camera simulate: {len(shots)} rendered views of the "
                                     f"{tgt.describe()}, blur {blur} px, noise {noise} grey levels")
     return SimulatedSession(session, images, target_file, truth_file, cam, tgt, poses, defect_names)
