@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 
 from robocal.geometry import invert_transform, matrix_from_rotvec, transform_from
-from robocal.rigs.lineprofiler.handeye import AXXB_METHODS, calibrate_hand_eye, calibrate_robot_world, transform_error
+from robocal.handeye import AXXB_METHODS, calibrate_hand_eye, calibrate_robot_world, transform_error
 
 CV = {"tsai": cv2.CALIB_HAND_EYE_TSAI, "park": cv2.CALIB_HAND_EYE_PARK, "horaud": cv2.CALIB_HAND_EYE_HORAUD,
       "andreff": cv2.CALIB_HAND_EYE_ANDREFF, "daniilidis": cv2.CALIB_HAND_EYE_DANIILIDIS}

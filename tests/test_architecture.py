@@ -80,7 +80,8 @@ def test_rig_cli_modules_are_declarations_only():
     # no numerical library and no rig library at module level, no long functions: the
     # work is in the rig's library modules, named by the Workflow's "module:attr" steps
     offenders = []
-    for cli in RIGS.glob("*/cli.py"):
+    # the core's hand-eye command (robocal.handeye, issue 13) is declared the way a rig's is
+    for cli in [*RIGS.glob("*/cli.py"), SRC / "handeye" / "cli.py"]:
         tree = ast.parse(cli.read_text(encoding="utf-8"))
         for node in tree.body:
             if isinstance(node, (ast.Import, ast.ImportFrom)):

@@ -7,7 +7,7 @@ from robocal.errors import InputError, NotEnoughDataError
 from robocal.geometry import apply_transform, invert_transform, transform_from
 from robocal.kinematics import DHChain
 from robocal.rigs.lineprofiler.fpdp import fpdp_calibrate
-from robocal.rigs.lineprofiler.handeye import transform_error
+from robocal.handeye import transform_error
 from robocal.rigs.lineprofiler.model import Block, ProfilerModel, Sphere, default_rig
 from robocal.rigs.lineprofiler.simulate import simulate_fpdp
 

@@ -7,7 +7,7 @@ import pytest
 
 from robocal.errors import DegenerateGeometryError, InputError
 from robocal.geometry import matrix_from_rotvec
-from robocal.rigs.lineprofiler.handeye import transform_error
+from robocal.handeye import transform_error
 from robocal.rigs.lineprofiler.mct import (
     _block_scan_residuals,
     _x_delta,

@@ -7,7 +7,7 @@ import pytest
 
 from robocal.geometry import matrix_from_rotvec, transform_from
 from robocal.rigs.lineprofiler.fpdp import fpdp_calibrate
-from robocal.rigs.lineprofiler.handeye import transform_error
+from robocal.handeye import transform_error
 from robocal.rigs.lineprofiler.mct import _x_delta
 from robocal.rigs.lineprofiler.model import ProfilerModel, default_rig
 from robocal.rigs.lineprofiler.refine import refine_sphere

@@ -1,4 +1,4 @@
-"""The lineprofiler and handeye commands on the example files, their errors, the demo."""
+"""The lineprofiler commands on the example files, their errors, the demo."""
 
 import json
 import re
@@ -9,11 +9,9 @@ import pytest
 
 from robocal.cli.main import main
 from robocal.errors import FileFormatError, ShapeError
-from robocal.estimation import truth_check
-from robocal.geometry import rotvec_from_matrix
 from robocal.io import load_result
 from robocal.rigs.lineprofiler.calibrate import calibrate_file
-from robocal.rigs.lineprofiler.cli import HANDEYE, RIG
+from robocal.rigs.lineprofiler.cli import RIG
 from robocal.workflow import DemoContext
 
 EX = Path(__file__).resolve().parents[3] / "examples" / "lineprofiler"
@@ -81,31 +79,8 @@ def test_calibrate_with_joint_sigma(tmp_path):
         calibrate_file(y)
 
 
-def test_handeye_example(tmp_path, capsys):
-    cal = tmp_path / "cal"
-    assert main(["handeye", "calibrate", str(EX / "gripper_poses.csv"), str(EX / "target_poses.csv"),
-                 "--method", "park", "--out", str(cal)]) == 0
-    assert "T_gripper_cam translation [mm] (park+refine): " in capsys.readouterr().out
-    res = json.loads((cal / "result.json").read_text())
-    assert np.allclose(res["estimate"]["T_gripper_cam.translation"], [0.035, 0.06, 0.12], atol=2e-3)
-    result = load_result(cal / "result.json")
-    assert list(result.poses) == ["T_gripper_cam", "T_base_target"] and _bare_matrices(result) == []
-    # the fixed target is estimated with X by the refinement: it has a std too
-    assert all(0 < v < 1e-2 for v in res["std"]["T_base_target.translation"])
-    assert len(res["diagnostics"]["closure_residuals"]["rotation_rad"]) == 16
-    page = _rebuilt_equal(cal, tmp_path / "rep", "handeye", capsys)
-    assert "Closed-form solvers compared" in page and all(m in page for m in ("tsai", "horaud", "daniilidis"))
-
-
-def test_cli_bad_input_is_one_line(tmp_path, capsys):
-    bad = tmp_path / "p.csv"
-    bad.write_text("t [s], x [m], y [m], z [m], qx, qy, qz, qw\n0, 0, 0, 0, 0, 0, 0.5, 0.5\n")
-    assert main(["handeye", "calibrate", str(bad), str(bad), "--out", str(tmp_path / "o")]) == 2
-    assert "unit quaternion" in capsys.readouterr().err
-
-
 def test_rigs_registered_and_demo(tmp_path):
-    assert RIG.name == "lineprofiler" and HANDEYE.name == "handeye"
+    assert RIG.name == "lineprofiler"
     out = RIG.step("demo")(DemoContext(tmp_path, np.random.default_rng(2026), progress=False))
     assert out.passed, out.summary
     assert "undetermined" in out.summary
@@ -162,29 +137,6 @@ def test_mct_input_errors_are_one_line(tmp_path, capsys, file, edit, message):
     assert len(err.splitlines()) == 1 and message in err, err
 
 
-def test_handeye_robot_world_example(tmp_path, capsys):
-    # the same two pose lists give AX = ZB: T_gripper_cam and T_base_target together
-    assert main(["handeye", "robot-world", str(EX / "gripper_poses.csv"), str(EX / "target_poses.csv"),
-                 "--out", str(tmp_path)]) == 0
-    assert "T_gripper_cam translation [mm]: 35.187 +/- 1.108, 59.455 +/- 0.390, 120.385 +/- 0.248" \
-        in capsys.readouterr().out
-    res = json.loads((tmp_path / "result.json").read_text())
-    assert res["method"] == "robot-world shah+refine"
-    result = load_result(tmp_path / "result.json")
-    assert set(result.poses) == {"T_target_base", "T_cam_gripper", "T_base_target", "T_gripper_cam"}
-    assert _bare_matrices(result) == []
-    # 'robocal report' rebuilds a robot-world result through the handeye workflow as well
-    _rebuilt_equal(tmp_path, tmp_path / "rep", "handeye", capsys)
-    T = result.pose("T_gripper_cam").T
-    assert np.allclose(T[:3, 3], [0.035, 0.06, 0.12], atol=2e-3)  # 0.2 mm / 1 mrad pose noise, 16 poses
-    assert all(v is not None and 0 < v < 3e-3 for v in res["std"]["T_cam_gripper.translation"])
-    assert np.allclose(result.pose("T_base_target").T @ result.pose("T_target_base").T, np.eye(4), atol=1e-12)
-    # the inverses carry their std too (first order through the inverse), and the CLI prints it
-    st = np.array(res["std"]["T_gripper_cam.translation"])
-    assert np.all((st > 0) & (st < 3e-3)) and len(res["std"]["T_gripper_cam.rotvec"]) == 3
-    assert np.all(np.abs(T[:3, 3] - [0.035, 0.06, 0.12]) < 4 * st)
-
-
 def test_mct_arm_sigma_enters_the_covariance(tmp_path):
     yaml_path = _mct_copy(tmp_path)
     yaml_path.write_text(yaml_path.read_text().replace("# arm_sigma: {length: 0.3", "arm_sigma: {length: 0.3"))
@@ -193,22 +145,3 @@ def test_mct_arm_sigma_enters_the_covariance(tmp_path):
     assert res["diagnostics"]["arm_dh_sigma"] == pytest.approx({"length_m": 3e-4, "angle_rad": np.deg2rad(0.1)})
     # 0.3 mm of arm error dominates the 0.03-0.08 mm the tracker and the scan leave
     assert all(v > 2.5e-4 for v in np.array(res["std"]["T_E_L.translation"])[[0, 2]])
-
-
-def test_handeye_simulate_calibrate_recovers_the_truth(tmp_path, capsys):
-    """``handeye simulate`` writes the two lists and their truth; ``calibrate`` finds X within its std (NEES)."""
-    import yaml
-
-    sim, cal = tmp_path / "sim", tmp_path / "cal"
-    assert main(["handeye", "simulate", "--seed", "3", "--out", str(sim)]) == 0
-    assert main(["handeye", "calibrate", str(sim / "gripper_poses.csv"), str(sim / "target_poses.csv"),
-                 "--out", str(cal)]) == 0
-    capsys.readouterr()
-    truth = yaml.safe_load((sim / "truth.yaml").read_text())
-    pose = load_result(cal / "result.json").pose("T_gripper_cam")
-    R, t = np.array(truth["T_gripper_cam"]["rotation"]), np.array(truth["T_gripper_cam"]["translation"])
-    err = np.r_[rotvec_from_matrix(pose.T[:3, :3] @ R.T), pose.T[:3, 3] - t]   # left rotation error, as the std
-    check = truth_check(err, np.r_[pose.std_rotation, pose.std_translation])
-    assert check.passed, check.to_dict()
-    # and the check can fail: the same errors against a std 10x too small
-    assert not truth_check(err, np.r_[pose.std_rotation, pose.std_translation] / 10).passed

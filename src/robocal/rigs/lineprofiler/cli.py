@@ -1,8 +1,8 @@
-"""``robocal lineprofiler`` and ``robocal handeye``, declared (:mod:`robocal.workflow`).
+"""``robocal lineprofiler``, declared (:mod:`robocal.workflow`).
 
 The steps live in the library: :mod:`.calibrate` (load, calibrate, result),
-:mod:`.report`, :mod:`.workflow` (simulate, summary, demo, ``compare``) and
-:mod:`.handeye_workflow` (the two pose lists, AX = XB, ``robot-world``).
+:mod:`.report`, :mod:`.workflow` (simulate, summary, demo, ``compare``).
+``robocal handeye`` is the core's (:mod:`robocal.handeye.cli`).
 """
 
 from __future__ import annotations
@@ -12,11 +12,10 @@ from pathlib import Path
 from robocal.cli._common import examples_epilog
 from robocal.workflow import Command, Option, Workflow, accept_implausible_option, number_at_least, seed_value
 
-__all__ = ["RIG", "HANDEYE"]
+__all__ = ["RIG"]
 
 EXAMPLES = Path("examples/lineprofiler")
 _LP = "robocal.rigs.lineprofiler"
-_HE = f"{_LP}.handeye_workflow"
 
 
 _POSES = Option("--poses", type=number_at_least(int, 5, why="FPDP fits X and the sphere centre from 5 or more"), default=16,
@@ -76,47 +75,16 @@ RIG = Workflow(
 )
 
 
-_PAIR = (Option("gripper_poses", type=Path, help="T_base_gripper list (CSV/YAML, scalar-last quaternions)"),
-         Option("target_poses", type=Path, help="T_cam_target list (CSV/YAML)"))
+def __getattr__(name: str):
+    # the hand-eye declaration moved to the core (robocal.handeye.cli); the old entry point
+    # "robocal.rigs.lineprofiler.cli:HANDEYE" of an older install keeps resolving for one release
+    if name == "HANDEYE":
+        import warnings
 
-HANDEYE = Workflow(
-    name="handeye",
-    help="AX = XB hand-eye solvers (Tsai, Park, Horaud, Andreff, Daniilidis) and robot-world AX = ZB, "
-         "with refinement",
-    description="Classic hand-eye calibration from pose lists (see docs/rigs/lineprofiler.md).\n\n"
-                + examples_epilog("robocal handeye simulate --out handeye-sim",
-                            f"robocal handeye calibrate {EXAMPLES}/gripper_poses.csv {EXAMPLES}/target_poses.csv "
-                            "--method park --out he",
-                            f"robocal handeye robot-world {EXAMPLES}/gripper_poses.csv {EXAMPLES}/target_poses.csv "
-                            "--out rw",
-                            "robocal handeye report he/result.json --out he-report"),
-    simulate=f"{_HE}:simulate_files",
-    load_input=f"{_HE}:load_pose_pair",
-    calibrate=f"{_HE}:calibrate",
-    to_result=f"{_HE}:to_result",
-    build_report=f"{_HE}:build_report",
-    summary=f"{_HE}:summary",
-    simulate_help="write two simulated pose lists (gripper, target) and their truth",
-    simulate_options=(_POSES, _NOISE_FREE),
-    simulate_examples=("robocal handeye simulate --out handeye-sim --seed 1",),
-    calibrate_help="eye-in-hand X = T_gripper_cam from two pose lists",
-    input_arguments=_PAIR,
-    calibrate_options=(
-        Option("--method", default="tsai", choices=["tsai", "park", "horaud", "andreff", "daniilidis"],
-               help="closed-form AX = XB solver (then refined unless --no-refine)"),
-        Option("--no-refine", action="store_true", help="closed form only (no covariance)"),
-    ),
-    calibrate_examples=(f"robocal handeye calibrate {EXAMPLES}/gripper_poses.csv {EXAMPLES}/target_poses.csv "
-                        "--method park --out he",),
-    commands=(
-        Command("robot-world", help="A X = Z B: T_gripper_cam and T_base_target together (Shah + refinement)",
-                run=f"{_HE}:run_robot_world",
-                options=(*_PAIR,
-                         Option("--no-refine", action="store_true", help="Shah's closed form only (no covariance)"),
-                         accept_implausible_option()),
-                examples=(f"robocal handeye robot-world {EXAMPLES}/gripper_poses.csv {EXAMPLES}/target_poses.csv "
-                          "--out rw",)),
-    ),
-    simulated_inputs=("gripper_poses.csv", "target_poses.csv"),
-    quick_simulate=("--poses", "8"),
-)
+        from robocal._deprecation import REMOVED_IN
+        from robocal.handeye.cli import HANDEYE
+
+        warnings.warn(f"robocal.rigs.lineprofiler.cli.HANDEYE is deprecated and will be removed in {REMOVED_IN}; "
+                      "use robocal.handeye.cli.HANDEYE instead", DeprecationWarning, stacklevel=2)
+        return HANDEYE
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

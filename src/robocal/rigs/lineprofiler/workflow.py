@@ -131,7 +131,7 @@ def demo(ctx: DemoContext) -> DemoOutcome:
     from robocal.report import truth_section
     from robocal.rigs.lineprofiler.calibrate import calibrate_sphere
     from robocal.rigs.lineprofiler.compare import run_comparison
-    from robocal.rigs.lineprofiler.handeye import transform_error
+    from robocal.handeye import transform_error
     from robocal.rigs.lineprofiler.model import default_rig
     from robocal.rigs.lineprofiler.report import build_report, comparison_sections
     from robocal.rigs.lineprofiler.result import result_from

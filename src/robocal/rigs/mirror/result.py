@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from robocal.geometry import rotvec_from_matrix
+from robocal.geometry import PoseWithCovariance
 from robocal.io import CalibrationResult
 
 __all__ = ["result_from_calibration", "relative_image_paths", "pose_error", "solver_record", "upgraded",
@@ -50,9 +50,8 @@ SOLVER_FIELDS = ("method", "loss", "status", "message", "success", "iterations",
 
 def pose_error(T_est, T_true) -> np.ndarray:
     """``[rotvec(R_est R_true^T) [rad], t_est - t_true [m]]`` (6,): the error on the covariance's (left) side."""
-    T_est = np.asarray(T_est, dtype=float).reshape(4, 4)
-    T_true = np.asarray(T_true, dtype=float).reshape(4, 4)
-    return np.concatenate([rotvec_from_matrix(T_est[:3, :3] @ T_true[:3, :3].T), T_est[:3, 3] - T_true[:3, 3]])
+    return PoseWithCovariance(np.asarray(T_est, dtype=float).reshape(4, 4)).error_to(
+        np.asarray(T_true, dtype=float).reshape(4, 4)).vector
 
 
 def relative_image_paths(image_paths: dict, base_dir) -> dict:

@@ -1,92 +1,22 @@
-"""Classic hand-eye solvers: AX = XB (eye-in-hand) and AX = ZB (robot-world).
+"""Deprecated alias of :mod:`robocal.handeye` (hand-eye became a core package, issue 13); removed in robocal 0.3.
 
-Frames and names (see ``docs/conventions.md``: ``T_a_b`` maps b into a):
-
-* eye-in-hand, absolute poses: ``T_base_gripper[i]`` from the robot and
-  ``T_cam_target[i]`` from the sensor; unknown ``X = T_gripper_cam`` and the
-  fixed target ``Y = T_base_target = T_base_gripper[i] X T_cam_target[i]``.
-  These are OpenCV's ``R/t_gripper2base``, ``R/t_target2cam`` and
-  ``R/t_cam2gripper`` (``cv2.calibrateHandEye``).
-* relative motions: for a pair (i, j), ``A = T_base_gripper[j]^-1 T_base_gripper[i]``
-  (gripper motion) and ``B = T_cam_target[j] T_cam_target[i]^-1`` (sensor
-  motion) satisfy ``A X = X B``.
-* robot-world: ``A[i] X = Z B[i]`` with ``A = T_cam_world``,
-  ``B = T_gripper_base``, ``X = T_world_base`` and ``Z = T_cam_gripper``
-  (``cv2.calibrateRobotWorldHandEye``'s ``world2cam``, ``base2gripper``,
-  ``base2world``, ``gripper2cam``).
-
-Closed-form rotation solvers: Tsai-Lenz (modified Rodrigues vectors),
-Park-Martin (log map / orthogonal Procrustes), Horaud-Dornaika (unit
-quaternions, eigenvector), Andreff (Kronecker null space), Daniilidis (dual
-quaternions, rotation and translation together); Shah (Kronecker) for AX = ZB.
-Every solver can be followed by a nonlinear refinement on all poses
-(:mod:`robocal.estimation`), which gives the covariance.
-
-Modules: :mod:`.motions` (pose pairs, relative motions, the excitation check),
-:mod:`.axxb` (closed-form AX = XB), :mod:`.refine` (AX = XB refined, with
-covariance; :func:`invert_with_covariance`), :mod:`.axzb` (robot-world AX =
-ZB), :mod:`.plausibility` (:func:`judge_poses`: the slip behind implausible
-pose lists). Everything below is importable from this package. The functions
-take pose arrays only (no file, no rig): the command-line workflow lives in
-:mod:`robocal.rigs.lineprofiler.handeye_workflow`.
-
-Degenerate motion sets are refused, never answered with an identity: if every
-relative rotation is below ``min_rotation``, or all rotation axes are parallel
-(planar motion of a mobile robot, seed 002; a single revolute joint), a
-:class:`~robocal.errors.DegenerateGeometryError` names the undetermined part
-(rotation about the common axis from rotations alone, translation along it).
-
-References
-----------
-R. Tsai, R. Lenz, IEEE T-RA 5(3), 1989. F. Park, B. Martin, IEEE T-RA 10(5),
-1994. R. Horaud, F. Dornaika, IJRR 14(3), 1995. N. Andreff, R. Horaud,
-B. Espiau, 3DIM 1999. K. Daniilidis, IJRR 18(3), 1999. M. Shah, J. Mech. Rob.
-5(3), 2013.
+``robocal.rigs.lineprofiler.handeye`` and its modules (``.axxb``, ``.axzb``,
+``.motions``, ``.plausibility``, ``.refine``) are the core's modules under their
+old names, so old imports keep working (with one ``DeprecationWarning``) for
+one release.
 """
 
+import sys
+import warnings
 
-from robocal.rigs.lineprofiler.handeye.axxb import AXXB_METHODS, solve_ax_xb
-from robocal.rigs.lineprofiler.handeye.axzb import RobotWorldResult, calibrate_robot_world
-from robocal.rigs.lineprofiler.handeye.motions import (
-    MAX_ALL_PAIRS,
-    MIN_AXIS_SPREAD,
-    MIN_ROTATION,
-    WEAK_AXIS_SPREAD,
-    MotionCheck,
-    check_motions,
-    relative_motions,
-    transform_error,
-)
-from robocal.rigs.lineprofiler.handeye.plausibility import (
-    REACH_FACTOR,
-    ROT_TRY,
-    TRANS_FLOOR,
-    TRANS_ROT_RATIO_MAX,
-    closure_residuals,
-    judge_poses,
-)
-from robocal.rigs.lineprofiler.handeye.refine import HandEyeResult, calibrate_hand_eye, invert_with_covariance
+from robocal._deprecation import REMOVED_IN
+from robocal.handeye import *  # noqa: F401,F403
+from robocal.handeye import __all__  # noqa: F401
+from robocal.handeye import axxb, axzb, motions, plausibility, refine
 
-__all__ = [
-    "AXXB_METHODS",
-    "MIN_ROTATION",
-    "MIN_AXIS_SPREAD",
-    "WEAK_AXIS_SPREAD",
-    "MAX_ALL_PAIRS",
-    "TRANS_ROT_RATIO_MAX",
-    "TRANS_FLOOR",
-    "ROT_TRY",
-    "REACH_FACTOR",
-    "invert_with_covariance",
-    "HandEyeResult",
-    "RobotWorldResult",
-    "MotionCheck",
-    "relative_motions",
-    "check_motions",
-    "solve_ax_xb",
-    "calibrate_hand_eye",
-    "calibrate_robot_world",
-    "transform_error",
-    "judge_poses",
-    "closure_residuals",
-]
+warnings.warn(f"robocal.rigs.lineprofiler.handeye is deprecated and will be removed in {REMOVED_IN}; "
+              "use robocal.handeye instead", DeprecationWarning, stacklevel=2)
+
+for _m in (axxb, axzb, motions, plausibility, refine):
+    sys.modules[f"{__name__}.{_m.__name__.rsplit('.', 1)[1]}"] = _m
+del _m

@@ -12,8 +12,8 @@ import numpy as np
 
 from robocal.errors import DegenerateGeometryError
 from robocal.geometry import invert_transform, project_to_rotation, transform_from
-from robocal.rigs.lineprofiler.handeye.axxb import solve_ax_xb
-from robocal.rigs.lineprofiler.handeye.motions import _pose_residual, relative_motions
+from robocal.handeye.axxb import solve_ax_xb
+from robocal.handeye.motions import _pose_residual, relative_motions
 
 __all__ = ["TRANS_ROT_RATIO_MAX", "TRANS_FLOOR", "ROT_TRY", "REACH_FACTOR", "closure_residuals", "judge_poses"]
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from robocal.errors import DegenerateGeometryError, InputError, NotEnoughDataError, ShapeError
 from robocal.geometry import matrix_from_quaternion, project_to_rotation, rotvec_from_matrix, skew, transform_from
-from robocal.rigs.lineprofiler.handeye.motions import (MIN_AXIS_SPREAD, MIN_ROTATION, MotionCheck, _check_poses,
+from robocal.handeye.motions import (MIN_AXIS_SPREAD, MIN_ROTATION, MotionCheck, _check_poses,
                                                        check_motions)
 
 __all__ = ["AXXB_METHODS", "solve_ax_xb"]

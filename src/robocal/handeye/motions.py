@@ -2,7 +2,7 @@
 
 Shared by the closed forms (:mod:`.axxb`, :mod:`.axzb`), the refinement
 (:mod:`.refine`) and the plausibility check (:mod:`.plausibility`). Frames as
-in :mod:`robocal.rigs.lineprofiler.handeye`.
+in :mod:`robocal.handeye`.
 """
 
 from __future__ import annotations
@@ -13,7 +13,8 @@ import numpy as np
 
 from robocal.diagnostics import Diagnostic
 from robocal.errors import DegenerateGeometryError, InputError, NotEnoughDataError, ShapeError
-from robocal.geometry import invert_transform, matrix_from_rotvec, rotation_angle, rotvec_from_matrix, transform_from
+from robocal.geometry import (PoseWithCovariance, invert_transform, matrix_from_rotvec, rotvec_from_matrix,
+                              transform_from)
 from robocal.validation import check_transform
 
 __all__ = ["MIN_ROTATION", "MIN_AXIS_SPREAD", "WEAK_AXIS_SPREAD", "MAX_ALL_PAIRS", "MotionCheck",
@@ -153,10 +154,12 @@ def check_motions(A, B=None, *, min_rotation: float = MIN_ROTATION, min_axis_spr
 
 
 def transform_error(T_est, T_true) -> tuple[float, float]:
-    """Rotation (rad) and translation (m) error of an estimate: angle of ``R_est R_true^T`` and ``|t_est - t_true|``."""
-    T_est, T_true = np.asarray(T_est, float), np.asarray(T_true, float)
-    return (float(rotation_angle(T_est[:3, :3] @ T_true[:3, :3].T)),
-            float(np.linalg.norm(T_est[:3, 3] - T_true[:3, 3])))
+    """Rotation (rad) and translation (m) error of an estimate: angle of ``R_est R_true^T`` and ``|t_est - t_true|``.
+
+    :meth:`robocal.geometry.PoseWithCovariance.error_to`'s first two fields (kept for its callers).
+    """
+    err = PoseWithCovariance(T_est).error_to(T_true)
+    return float(err.rotation), float(err.translation)
 
 
 def _perturbed(T0, x):

@@ -15,10 +15,10 @@ import numpy as np
 from robocal.errors import DegenerateGeometryError, NotEnoughDataError, ShapeError
 from robocal.estimation import Problem, solve
 from robocal.geometry import invert_transform, project_to_rotation, transform_from
-from robocal.rigs.lineprofiler.handeye.motions import (_LABELS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses,
+from robocal.handeye.motions import (_LABELS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses,
                                                        _pair_indices, _perturbed, _pose_residual, _sigmas,
                                                        check_motions)
-from robocal.rigs.lineprofiler.handeye.plausibility import judge_poses
+from robocal.handeye.plausibility import judge_poses
 
 __all__ = ["RobotWorldResult", "calibrate_robot_world"]
 

@@ -14,11 +14,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from robocal.estimation import Problem, solve
-from robocal.geometry import invert_transform, project_to_rotation, skew, transform_from
-from robocal.rigs.lineprofiler.handeye.axxb import _check_method, solve_ax_xb
-from robocal.rigs.lineprofiler.handeye.motions import (_LABELS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses,
+from robocal.geometry import PoseWithCovariance, project_to_rotation, transform_from
+from robocal.handeye.axxb import _check_method, solve_ax_xb
+from robocal.handeye.motions import (_LABELS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses,
                                                        _perturbed, _pose_residual, _sigmas, relative_motions)
-from robocal.rigs.lineprofiler.handeye.plausibility import judge_poses
+from robocal.handeye.plausibility import judge_poses
 from robocal.validation import check_array, check_transform
 
 __all__ = ["HandEyeResult", "calibrate_hand_eye", "invert_with_covariance"]
@@ -140,15 +140,8 @@ def invert_with_covariance(T, cov):
 
     Both covariances are over ``(rx, ry, rz, tx, ty, tz)``: the rotation vector
     of ``R_perturbed R^T`` (rad) and the translation (m), the convention of
-    :class:`RobotWorldResult` and :class:`HandEyeResult`. With ``T = (R, t)``
-    and ``T^-1 = (R^T, -R^T t)``: ``d omega_inv = -R^T d omega``,
-    ``d t_inv = -R^T [t]x d omega - R^T d t``.
+    :class:`RobotWorldResult` and :class:`HandEyeResult`. Kept for its callers:
+    :meth:`robocal.geometry.PoseWithCovariance.inverse` (left side) does it.
     """
-    T = check_transform(T, "T")
-    cov = check_array(cov, "cov", shape=(6, 6))
-    R, t = T[:3, :3], T[:3, 3]
-    G = np.zeros((6, 6))
-    G[:3, :3] = -R.T
-    G[3:, :3] = -R.T @ skew(t)
-    G[3:, 3:] = -R.T
-    return invert_transform(T), G @ cov @ G.T
+    inv = PoseWithCovariance(check_transform(T, "T"), check_array(cov, "cov", shape=(6, 6))).inverse()
+    return inv.T, inv.cov

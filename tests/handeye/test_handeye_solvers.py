@@ -7,7 +7,7 @@ from opencv_reference import opencv  # cv2 on OpenCV 4; outputs recorded from 4.
 
 from robocal.errors import DegenerateGeometryError, InputError, NonFiniteError, NotEnoughDataError, ShapeError
 from robocal.geometry import invert_transform, matrix_from_angle, matrix_from_rotvec, rotvec_from_matrix, transform_from
-from robocal.rigs.lineprofiler.handeye import (
+from robocal.handeye import (
     AXXB_METHODS,
     calibrate_hand_eye,
     calibrate_robot_world,
@@ -157,7 +157,7 @@ def test_bad_input_errors():
 
 
 def test_invert_with_covariance_matches_finite_differences_and_sampling():
-    from robocal.rigs.lineprofiler.handeye import invert_with_covariance
+    from robocal.handeye import invert_with_covariance
 
     rng = np.random.default_rng(4)
     T = transform_from(matrix_from_rotvec([0.4, -1.1, 0.7]), [0.05, -0.2, 0.3])

@@ -1,0 +1,62 @@
+"""``robocal handeye``, declared (:mod:`robocal.workflow`): the steps live in :mod:`.workflow`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from robocal.cli._common import examples_epilog
+from robocal.workflow import Command, Option, Workflow, accept_implausible_option, number_at_least
+
+__all__ = ["HANDEYE"]
+
+EXAMPLES = Path("examples/lineprofiler")
+_HE = "robocal.handeye.workflow"
+
+_PAIR = (Option("gripper_poses", type=Path, help="T_base_gripper list (CSV/YAML, scalar-last quaternions)"),
+         Option("target_poses", type=Path, help="T_cam_target list (CSV/YAML)"))
+
+HANDEYE = Workflow(
+    name="handeye",
+    help="AX = XB hand-eye solvers (Tsai, Park, Horaud, Andreff, Daniilidis) and robot-world AX = ZB, "
+         "with refinement",
+    description="Classic hand-eye calibration from pose lists (see docs/handeye.md).\n\n"
+                + examples_epilog("robocal handeye simulate --out handeye-sim",
+                            f"robocal handeye calibrate {EXAMPLES}/gripper_poses.csv {EXAMPLES}/target_poses.csv "
+                            "--method park --out he",
+                            f"robocal handeye robot-world {EXAMPLES}/gripper_poses.csv {EXAMPLES}/target_poses.csv "
+                            "--out rw",
+                            "robocal handeye report he/result.json --out he-report"),
+    simulate=f"{_HE}:simulate_files",
+    load_input=f"{_HE}:load_pose_pair",
+    calibrate=f"{_HE}:calibrate",
+    to_result=f"{_HE}:to_result",
+    build_report=f"{_HE}:build_report",
+    summary=f"{_HE}:summary",
+    simulate_help="write two simulated pose lists (gripper, target) and their truth",
+    simulate_options=(
+        Option("--poses", type=number_at_least(int, 3, why="AX = XB needs 2 motions, i.e. 3 poses or more"),
+               default=16, help="number of simulated views of the target"),
+        Option("--noise-free", action="store_true", help="no measurement noise"),
+    ),
+    simulate_examples=("robocal handeye simulate --out handeye-sim --seed 1",),
+    calibrate_help="eye-in-hand X = T_gripper_cam from two pose lists",
+    input_arguments=_PAIR,
+    calibrate_options=(
+        Option("--method", default="tsai", choices=["tsai", "park", "horaud", "andreff", "daniilidis"],
+               help="closed-form AX = XB solver (then refined unless --no-refine)"),
+        Option("--no-refine", action="store_true", help="closed form only (no covariance)"),
+    ),
+    calibrate_examples=(f"robocal handeye calibrate {EXAMPLES}/gripper_poses.csv {EXAMPLES}/target_poses.csv "
+                        "--method park --out he",),
+    commands=(
+        Command("robot-world", help="A X = Z B: T_gripper_cam and T_base_target together (Shah + refinement)",
+                run=f"{_HE}:run_robot_world",
+                options=(*_PAIR,
+                         Option("--no-refine", action="store_true", help="Shah's closed form only (no covariance)"),
+                         accept_implausible_option()),
+                examples=(f"robocal handeye robot-world {EXAMPLES}/gripper_poses.csv {EXAMPLES}/target_poses.csv "
+                          "--out rw",)),
+    ),
+    simulated_inputs=("gripper_poses.csv", "target_poses.csv"),
+    quick_simulate=("--poses", "8"),
+)

@@ -1,0 +1,322 @@
+"""The ``handeye`` workflow's steps (:mod:`robocal.workflow`): two pose lists -> X = T_gripper_cam.
+
+``robocal handeye calibrate GRIPPER TARGET`` (AX = XB, one closed form then the
+refinement) and ``robocal handeye robot-world GRIPPER TARGET`` (AX = ZB) over
+the library :mod:`robocal.handeye`; ``simulate`` writes the
+two lists with their truth (:func:`.simulate.simulate_eye_in_hand`). The
+declaration is ``HANDEYE`` in :mod:`.cli`. Errors a solver raises without a
+file are named with both lists by the core (``gripper.csv + target.csv``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from robocal.io import CalibrationResult, hash_inputs
+from robocal.progress import progress as _progress
+
+__all__ = ["SOLVER_FIELDS", "solver_record", "PosePair", "load_pose_pair", "calibrate", "to_result", "robot_world",
+           "robot_world_result", "build_report", "summary", "simulate_files", "run_robot_world"]
+
+_LABELS = ("rx", "ry", "rz", "tx", "ty", "tz")
+_GRIPPER_CAM = {"parent": "gripper", "child": "camera"}
+_BASE_TARGET = {"parent": "robot base", "child": "target"}
+
+
+@dataclass
+class PosePair:
+    """Two pose lists paired pose by pose: ``T_base_gripper`` and ``T_cam_target`` (N, 4, 4), metres."""
+
+    T_base_gripper: np.ndarray
+    T_cam_target: np.ndarray
+    gripper_path: Path
+    target_path: Path
+
+    @property
+    def names(self) -> tuple[str, str]:
+        return self.gripper_path.name, self.target_path.name
+
+    @property
+    def files(self) -> list[Path]:
+        return [self.gripper_path, self.target_path]
+
+
+#: The fields of :meth:`robocal.estimation.LSQResult.to_dict` the report's solver section shows (the full
+#: record holds every residual and the covariance).
+SOLVER_FIELDS = ("method", "loss", "message", "status", "iterations", "nfev", "cost_history", "cost", "rms",
+                 "rank", "free_labels", "condition_number", "outlier_sigma")
+
+
+def solver_record(lsq) -> dict:
+    """The solver's record for :func:`robocal.report.solver_section`: :data:`SOLVER_FIELDS` of ``lsq.to_dict()``."""
+    if lsq is None:
+        return {}
+    d = lsq.to_dict()
+    return {k: d[k] for k in SOLVER_FIELDS if k in d}
+
+
+def _stages(desc: str, n: int, enabled: bool = True):
+    """A stage bar on a terminal (10^4 poses: ~8 s to read, ~15 s to solve): ``tick()`` starts the next stage."""
+    it = iter(_progress(range(n), desc=desc, total=n, enabled=enabled))
+    return lambda: next(it, None)
+
+
+def load_pose_pair(gripper_poses, target_poses) -> PosePair:
+    """``T_base_gripper`` and ``T_cam_target`` from two pose-list files (CSV/YAML, scalar-last quaternions).
+
+    When both lists have timestamps that differ, the robot stream is resampled at the sensor's
+    times (:func:`~robocal.io.interpolate_poses`, SLERP, no extrapolation);
+    without timestamps the counts must match. Errors name the file(s).
+    """
+    from robocal.errors import RobocalError, ShapeError
+    from robocal.io import interpolate_poses, load_poses
+
+    gripper_poses, target_poses = Path(gripper_poses), Path(target_poses)
+    tick = _stages("handeye: read poses", 1)
+    tick()
+    g, c = load_poses(gripper_poses), load_poses(target_poses)
+    Tg, tg, Tc, tc = g.T, g.t, c.T, c.t
+    if tg is not None and tc is not None and (len(tg) != len(tc) or np.any(np.abs(tg - tc) > 1e-9)):
+        try:
+            Tg = interpolate_poses(tg, Tg, tc)
+        except RobocalError as exc:
+            raise exc.with_source(f"{gripper_poses} resampled at the times of {target_poses}") from None
+    elif len(Tg) != len(Tc):
+        raise ShapeError(f"{gripper_poses} has {len(Tg)} poses but {target_poses} has {len(Tc)}: "
+                         "without timestamps in both lists the counts must match (pose i with pose i)")
+    tick()
+    return PosePair(Tg, Tc, gripper_poses, target_poses)
+
+
+# ----------------------------------------------------------------------------- AX = XB
+def calibrate(pair: PosePair, *, method: str = "tsai", no_refine: bool = False, accept_implausible: bool = False,
+              progress: bool = True, **_):
+    """``X = T_gripper_cam`` (:func:`~robocal.handeye.calibrate_hand_eye`) and the
+    other closed forms on the same motions, for the report's comparison.
+
+    Returns ``(HandEyeResult, comparison)``; ``comparison`` lists per closed-form method the
+    rotation (rad) and translation (m) difference of its X from the estimate and its closure RMS
+    (on all pose pairs up to :data:`~robocal.handeye.MAX_ALL_PAIRS` of them, else
+    consecutive pairs).
+    """
+    from robocal.errors import RobocalError
+    from robocal.handeye import (AXXB_METHODS, MAX_ALL_PAIRS, calibrate_hand_eye, closure_residuals,
+                                                   transform_error)
+
+    tick = _stages("handeye: solve", 1, enabled=progress)
+    tick()
+    res = calibrate_hand_eye(pair.T_base_gripper, pair.T_cam_target, method, refine=not no_refine,
+                             accept_implausible=accept_implausible, names=pair.names)
+    comparison = []
+    n = len(pair.T_base_gripper)
+    # the estimate's own motions up to MAX_ALL_PAIRS; beyond, consecutive pairs: the comparison (Andreff's
+    # and Daniilidis' closed forms loop over the motions) would otherwise cost ~15 x the calibration itself
+    # (10^4 poses: 34 s CPU against 2.4 s)
+    pairs = "all" if n * (n - 1) // 2 <= MAX_ALL_PAIRS else "consecutive"
+    for m in AXXB_METHODS:
+        try:
+            rot_rms, trans_rms, Xm = closure_residuals(pair.T_base_gripper, pair.T_cam_target, m, pairs=pairs)
+        except RobocalError as exc:             # one closed form may fail where another does not
+            comparison.append({"method": m, "error": str(exc)})
+            continue
+        rot, trans = transform_error(Xm, res.X)
+        comparison.append({"method": m, "pairs": pairs, "rotation_diff_rad": rot, "translation_diff_m": trans,
+                           "rotation_rms_rad": rot_rms, "translation_rms_m": trans_rms})
+    tick()
+    return res, comparison
+
+
+def _closure(Tg, Tc, X, Y) -> dict:
+    """Per-pose closure residuals of ``T_base_gripper[i] X T_cam_target[i] = Y``: rotation angle (rad) and
+    translation distance (m)."""
+    from robocal.handeye.motions import _pose_residual
+
+    r = _pose_residual(Tg @ X @ Tc, Y[None])
+    return {"rotation_rad": np.linalg.norm(r[:, :3], axis=1).tolist(),
+            "translation_m": np.linalg.norm(r[:, 3:], axis=1).tolist()}
+
+
+def _std_of(lsq, prefix: str):
+    """(rotation std (3,), translation std (3,)) of block ``prefix`` from the solver, or (None, None)."""
+    if lsq is None:
+        return None, None
+    s = [lsq.std.get(f"{prefix}.{k}") for k in _LABELS]
+    return s[:3], s[3:]
+
+
+def to_result(calibration, pair: PosePair) -> CalibrationResult:
+    """The result of :func:`calibrate`: ``T_gripper_cam`` and ``T_base_target`` (with std after refinement)."""
+    res, comparison = calibration
+    result = CalibrationResult(
+        rig="handeye", method=res.method, estimate={}, std={}, units={}, residual_rms=res.trans_rms,
+        residual_unit="m", warnings=res.warnings, inputs=hash_inputs(pair.files))
+    xr, xt = _std_of(res.lsq, "X")
+    yr, yt = _std_of(res.lsq, "Y")
+    result.add_pose("T_gripper_cam", res.X, std_rotation=xr, std_translation=xt, **_GRIPPER_CAM)
+    result.add_pose("T_base_target", res.Y, std_rotation=yr, std_translation=yt, **_BASE_TARGET)
+    result.diagnostics = {
+        "rotation_rms_rad": res.rot_rms, "n_motions": res.n_motions, "n_poses": len(pair.T_base_gripper),
+        "convention": "A X = X B, X = T_gripper_cam, Y = T_base_target = T_base_gripper[i] X T_cam_target[i]; "
+                      "std as rotation vector of R_perturbed R^T (rad) and translation (m); quaternions scalar-last",
+        "closure_residuals": _closure(pair.T_base_gripper, pair.T_cam_target, res.X, res.Y),
+        "solver_comparison": comparison,
+        "solver": solver_record(res.lsq),
+    }
+    return result
+
+
+# ----------------------------------------------------------------------------- AX = ZB
+def robot_world(pair: PosePair, *, no_refine: bool = False, accept_implausible: bool = False):
+    """``A X = Z B`` with ``A = T_cam_target``, ``B = T_gripper_base``: X = T_target_base, Z = T_cam_gripper
+    (:func:`~robocal.handeye.calibrate_robot_world`)."""
+    from robocal.geometry import invert_transform
+    from robocal.handeye import calibrate_robot_world
+
+    tick = _stages("handeye robot-world: solve", 1)
+    tick()
+    res = calibrate_robot_world(pair.T_cam_target, invert_transform(pair.T_base_gripper), refine=not no_refine,
+                                accept_implausible=accept_implausible, names=pair.names)
+    tick()
+    return res
+
+
+def robot_world_result(res, pair: PosePair) -> CalibrationResult:
+    """The result of :func:`robot_world`: X, Z and their inverses ``T_base_target``, ``T_gripper_cam``,
+    each with its std after refinement (the inverses' by first-order propagation,
+    :func:`~robocal.handeye.invert_with_covariance`)."""
+    from robocal.geometry import invert_transform
+    from robocal.handeye import invert_with_covariance
+
+    result = CalibrationResult(
+        rig="handeye", method=f"robot-world {res.method}", estimate={}, std={}, units={},
+        residual_rms=res.trans_rms, residual_unit="m", warnings=res.warnings, inputs=hash_inputs(pair.files))
+    xr, xt = _std_of(res.lsq, "X")
+    zr, zt = _std_of(res.lsq, "Z")
+    result.add_pose("T_target_base", res.X, std_rotation=xr, std_translation=xt,
+                    parent="target", child="robot base")
+    result.add_pose("T_cam_gripper", res.Z, std_rotation=zr, std_translation=zt, parent="camera", child="gripper")
+    for name, T, sl, frames in (("T_base_target", res.X, slice(0, 6), _BASE_TARGET),
+                                ("T_gripper_cam", res.Z, slice(6, 12), _GRIPPER_CAM)):
+        sr = st = None
+        if res.cov is not None and res.std and all(v is not None for v in res.std.values()):
+            _, C = invert_with_covariance(T, np.asarray(res.cov)[sl, sl])
+            sd = np.sqrt(np.maximum(np.diag(C), 0.0))
+            sr, st = sd[:3].tolist(), sd[3:].tolist()
+        result.add_pose(name, invert_transform(T), std_rotation=sr, std_translation=st, **frames)
+    result.diagnostics = {
+        "rotation_rms_rad": res.rot_rms, "n_poses": len(pair.T_cam_target),
+        "convention": "A X = Z B, A = T_cam_target, B = T_gripper_base (inverse of the robot's T_base_gripper), "
+                      "X = T_target_base, Z = T_cam_gripper; std as rotation vector of R_perturbed R^T (rad) and "
+                      "translation (m), of the inverses by first-order propagation; quaternions scalar-last",
+        "solver": solver_record(res.lsq),
+    }
+    return result
+
+
+def run_robot_world(args) -> int:
+    """``robocal handeye robot-world GRIPPER TARGET --out DIR``: ``DIR/result.json`` and ``DIR/report.html``."""
+    from robocal.errors import RobocalError
+    from robocal.io import prepare_out_dir, write_run
+
+    pair = load_pose_pair(args.gripper_poses, args.target_poses)
+    try:
+        res = robot_world(pair, no_refine=args.no_refine, accept_implausible=args.accept_implausible)
+        result = robot_world_result(res, pair)
+        report = build_report(result)
+    except RobocalError as exc:
+        raise exc if exc.source is not None else exc.with_source(f"{pair.gripper_path} + {pair.target_path}") \
+            from None
+    out = prepare_out_dir(args.out, "handeye-robot-world")
+    write_run(out, result, report)
+    print(summary(result))
+    sr = result.std.get("T_gripper_cam.rotvec")
+    if sr is not None and all(v is not None for v in sr):
+        print("T_gripper_cam rotation std [mrad] (rotation vector of R_perturbed R^T): "
+              + ", ".join(f"{1e3 * v:.3f}" for v in sr))
+    return 0
+
+
+# ----------------------------------------------------------------------------- report, summary
+def summary(result) -> str:
+    """``T_gripper_cam translation [mm] (method): x +/- s, ...``: the line the commands print."""
+    t = result.estimate["T_gripper_cam.translation"]
+    st = result.std.get("T_gripper_cam.translation") or [None] * 3
+    head = "T_gripper_cam translation [mm]" + ("" if result.method.startswith("robot-world") else
+                                                f" ({result.method})")
+    return f"{head}: " + ", ".join(f"{1e3 * v:.3f}" + ("" if s is None else f" +/- {1e3 * s:.3f}")
+                                   for v, s in zip(t, st))
+
+
+def build_report(result, *, base_dir=None):
+    """The hand-eye report from the result alone: poses, per-pose closure residuals, the closed forms
+    compared, the solver record."""
+    from robocal.report import Report, new_figure, solver_section
+
+    rw = result.method.startswith("robot-world")
+    rep = Report("handeye: robot-world AX = ZB" if rw else "handeye: AX = XB", subtitle=result.method)
+    d = result.diagnostics
+    s = rep.section("Estimate")
+    s.parameters(result.estimate, result.std, result.units)
+    s.table([{"quantity": "rotation residual RMS [mrad]", "value": 1e3 * (d.get("rotation_rms_rad") or np.nan)},
+             {"quantity": "translation residual RMS [mm]", "value": 1e3 * (result.residual_rms or np.nan)}],
+            ["quantity", "value"], digits=4)
+    s.text(d.get("convention", ""))
+    s.diagnostics(result.warnings)
+    cl = d.get("closure_residuals")
+    if cl:
+        fig, ax = new_figure(1, 2, size=(10, 3.2))
+        n = np.arange(len(cl["rotation_rad"]))
+        for a, key, label in ((ax[0], "rotation_rad", "rotation residual [mrad]"),
+                              (ax[1], "translation_m", "translation residual [mm]")):
+            v = 1e3 * np.asarray(cl[key], float)
+            if len(n) <= 200:
+                a.bar(n, v)
+            else:                               # 10^4 bars take seconds to draw and show nothing more
+                a.plot(n, v, ".", ms=2)
+            a.set_xlabel("pose")
+            a.set_ylabel(label)
+        rep.section("Residuals").figure(fig, "closure residual per pose: T_base_gripper[i] X T_cam_target[i] "
+                                             "against Y = T_base_target")
+    cmp = d.get("solver_comparison")
+    if cmp:
+        rows = [{"closed form": c["method"],
+                 "rotation vs estimate [mrad]": None if "error" in c else 1e3 * c["rotation_diff_rad"],
+                 "translation vs estimate [mm]": None if "error" in c else 1e3 * c["translation_diff_m"],
+                 "rotation RMS [mrad]": None if "error" in c else 1e3 * c["rotation_rms_rad"],
+                 "translation RMS [mm]": None if "error" in c else 1e3 * c["translation_rms_m"],
+                 **({"failed": c["error"]} if any("error" in e for e in cmp) else {})} for c in cmp]
+        pairs = next((c["pairs"] for c in cmp if "pairs" in c), "all")
+        rep.section("Closed-form solvers compared").table(
+            rows, digits=4, caption="each closed form against the estimate above, on "
+            + ("the relative motions of all pose pairs" if pairs == "all" else "the motions between consecutive poses"))
+    solver_section(rep.section("Solver (refinement)"), d.get("solver") or {})
+    return rep
+
+
+# ----------------------------------------------------------------------------- simulate
+def simulate_files(out_dir: Path, rng: np.random.Generator, *, poses: int = 16, noise_free: bool = False,
+                   progress: bool = True, **_) -> list[Path]:
+    """``robocal handeye simulate``: ``gripper_poses.csv``, ``target_poses.csv`` and their truth ``truth.yaml``.
+
+    :func:`.simulate.simulate_eye_in_hand`: ``poses`` views of a fixed target by a camera on the gripper;
+    1 mrad / 0.2 mm sensor noise unless ``noise_free``.
+    """
+    from robocal.handeye.simulate import simulate_eye_in_hand
+    from robocal.io import atomic_write_text, write_poses
+
+    sim = simulate_eye_in_hand(rng, poses, noise=not noise_free)
+    out = Path(out_dir)
+    t = np.arange(poses) * 0.1
+    paths = [write_poses(out / "gripper_poses.csv", sim.T_base_gripper, t),
+             write_poses(out / "target_poses.csv", sim.T_cam_target, t)]
+
+    def pose(T):
+        return "{rotation: %s, translation: %s}" % (np.round(T[:3, :3], 12).tolist(), np.round(T[:3, 3], 12).tolist())
+    paths.append(atomic_write_text(out / "truth.yaml", (
+        "# ground truth of the simulated pose lists (m); not an input of 'robocal handeye calibrate'\n"
+        f"T_gripper_cam: {pose(sim.X)}\nT_base_target: {pose(sim.Y)}\n"
+        f"noise: {{rotation_rad: {sim.sigma_rotation}, translation_m: {sim.sigma_translation}}}\n")))
+    return [Path(p) for p in paths]
