@@ -186,9 +186,8 @@ def robot_world(pair: PosePair, *, no_refine: bool = False, accept_implausible: 
 def robot_world_result(res, pair: PosePair) -> CalibrationResult:
     """The result of :func:`robot_world`: X, Z and their inverses ``T_base_target``, ``T_gripper_cam``,
     each with its std after refinement (the inverses' by first-order propagation,
-    :func:`~robocal.handeye.invert_with_covariance`)."""
-    from robocal.geometry import invert_transform
-    from robocal.handeye import invert_with_covariance
+    :meth:`~robocal.geometry.PoseWithCovariance.inverse`)."""
+    from robocal.geometry import PoseWithCovariance, invert_transform
 
     result = CalibrationResult(
         rig="handeye", method=f"robot-world {res.method}", estimate={}, std={}, units={},
@@ -202,9 +201,8 @@ def robot_world_result(res, pair: PosePair) -> CalibrationResult:
                                 ("T_gripper_cam", res.Z, slice(6, 12), _GRIPPER_CAM)):
         sr = st = None
         if res.cov is not None and res.std and all(v is not None for v in res.std.values()):
-            _, C = invert_with_covariance(T, np.asarray(res.cov)[sl, sl])
-            sd = np.sqrt(np.maximum(np.diag(C), 0.0))
-            sr, st = sd[:3].tolist(), sd[3:].tolist()
+            inv = PoseWithCovariance(T, np.asarray(res.cov)[sl, sl]).inverse()
+            sr, st = inv.std_rotation.tolist(), inv.std_translation.tolist()
         result.add_pose(name, invert_transform(T), std_rotation=sr, std_translation=st, **frames)
     result.diagnostics = {
         "rotation_rms_rad": res.rot_rms, "n_poses": len(pair.T_cam_target),
