@@ -151,7 +151,10 @@ def simulate_session(out_dir, rng: np.random.Generator, *, views: int = 12, targ
     out_dir = Path(out_dir)
     cam = default_camera(int(width), int(height))
     tgt = default_target(target)
-    poses = sample_poses(cam, tgt, int(views), rng, whole=tgt.kind == "chessboard")
+    # distances scale with the focal length, so that the target looks the same in pixels at any image size
+    scale = cam.fx / default_camera().fx
+    poses = sample_poses(cam, tgt, int(views), rng, whole=tgt.kind == "chessboard",
+                         distance=(0.3 * scale, 0.75 * scale))
     shots = [(T, blur) for T in poses]
     defect_names = {}
     if defects:
