@@ -27,6 +27,25 @@ def test_simulated_views_give_consistent_covariance():
     assert np.mean(small) > 7.8          # a std half the size is caught
 
 
+def test_results_give_their_poses_with_covariance():
+    from robocal.geometry import invert_transform
+    from robocal.handeye import calibrate_robot_world, invert_with_covariance, transform_error
+
+    sim = simulate_eye_in_hand(np.random.default_rng(1), 12)
+    res = calibrate_hand_eye(sim.T_base_gripper, sim.T_cam_target)
+    assert res.X_pose.cov is res.cov and np.array_equal(res.X_pose.T, res.X)
+    err = res.X_pose.error_to(sim.X)
+    assert (err.rotation, err.translation) == transform_error(res.X, sim.X)
+    assert calibrate_hand_eye(sim.T_base_gripper, sim.T_cam_target, refine=False).X_pose.std is None
+    rw = calibrate_robot_world(sim.T_cam_target, invert_transform(sim.T_base_gripper))
+    Ti, Ci = invert_with_covariance(rw.Z, np.asarray(rw.cov)[6:, 6:])
+    np.testing.assert_array_equal(rw.Z_pose.inverse().cov, Ci)      # the same arithmetic, bit for bit
+    # Z = T_cam_gripper: its inverse is the truth X = T_gripper_cam, within the propagated covariance
+    e = rw.Z_pose.inverse().error_to(sim.X).vector
+    assert e @ np.linalg.solve(Ci, e) < 22.5                         # chi2(6) 0.999 quantile
+    assert rw.X_pose.cov.shape == (6, 6)
+
+
 def test_noise_free_simulation_is_exact_and_bad_arguments_are_named():
     sim = simulate_eye_in_hand(np.random.default_rng(0), 5, noise=False)
     assert sim.sigma_rotation == 0.0

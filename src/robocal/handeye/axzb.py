@@ -14,7 +14,7 @@ import numpy as np
 
 from robocal.errors import DegenerateGeometryError, NotEnoughDataError, ShapeError
 from robocal.estimation import Problem, solve
-from robocal.geometry import invert_transform, project_to_rotation, transform_from
+from robocal.geometry import PoseWithCovariance, invert_transform, project_to_rotation, transform_from
 from robocal.handeye.motions import (_LABELS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses,
                                                        _pair_indices, _perturbed, _pose_residual, _sigmas,
                                                        check_motions)
@@ -39,6 +39,16 @@ class RobotWorldResult:
     trans_rms: float = float("nan")
     warnings: list = field(default_factory=list)
     lsq: object = None
+
+    @property
+    def X_pose(self) -> PoseWithCovariance:
+        """``X = T_world_base`` with its 6x6 block of :attr:`cov` (left side; none before refinement)."""
+        return PoseWithCovariance(self.X, None if self.cov is None else np.asarray(self.cov)[:6, :6])
+
+    @property
+    def Z_pose(self) -> PoseWithCovariance:
+        """``Z = T_cam_gripper`` with its 6x6 block of :attr:`cov` (the X-Z correlation is in :attr:`cov`)."""
+        return PoseWithCovariance(self.Z, None if self.cov is None else np.asarray(self.cov)[6:, 6:])
 
 
 

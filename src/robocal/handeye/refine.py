@@ -59,6 +59,10 @@ class HandEyeResult:
     warnings: list = field(default_factory=list)
     lsq: object = None
 
+    @property
+    def X_pose(self) -> PoseWithCovariance:
+        """``X`` with its covariance (left side; none before refinement): inverse, error to a truth, result."""
+        return PoseWithCovariance(self.X, self.cov)
 
 
 def _std_dict(res, prefix: str) -> dict:
