@@ -60,6 +60,10 @@ def test_sb_detector_and_unrefined_corners():
 def test_full_output_names_corners_whose_refinement_wandered(monkeypatch):
     import cv2
 
+    from robocal.camera import _detect
+
+    # the search at full size, so the detector's estimate is refine=False's (the reduced search: below)
+    monkeypatch.setattr(_detect, "DETECT_MAX_SIDE", 10**6)
     T = _poses(1, 11)[0]
     img = render_planar_target(CAM, T, BOARD, blur_sigma=0.7)
     clean, info = detect_checkerboard(img, BOARD, method="classic", full_output=True)
@@ -170,7 +174,7 @@ def test_large_image_is_searched_reduced_and_refined_at_full_size(large_view, mo
 
     img, truth = large_view
     uv, info = detect_checkerboard(img, BOARD, full_output=True)
-    assert info["scale"] == 2 and info["detector"] == "classic" and info["unrefined"] == ()
+    assert info["scale"] == 4 and info["detector"] == "classic" and info["unrefined"] == ()  # searched at 320x240
     # The same noise-limited accuracy as at 640x480 (test_render_detect_recovers_corners_and_pose).
     assert _rms(uv, truth) < 0.06
     # the reduced search only seeds the refinement: from the full-size detector's corners it converges to
@@ -184,7 +188,7 @@ def test_large_image_is_searched_reduced_and_refined_at_full_size(large_view, mo
     assert detect_checkerboard(img, BOARD, method="classic", refine=False, full_output=True)[1]["scale"] == 1
 
 
-def test_board_not_found_reduced_is_searched_at_full_size(large_view, monkeypatch):
+def test_board_not_found_reduced_is_searched_finer_down_to_full_size(large_view, monkeypatch):
     import cv2
 
     img, truth = large_view
@@ -197,5 +201,5 @@ def test_board_not_found_reduced_is_searched_at_full_size(large_view, monkeypatc
 
     monkeypatch.setattr(cv2, "findChessboardCorners", blind_when_small)
     uv, info = detect_checkerboard(img, BOARD, full_output=True)
-    assert seen == [(480, 640), (960, 1280)] and info["scale"] == 1 and info["detector"] == "classic"
+    assert seen == [(240, 320), (480, 640), (960, 1280)] and info["scale"] == 1 and info["detector"] == "classic"
     assert _rms(uv, truth) < 0.06

@@ -127,16 +127,23 @@ REFINE_MAX_HALF_WINDOW = 7
 REFINE_MAX_SHIFT = 0.25
 
 
-#: Images whose longer side exceeds this [px] are searched by "classic" at an integer reduction
-#: (``ceil(side / DETECT_MAX_SIDE)``, area-averaged) before the sub-pixel refinement on the full image:
-#: ``cv2.findChessboardCorners`` costs ~ the pixel count times the adaptive-threshold passes (measured
-#: 136 ms per 1280x960 view at full size, 22 ms at half size on one core), and its corners only seed
-#: the refinement. A board not found reduced is searched at full size (small boards).
-DETECT_MAX_SIDE = 800
+#: With ``refine``, "classic" searches the image reduced first, to about this longer side [px]
+#: (integer reduction ``ceil(side / DETECT_MAX_SIDE)``, area-averaged), then at half that reduction, ...,
+#: down to full size, stopping where it finds the board; its corners only seed the sub-pixel
+#: refinement on the full image, which converges to the same saddle points. ``cv2.findChessboardCorners``
+#: is slow on large squares, not only on large images (measured, 9x6 board, one core: 2-5 ms a view
+#: whose squares are ~20 px, 80-100 ms at 40-60 px in a 640x480 image, 0.6-1.3 s at 1280x960; at
+#: 320x240 all of them 3-8 ms). A board too small for the reduced search is found at a finer step.
+DETECT_MAX_SIDE = 400
 
 
-def _detect_scale(shape) -> int:
-    return max(1, int(np.ceil(max(shape[:2]) / DETECT_MAX_SIDE)))
+def _detect_scales(shape) -> list[int]:
+    """Reductions to search at, coarse to fine, ending with 1 (full size)."""
+    s, out = max(1, int(np.ceil(max(shape[:2]) / DETECT_MAX_SIDE))), []
+    while s > 1:
+        out.append(s)
+        s //= 2
+    return out + [1]
 
 
 def _refine_corners(img: np.ndarray, corners: np.ndarray, board: Checkerboard):
@@ -199,9 +206,8 @@ def detect_checkerboard(
         spacing). Without it, "sb" corners are OpenCV's own sub-pixel
         estimate and "classic" corners only pixel-accurate.
     method : {"auto", "classic", "sb"}
-        ``"classic"``: ``cv2.findChessboardCorners`` (fast; with ``refine``,
-        an image whose longer side exceeds :data:`DETECT_MAX_SIDE` is searched
-        reduced first, see there); ``"sb"``: ``cv2.findChessboardCornersSB``
+        ``"classic"``: ``cv2.findChessboardCorners`` (with ``refine``, on the
+        image reduced first, see :data:`DETECT_MAX_SIDE`); ``"sb"``: ``cv2.findChessboardCornersSB``
         (sector-based, more robust on blurred/noisy/distorted images, ~0.1 s
         at 640x480); ``"auto"`` tries classic, then sb. After refinement both
         give the same corners.
@@ -216,7 +222,8 @@ def detect_checkerboard(
         ``"refine_shift"`` (ndarray (rows * cols,) [px], returned order: how
         far the refinement moved each corner, the wandered ones included;
         zeros with ``refine=False``) and ``"scale"`` (the reduction at which
-        the detector found the board, 1 = full size).
+        the detector found the board, 1 = full size; a corner that wandered
+        keeps the detector's estimate at that reduction, ~``scale / 2`` px).
 
     Returns
     -------
@@ -239,17 +246,14 @@ def detect_checkerboard(
     found, corners, detector, scale = False, None, None, 1
     if method in ("auto", "classic"):
         flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
-        scale = _detect_scale(img.shape) if refine else 1
-        if scale > 1:
-            found, corners = cv2.findChessboardCorners(
-                cv2.resize(img, None, fx=1.0 / scale, fy=1.0 / scale, interpolation=cv2.INTER_AREA), size, flags=flags
-            )
+        for scale in _detect_scales(img.shape) if refine else [1]:
+            small = img if scale == 1 else cv2.resize(img, None, fx=1.0 / scale, fy=1.0 / scale,
+                                                      interpolation=cv2.INTER_AREA)
+            found, corners = cv2.findChessboardCorners(small, size, flags=flags)
             if found:
                 # a reduced pixel k averages full pixels scale*k .. scale*k + scale - 1 (pixel-centre convention)
                 corners = corners * scale + 0.5 * (scale - 1)
-        if not found:
-            scale = 1
-            found, corners = cv2.findChessboardCorners(img, size, flags=flags)
+                break
         detector = "classic"
     if not found and method in ("auto", "sb"):
         # (CALIB_CB_ACCURACY would cost ~0.5 s; the refinement below does that job.)
