@@ -26,25 +26,28 @@ def default_camera() -> CameraModel:
     return CameraModel(d["fx"], d["fy"], d["cx"], d["cy"], d["dist"], d["width"], d["height"])
 
 
-def default_setup(n_placements: int = 1, rng: np.random.Generator | None = None) -> tuple[CameraModel, MirrorScene]:
+def default_setup(n_placements: int = 1, rng: np.random.Generator | None = None, *,
+                  tilt_deg: float = 8.0) -> tuple[CameraModel, MirrorScene]:
     """Camera and the published scene, with ``n_placements - 1`` extra mirror placements.
 
-    Extra placements need ``rng`` (see :func:`~robocal.rigs.mirror.scene.perturbed_placements`).
+    Extra placements need ``rng`` (see :func:`~robocal.rigs.mirror.scene.perturbed_placements`;
+    ``tilt_deg``: the size of their random tilts, 8 deg by default, 20 deg for the markerless scenes,
+    whose accuracy comes from the angles between the mirror normals).
     """
     cam = default_camera()
     scene = published_scene()
     if n_placements > 1:
         if rng is None:
             raise ValueError("default_setup: n_placements > 1 needs an rng")  # programming error
-        T = _visible_placements(cam, scene, n_placements, rng)
+        T = _visible_placements(cam, scene, n_placements, rng, tilt_deg=tilt_deg)
         scene = MirrorScene(scene.T_c_r, T, scene.body_points_r, scene.rectangle)
     return cam, scene
 
 
-def _visible_placements(cam, scene, k, rng, margin=10.0):
+def _visible_placements(cam, scene, k, rng, margin=10.0, tilt_deg=8.0):
     out = [scene.T_c_m[0]]
     while len(out) < k:
-        T = perturbed_placements(scene, 2, rng)[1]
+        T = perturbed_placements(scene, 2, rng, tilt_deg=tilt_deg)[1]
         try:
             s = MirrorScene(scene.T_c_r, T, scene.body_points_r, scene.rectangle)
         except Exception:  # placement puts the camera or body behind the mirror: draw again

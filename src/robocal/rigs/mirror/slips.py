@@ -77,8 +77,12 @@ def _extent(P) -> float:
     return float(np.linalg.norm(np.ptp(np.asarray(P, dtype=float), axis=0)))
 
 
-def check_body_span(body_points_r, *, declared: dict | None = None, accept: bool = False) -> list[Diagnostic]:
-    """Check 1 of the module doc: raise (or warn with ``accept``) when the body points' span is implausible."""
+def check_body_span(body_points_r, *, declared: dict | None = None, accept: bool = False,
+                    field: str = "body_points") -> list[Diagnostic]:
+    """Check 1 of the module doc: raise (or warn with ``accept``) when the body points' span is implausible.
+
+    ``field``: the input's name for the points (``reference_points`` in a markerless file).
+    """
     from robocal.rigs.mirror.single import BODY_EXTENT_RANGE_M
 
     lo, hi = BODY_EXTENT_RANGE_M
@@ -90,9 +94,9 @@ def check_body_span(body_points_r, *, declared: dict | None = None, accept: bool
 
     d = check_slips(what=f"factor between the body points' span and a typical robot's {typical:.2g} m",
                     residual=off(ext), unit="", plausible=lo <= ext <= hi, threshold=hi / typical,
-                    reason=f"the body points span {ext:.4g} m (plausible {lo:g}-{hi:g} m): check the unit of "
-                           f"body_points",
-                    slips=_length_slips("body_points", (declared or {}).get("body_points"),
+                    reason=f"the {'body points' if field == 'body_points' else field} span {ext:.4g} m (plausible {lo:g}-{hi:g} m): check the unit of "
+                           f"{field}",
+                    slips=_length_slips(field, (declared or {}).get(field),
                                         lambda k: off(ext * k)),
                     accept=accept)
     return [] if d is None else [d]
