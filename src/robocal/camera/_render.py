@@ -36,8 +36,39 @@ def _corner_grid(camera: CameraModel) -> np.ndarray:
 
 
 def _check_camera(camera):
-    if not isinstance(camera, CameraModel):
-        raise InputError(f"camera must be a robocal.camera.CameraModel, got {type(camera).__name__}")
+    from robocal.camera._fisheye import FisheyeCamera
+
+    if not isinstance(camera, (CameraModel, FisheyeCamera)):
+        raise InputError(f"camera must be a robocal.camera.CameraModel or FisheyeCamera, got {type(camera).__name__}")
+
+
+def _fisheye_distort_with_jacobian(camera, x, y):
+    """Equidistant model (cv2.fisheye): distorted normalised ``(xd, yd)`` of ``(x, y)`` and d(xd, yd)/d(x, y).
+
+    ``xd = s(r) x``, ``s = theta_d / r``, ``theta = atan r``, ``theta_d = theta (1 + k1 theta^2 + ... + k4 theta^8)``;
+    ``ds/dr = (theta_d'(theta) / (1 + r^2) - s) / r``, which goes to 0 at the axis (written so there).
+    """
+    k1, k2, k3, k4 = (float(v) for v in camera.k)
+    r = np.hypot(x, y)
+    th = np.arctan(r)
+    t2 = th * th
+    poly = 1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4)))
+    dpoly = 1 + t2 * (3 * k1 + t2 * (5 * k2 + t2 * (7 * k3 + t2 * 9 * k4)))  # d(theta * poly) / d theta
+    small = r < 1e-8
+    rs = np.where(small, 1.0, r)
+    s = np.where(small, 1.0, th * poly / rs)
+    ds_r = np.where(small, 0.0, (dpoly / (1 + r * r) - s) / rs)  # ds/dr
+    ux, uy = np.where(small, 0.0, x / rs), np.where(small, 0.0, y / rs)
+    return (s * x, s * y, s + x * ds_r * ux, x * ds_r * uy, y * ds_r * ux, s + y * ds_r * uy)
+
+
+def _distortion_with_jacobian(camera):
+    """The camera's ``(x, y) -> (xd, yd, dxd/dx, dxd/dy, dyd/dx, dyd/dy)``, or None without distortion."""
+    from robocal.camera._fisheye import FisheyeCamera
+
+    if isinstance(camera, FisheyeCamera):
+        return lambda x, y: _fisheye_distort_with_jacobian(camera, x, y)
+    return camera._distort_with_jacobian if camera.has_distortion else None
 
 
 def _check_pattern(target):
@@ -233,7 +264,8 @@ def _draw(camera, Hinv, target, grid, GX, GY, canvas, offset, r0, r1, c0, c1, s,
     a = off[None, None, None, :, None]  # along u
     b = off[None, :, None, None, None]  # along v
     xy = (1 - a) * (1 - b) * g00 + a * (1 - b) * g01 + (1 - a) * b * g10 + a * b * g11  # (bh, s, bw, s, 2)
-    if camera.has_distortion:
+    distort = _distortion_with_jacobian(camera)
+    if distort is not None:
         # Bilinear interpolation of the undistortion map is off by up to ~3e-4 px
         # (strong distortion, image corner). One Newton step at each pixel centre
         # gives the exact ray there (~1e-12); adding that correction to all the
@@ -244,7 +276,7 @@ def _draw(camera, Hinv, target, grid, GX, GY, canvas, offset, r0, r1, c0, c1, s,
         xd_t = (uu - camera.cx) / camera.fx
         yd_t = (vv - camera.cy) / camera.fy
         x, y = centre[..., 0], centre[..., 1]
-        fx_, fy_, ja, jb, jc, jd = camera._distort_with_jacobian(x, y)
+        fx_, fy_, ja, jb, jc, jd = distort(x, y)
         ex, ey = fx_ - xd_t, fy_ - yd_t
         det = ja * jd - jb * jc
         with np.errstate(divide="ignore", invalid="ignore"):

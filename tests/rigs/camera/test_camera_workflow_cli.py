@@ -217,3 +217,19 @@ def test_charuco_session_with_partial_views_calibrates_to_its_truth(tmp_path, ca
     assert res.diagnostics["truth_check"]["passed"], res.diagnostics["truth_check"]
     n_corners = [len(v["ids"]) for v in res.diagnostics["views"].values()]
     assert len(n_corners) == 5 and max(n_corners) <= 24  # 7x5 squares: 6x4 inner corners, some views partial
+
+
+def test_fisheye_lens_calibrates_with_the_fisheye_model_and_is_not_compared_with_another(tmp_path, capsys):
+    code, _, err = _run(["camera", "simulate", "--lens", "fisheye", "--views", "6", "--width", "480", "--height",
+                         "360", "--seed", "5", "--out", tmp_path / "sim"], capsys)
+    assert code == 0, err
+    session = tmp_path / "sim" / "camera_input.yaml"
+    code, _, err = _run(["camera", "calibrate", session, "--model", "fisheye", "--out", tmp_path / "cal"], capsys)
+    assert code == 0, err
+    res = load_result(tmp_path / "cal" / "result.json")
+    assert res.diagnostics["truth_check"]["passed"], res.diagnostics["truth_check"]
+    assert load_camera(tmp_path / "cal" / "camera_info.yaml").__class__.__name__ == "FisheyeCamera"
+    code, _, err = _run(["camera", "calibrate", session, "--out", tmp_path / "cal2"], capsys)
+    assert code == 0, err
+    res = load_result(tmp_path / "cal2" / "result.json")
+    assert "truth_check" not in res.diagnostics and "not compared" in res.diagnostics["truth_note"]

@@ -50,7 +50,8 @@ RIG = Workflow(
         "a webcam's barrel distortion. ChArUco and grid views may be partial; chessboard views are whole."),
     simulate_examples=("robocal camera simulate --out cam-sim",
                        "robocal camera simulate --target charuco --views 20 --out cam-sim",
-                       "robocal camera simulate --defects --blur 1.2 --noise 4 --seed 3 --out cam-sim"),
+                       "robocal camera simulate --defects --blur 1.2 --noise 4 --seed 3 --out cam-sim",
+                       "robocal camera simulate --lens fisheye --out fish-sim   # then calibrate with --model fisheye"),
     simulate_options=(
         Option("--views", type=number_at_least(int, 3, why="a calibration needs 3 views or more"), default=12,
                help="number of rendered views"),
@@ -62,6 +63,9 @@ RIG = Workflow(
         Option("--blur", type=number_at_least(float, 0.0), default=0.7, help="Gaussian blur sigma [px]"),
         Option("--noise", type=number_at_least(float, 0.0), default=2.0, help="grey-level noise std (0-255)"),
         Option("--vignetting", type=float, default=0.3, help="brightness loss at the image corners, 0-1"),
+        Option("--lens", choices=("pinhole", "fisheye"), default="pinhole",
+               help="pinhole with OpenCV's 5-term distortion, or an equidistant fisheye (~150 deg; calibrate it "
+                    "with --model fisheye)"),
         Option("--image-format", choices=("png", "jpg"), default="png",
                help="lossless PNG or JPEG (quality 90, a quarter of the size)"),
         Option("--defects", action="store_true",

@@ -192,6 +192,8 @@ def build_report(result: CalibrationResult, *, base_dir=None, title: str | None 
     _correlation(rep.section("Correlation of the intrinsics"), cal)
     solver_section(rep.section("Solver"), d.get("solver") or {},
                    caption="joint least squares over the intrinsics and every view's pose")
+    if d.get("truth_note"):
+        rep.section("Check against the simulated truth").text(d["truth_note"])
     if d.get("truth_check"):
         t = rep.section("Check against the simulated truth")
         truth_section(t, d["truth_check"])

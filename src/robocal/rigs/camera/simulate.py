@@ -17,12 +17,13 @@ import numpy as np
 
 from robocal.errors import InputError
 
-__all__ = ["TARGET_KINDS", "default_camera", "default_target", "sample_poses", "simulate_session", "SimulatedSession",
+__all__ = ["TARGET_KINDS", "LENSES", "default_camera", "default_fisheye", "default_target", "sample_poses", "simulate_session", "SimulatedSession",
            "target_mapping", "INPUT_NAME"]
 
 #: The session file ``simulate`` writes (``Workflow.simulated_inputs``).
 INPUT_NAME = "camera_input.yaml"
 TARGET_KINDS = ("chessboard", "charuco", "aruco_grid")
+LENSES = ("pinhole", "fisheye")
 
 
 def default_camera(width: int = 640, height: int = 480):
@@ -32,6 +33,15 @@ def default_camera(width: int = 640, height: int = 480):
     s = width / 640.0
     return CameraModel(520.0 * s, 518.0 * s, 322.5 * s, 243.5 * height / 480.0,
                        dist=[-0.28, 0.095, 8e-4, -5e-4, -0.015], width=width, height=height)
+
+
+def default_fisheye(width: int = 640, height: int = 480):
+    """A 640 x 480 equidistant fisheye (cv2.fisheye model) of ~150 deg diagonal field of view."""
+    from robocal.camera import FisheyeCamera
+
+    s = width / 640.0
+    return FisheyeCamera(260.0 * s, 259.0 * s, 320.5 * s, 240.5 * height / 480.0, [0.05, -0.01, 0.003, -0.001],
+                         width, height)
 
 
 def default_target(kind: str = "chessboard"):
@@ -108,7 +118,7 @@ class SimulatedSession:
 def simulate_session(out_dir, rng: np.random.Generator, *, views: int = 12, target: str = "chessboard",
                      width: int = 640, height: int = 480, blur: float = 0.7, noise: float = 2.0,
                      vignetting: float = 0.3, defects: bool = False, image_format: str = "png",
-                     progress: bool = False) -> SimulatedSession:
+                     lens: str = "pinhole", progress: bool = False) -> SimulatedSession:
     """Render ``views`` images of a target with the known :func:`default_camera`; write the session.
 
     Parameters
@@ -127,6 +137,9 @@ def simulate_session(out_dir, rng: np.random.Generator, *, views: int = 12, targ
         Add two views a real session has: one badly defocused (blur 4 px) and
         a second shot of the first pose (a duplicate); calibrate names and
         skips both.
+    lens : {"pinhole", "fisheye"}
+        :func:`default_camera` (OpenCV 5-term distortion) or
+        :func:`default_fisheye` (equidistant; calibrate it with ``model="fisheye"``).
     image_format : {"png", "jpg"}
         Lossless PNG, or JPEG of quality 90 (a quarter of the size; its
         compression adds ~0.005 px to the corner noise; the shipped examples).
@@ -149,7 +162,9 @@ def simulate_session(out_dir, rng: np.random.Generator, *, views: int = 12, targ
         if not np.isfinite(v) or v < 0:
             raise InputError(f"{name}: must be >= 0, got {v}")
     out_dir = Path(out_dir)
-    cam = default_camera(int(width), int(height))
+    if lens not in LENSES:
+        raise InputError(f"lens: must be one of {', '.join(LENSES)}, got {lens!r}")
+    cam = (default_camera if lens == "pinhole" else default_fisheye)(int(width), int(height))
     tgt = default_target(target)
     # distances scale with the focal length, so that the target looks the same in pixels at any image size
     scale = cam.fx / default_camera().fx

@@ -197,7 +197,13 @@ def to_result(run: CameraRun, inp) -> CalibrationResult:
         "blur_px": {_rel(d.name, base): d.blur_px for d in inp.detections.detections},
         "n_images": len(inp.images), "solver": solver,
     }
-    if inp.truth is not None:
+    from robocal.camera import FisheyeCamera
+
+    if inp.truth is not None and isinstance(inp.truth, FisheyeCamera) != (cal.model == "fisheye"):
+        # the terms of another model mean other things: no comparison, said in the report
+        diag["truth_note"] = (f"the true camera is {'a fisheye' if isinstance(inp.truth, FisheyeCamera) else 'a pinhole'}"
+                              f" camera, the model fitted is {cal.model}: not compared")
+    elif inp.truth is not None:
         truth = inp.truth
         tv = np.array([truth.fx, truth.fy, truth.cx, truth.cy, *np.asarray(getattr(truth, "dist", getattr(truth, "k", [])))])
         n = len(cal.labels)
