@@ -163,10 +163,25 @@ def _target_record(inp) -> dict:
     return {"mapping": target_mapping(inp.target), "describe": inp.target.describe(), "source": inp.target_source}
 
 
-def to_result(run: CameraRun, inp) -> CalibrationResult:
-    """The result record: intrinsics with std and covariance, per-view poses and residuals, rejected views."""
+def _truth_record(cal, truth) -> dict:
+    """``truth`` (the true camera and its values in ``cal.labels`` order) and ``truth_check`` (NEES), or a
+    ``truth_note`` when the truth is of another kind than the model fitted (its terms mean other things)."""
+    from robocal.camera import FisheyeCamera
     from robocal.estimation import truth_check
 
+    if isinstance(truth, FisheyeCamera) != (cal.model == "fisheye"):
+        kind = "a fisheye" if isinstance(truth, FisheyeCamera) else "a pinhole"
+        return {"truth_note": f"the true camera is {kind} camera, the model fitted is {cal.model}: not compared"}
+    n = len(cal.labels)
+    tv = np.array([truth.fx, truth.fy, truth.cx, truth.cy, *np.asarray(truth.dist, dtype=float)])
+    tv = np.concatenate([tv, np.zeros(max(0, n - tv.size))])[:n]  # terms the truth lacks are zero in it
+    free = [i for i, lab in enumerate(cal.labels) if lab in cal.free]
+    check = truth_check((cal.values - tv)[free], cal.cov[np.ix_(free, free)], names=[cal.labels[i] for i in free])
+    return {"truth": {"camera": truth.to_dict(), "values": tv.tolist()}, "truth_check": check.to_dict()}
+
+
+def to_result(run: CameraRun, inp) -> CalibrationResult:
+    """The result record: intrinsics with std and covariance, per-view poses and residuals, rejected views."""
     cal = run.calibration
     base = run.base_dir
     est, std, units = {}, {}, {}
@@ -197,22 +212,8 @@ def to_result(run: CameraRun, inp) -> CalibrationResult:
         "blur_px": {_rel(d.name, base): d.blur_px for d in inp.detections.detections},
         "n_images": len(inp.images), "solver": solver,
     }
-    from robocal.camera import FisheyeCamera
-
-    if inp.truth is not None and isinstance(inp.truth, FisheyeCamera) != (cal.model == "fisheye"):
-        # the terms of another model mean other things: no comparison, said in the report
-        diag["truth_note"] = (f"the true camera is {'a fisheye' if isinstance(inp.truth, FisheyeCamera) else 'a pinhole'}"
-                              f" camera, the model fitted is {cal.model}: not compared")
-    elif inp.truth is not None:
-        truth = inp.truth
-        tv = np.array([truth.fx, truth.fy, truth.cx, truth.cy, *np.asarray(getattr(truth, "dist", getattr(truth, "k", [])))])
-        n = len(cal.labels)
-        tv = np.concatenate([tv, np.zeros(max(0, n - tv.size))])[:n]
-        free = [i for i, lab in enumerate(cal.labels) if lab in cal.free]
-        check = truth_check((cal.values - tv)[free], cal.cov[np.ix_(free, free)],
-                            names=[cal.labels[i] for i in free])
-        diag["truth"] = {"camera": truth.to_dict(), "values": tv.tolist(), "check": check.to_dict()}
-        diag["truth_check"] = check.to_dict()
+    if inp.truth is not None:
+        diag.update(_truth_record(cal, inp.truth))
     inputs = hash_inputs([p for p in (inp.source, inp.target_file, inp.truth_file) if p is not None] + list(inp.images))
     return CalibrationResult(
         rig="camera", method=f"joint least squares over intrinsics ({cal.model}) and view poses, started from "
