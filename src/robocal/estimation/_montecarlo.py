@@ -20,7 +20,8 @@ from robocal.estimation._identifiability import analyze_jacobian
 from robocal.estimation._result import _json
 from robocal.validation import check_array
 
-__all__ = ["monte_carlo", "MonteCarloResult", "check_coverage", "CoverageResult", "fisher_bound"]
+__all__ = ["monte_carlo", "MonteCarloResult", "check_coverage", "CoverageResult", "fisher_bound", "executor_workers",
+           "default_batch_size"]
 
 
 def fisher_bound(J, sigma=1.0, *, labels: Sequence[str] | None = None) -> np.ndarray:
@@ -272,6 +273,80 @@ def _bound_std(bound, k: int) -> tuple[np.ndarray, float]:
     raise ShapeError(f"bound must be a covariance ({k}, {k}) or a std vector ({k},), got {b.shape}")
 
 
+def _trial_seeds(rng: np.random.Generator, n: int) -> tuple[type, list]:
+    """The bit generator's type and one ``SeedSequence`` child per trial: what ``rng.spawn(n)`` would build.
+
+    Shipping seed sequences (a few hundred bytes each) instead of generators
+    lets any process rebuild trial ``i``'s generator exactly; the children are
+    the same as ``rng.spawn``'s, so a serial run draws what it drew before.
+    """
+    bitgen = rng.bit_generator
+    seq = getattr(bitgen, "seed_seq", None) or bitgen._seed_seq  # public since NumPy 1.25
+    return type(bitgen), seq.spawn(int(n))
+
+
+def _run_trials(simulate, estimate, error, bitgen_type, seeds, first: int) -> list:
+    """Trials ``first, first + 1, ...``: one task's work, run where the executor puts it.
+
+    Returns per trial ``(error, reported std)`` or the failure message (a
+    :class:`RobocalError` the estimator raised); anything else propagates.
+    Shapes are checked by the caller, in trial order, so that a message names
+    the same trial whatever the number of workers.
+    """
+    out = []
+    for j, seq in enumerate(seeds):
+        i = first + j
+        data, truth = simulate(np.random.Generator(bitgen_type(seq)))
+        try:
+            res = estimate(data)
+        except RobocalError as exc:
+            out.append(str(exc))
+            continue
+        pred = None
+        if hasattr(res, "x") and hasattr(res, "std_array"):
+            est, pred = res.x, res.std_array
+        elif isinstance(res, tuple) and len(res) == 2:
+            est, pred = res
+        else:
+            est = res
+        est = check_array(est, f"estimate of trial {i}", finite=False)
+        e = np.atleast_1d(error(est, truth) if error is not None else est - check_array(truth, "truth"))
+        e = check_array(e, f"error of trial {i}", finite=False).reshape(-1)
+        if pred is not None:
+            pred = check_array(pred, f"reported std of trial {i}", finite=False).reshape(-1)
+        out.append((e, pred))
+    return out
+
+
+def _submit(executor, fn, *args):
+    # Dask's Client hashes a task's arguments to name it unless told the call is impure;
+    # concurrent.futures executors take no such keyword
+    if type(executor).__module__.split(".")[0] == "distributed":
+        return executor.submit(fn, *args, pure=False)
+    return executor.submit(fn, *args)
+
+
+def executor_workers(executor) -> int:
+    """How many tasks ``executor`` runs at once (1 for None; a Dask ``Client``: its workers' threads)."""
+    if executor is None:
+        return 1
+    info = getattr(executor, "nthreads", None)
+    if callable(info) and type(executor).__module__.split(".")[0] == "distributed":
+        return max(1, sum(info().values()))
+    return max(1, int(getattr(executor, "_max_workers", 1) or 1))
+
+
+def default_batch_size(n_tasks: int, workers: int, *, per_worker: int = 4) -> int:
+    """Items per task: about ``per_worker`` tasks for each worker (load balance vs per-task overhead).
+
+    With one task per worker the slowest task sets the wall time; with many
+    small ones the per-task overhead (~1-5 ms on a local Dask cluster,
+    ``bench/bench_batch.py``) dominates cheap trials. Four per worker keeps
+    both small for trials of >= ~10 ms.
+    """
+    return max(1, math.ceil(n_tasks / (per_worker * max(1, workers))))
+
+
 def monte_carlo(
     simulate: Callable[[np.random.Generator], tuple[object, object]],
     estimate: Callable[[object], object],
@@ -283,6 +358,9 @@ def monte_carlo(
     labels: Sequence[str] | None = None,
     n_sigma: float = 3.0,
     progress: bool = False,
+    executor=None,
+    workers: int | None = None,
+    batch_size: int | None = None,
 ) -> MonteCarloResult:
     """Run ``estimate`` on ``n_trials`` simulations and measure its accuracy.
 
@@ -296,8 +374,10 @@ def monte_carlo(
         is kept for a coverage check), or a tuple ``(estimate, std)``.
     n_trials : int
     rng : numpy.random.Generator
-        Each trial gets its own child generator (``rng.spawn``), so trial
-        ``i`` can be reproduced on its own.
+        Each trial gets its own child ``SeedSequence`` (those of
+        ``rng.spawn``), so trial ``i`` draws the same numbers wherever and in
+        whichever order it runs: the result is bit-identical for a serial run
+        and for any number of workers.
     error : callable, optional
         ``error(estimate, truth) -> (k,)``; default ``estimate - truth``. Use
         it for rotations (e.g. the rotation vector of ``R_true^T R_est``).
@@ -307,7 +387,21 @@ def monte_carlo(
     n_sigma : float
         Interval of the coverage check.
     progress : bool
-        Show a tqdm progress bar.
+        Show a progress bar on a terminal.
+    executor : concurrent.futures.Executor-like, optional
+        Runs the trials in tasks of ``batch_size`` through
+        ``executor.submit(fn, *args) -> future``: a Dask
+        ``distributed.Client`` or a ``concurrent.futures`` executor (a
+        process pool needs ``simulate``/``estimate`` picklable by ``pickle``:
+        module-level functions or ``functools.partial``; Dask's cloudpickle
+        also ships closures). Default: serial, in this process.
+    workers : int, optional
+        Without ``executor``: ``1`` (or None) runs serially; ``N > 1`` starts
+        a local Dask cluster of ``N`` worker processes for this call
+        (:func:`robocal.batch.open_executor`).
+    batch_size : int, optional
+        Trials per task (default :func:`default_batch_size`: ~4 tasks per
+        worker). It changes the speed, never the result.
 
     Returns
     -------
@@ -322,30 +416,42 @@ def monte_carlo(
         raise InputError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
     if int(n_trials) != n_trials or n_trials < 2:
         raise InputError(f"n_trials must be an integer >= 2, got {n_trials!r}")
-    children = rng.spawn(int(n_trials))
-    if progress:
-        from tqdm import tqdm
+    if batch_size is not None and (int(batch_size) != batch_size or batch_size < 1):
+        raise InputError(f"batch_size must be an integer >= 1, got {batch_size!r}")
+    n_trials = int(n_trials)
+    if executor is None and workers is not None and int(workers) > 1:
+        from robocal.batch._engine import open_executor  # Dask only when asked for
 
-        children = tqdm(children, desc="Monte Carlo", unit="trial", leave=False, disable=None)  # None: off when stderr is no terminal
+        with open_executor(workers=int(workers), echo=None) as ex:
+            return monte_carlo(simulate, estimate, n_trials, rng, error=error, bound=bound, labels=labels,
+                               n_sigma=n_sigma, progress=progress, executor=ex, batch_size=batch_size)
+    bitgen_type, seeds = _trial_seeds(rng, n_trials)
+    from robocal.progress import progress as _progress
+
+    if executor is None:
+        outcomes = [_run_trials(simulate, estimate, error, bitgen_type, [s], i)[0]
+                    for i, s in enumerate(_progress(seeds, desc="Monte Carlo", total=n_trials, enabled=progress))]
+    else:
+        size = int(batch_size or default_batch_size(n_trials, executor_workers(executor)))
+        futures = [_submit(executor, _run_trials, simulate, estimate, error, bitgen_type, seeds[a:a + size], a)
+                   for a in range(0, n_trials, size)]
+        outcomes = []
+        # collected in submission order: the trials stay in their order, so the statistics
+        # are summed in the same order as a serial run's (bit-identical)
+        for fut in _progress(futures, desc=f"Monte Carlo ({size} trials a task)", total=len(futures),
+                             enabled=progress):
+            outcomes.extend(fut.result())
+    return _summarise(outcomes, n_trials, bound=bound, labels=labels, n_sigma=n_sigma)
+
+
+def _summarise(outcomes, n_trials: int, *, bound, labels, n_sigma) -> MonteCarloResult:
     errs, preds, failures = [], [], []
     k = None
-    for i, child in enumerate(children):
-        data, truth = simulate(child)
-        try:
-            out = estimate(data)
-        except RobocalError as exc:
-            failures.append((i, str(exc)))
+    for i, out in enumerate(outcomes):
+        if isinstance(out, str):
+            failures.append((i, out))
             continue
-        pred = None
-        if hasattr(out, "x") and hasattr(out, "std_array"):
-            est, pred = out.x, out.std_array
-        elif isinstance(out, tuple) and len(out) == 2:
-            est, pred = out
-        else:
-            est = out
-        est = check_array(est, f"estimate of trial {i}", finite=False)
-        e = np.atleast_1d(error(est, truth) if error is not None else est - check_array(truth, "truth"))
-        e = check_array(e, f"error of trial {i}", finite=False).reshape(-1)
+        e, pred = out
         if k is None:
             k = e.size
         if e.size != k:
@@ -355,7 +461,6 @@ def monte_carlo(
             continue
         errs.append(e)
         if pred is not None:
-            pred = check_array(pred, f"reported std of trial {i}", finite=False).reshape(-1)
             if pred.size != k:
                 raise ShapeError(f"reported std of trial {i} has {pred.size} elements, errors have {k}")
             preds.append(pred)
