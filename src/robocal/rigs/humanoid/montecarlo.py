@@ -24,19 +24,29 @@ __all__ = ["calibration_monte_carlo", "repeatability"]
 def calibration_monte_carlo(model: HumanoidModel, n_trials: int, rng: np.random.Generator, *,
                             n_per_foot: int = 6, noise_px: float = 0.3,
                             resolution: float = JOINT_RESOLUTION, parameters="seed",
-                            new_poses: bool = False, progress: bool = False) -> MonteCarloResult:
+                            new_poses: bool = False, progress: bool = False, design=None, executor=None,
+                            workers: int | None = None, batch_size: int | None = None) -> MonteCarloResult:
     """Errors and reported stds of the selected parameters over ``n_trials`` simulated runs.
 
     Corner-level simulation (projected corners + Gaussian noise ``noise_px``)
     for speed; the image pipeline is exercised separately. Returns a
     :class:`MonteCarloResult` whose ``coverage`` holds the fraction of trials
     within 3 reported sigma and the Monte Carlo / reported spread ratio.
+
+    ``design``: ``(feet, theta)``, the poses of every trial (e.g. a
+    :class:`~robocal.rigs.humanoid.plan.PosePlan`'s); default: drawn from
+    ``rng``. ``executor`` / ``workers`` / ``batch_size`` run the trials in
+    parallel (:func:`robocal.estimation.monte_carlo`): one seed per trial, so
+    the result is the same bits for any number of workers.
     """
     labels = resolve_parameters(model, parameters)
     idx = [model.parameter_labels().index(lab) for lab in labels]
     # one design for all trials (unless new_poses): the reported std is then one number per
     # parameter and the Monte Carlo spread is compared with it directly
-    feet, q = sample_poses(model, n_per_foot, rng, margin=25.0)
+    if design is None:
+        feet, q = sample_poses(model, n_per_foot, rng, margin=25.0)
+    else:
+        feet, q = list(design[0]), np.array(design[1], dtype=float)
     head = [model.joint_names.index(j) for j in model.head_joints]
 
     def simulate(child):
@@ -59,7 +69,8 @@ def calibration_monte_carlo(model: HumanoidModel, n_trials: int, rng: np.random.
         std = np.array([np.nan if cal.std(lab) is None else cal.std(lab) for lab in labels])
         return est, std
 
-    return monte_carlo(simulate, estimate, n_trials, rng, labels=labels, progress=progress)
+    return monte_carlo(simulate, estimate, n_trials, rng, labels=labels, progress=progress, executor=executor,
+                       workers=workers, batch_size=batch_size)
 
 
 def repeatability(model: HumanoidModel, n_runs: int, rng: np.random.Generator, *, n_per_foot: int = 3,

@@ -96,6 +96,24 @@ class PosePlan:
         ax.grid(True, which="both", alpha=0.3)
         return ax
 
+    def monte_carlo(self, model: HumanoidModel, n_trials: int, rng: np.random.Generator, *,
+                    noise_px: float = 0.3, resolution: float = JOINT_RESOLUTION, executor=None,
+                    workers: int | None = None, batch_size: int | None = None, progress: bool = False):
+        """Check the plan by simulation: ``n_trials`` calibrations from these poses (new offsets and noise each).
+
+        The Monte Carlo spread of each parameter against the plan's predicted
+        std (``std_history[-1]``) tells whether the linearised Fisher
+        information holds for this design. Trials run on ``executor`` (a Dask
+        ``Client``) or ``workers`` local processes, bit-identical to a serial
+        run (:func:`~robocal.rigs.humanoid.montecarlo.calibration_monte_carlo`).
+        """
+        from robocal.rigs.humanoid.montecarlo import calibration_monte_carlo
+
+        return calibration_monte_carlo(model, n_trials, rng, noise_px=noise_px, resolution=resolution,
+                                       parameters=list(self.labels), design=(self.feet, self.theta),
+                                       executor=executor, workers=workers, batch_size=batch_size,
+                                       progress=progress)
+
     def dataset(self) -> HumanoidDataset:
         """The plan as a data set without corners (to simulate or to save as commands)."""
         return HumanoidDataset(list(self.feet), self.theta, names=[f"pose{k:03d}" for k in range(len(self.feet))])
