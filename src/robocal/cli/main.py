@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 import robocal
+from robocal.cli._bag import add_bag_command
 from robocal.cli._common import FORCE_HELP, OneLineErrorParser, RawHelp, examples_epilog, prepare_out_dir
 from robocal.cli._rig import DemoContext, demo_of, discover_rigs, registered_rig_names
 from robocal.cli._workflow import add_report_command, add_workflow_commands
@@ -85,6 +86,7 @@ def build_parser(rigs=None) -> argparse.ArgumentParser:
 
     # `robocal report` reads the rig from the result file: it loads every rig when it runs
     add_report_command(sub, lambda: {w.name: w for w in discover_rigs()})
+    add_bag_command(sub)
 
     for rig in rigs:
         p = sub.add_parser(rig.name, help=rig.help, description=rig.description, formatter_class=RawHelp)
