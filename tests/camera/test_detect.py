@@ -203,3 +203,37 @@ def test_board_not_found_reduced_is_searched_finer_down_to_full_size(large_view,
     uv, info = detect_checkerboard(img, BOARD, full_output=True)
     assert seen == [(240, 320), (480, 640), (960, 1280)] and info["scale"] == 1 and info["detector"] == "classic"
     assert _rms(uv, truth) < 0.06
+
+
+def test_grid_outliers_name_the_corner_off_the_grid():
+    from robocal.camera._detect import _grid_outliers
+
+    board = Checkerboard(6, 9, 0.025)
+    T = transform_from_rotvec([0.5, -0.4, 0.2], [-0.1, -0.06, 0.4])  # tilted ~37 deg, strong distortion
+    uv = CAM.project_points(board.object_points(), T)
+    assert not _grid_outliers(uv, board).any()
+    for k in (0, 22, 53):  # a board corner, an interior corner, the last corner
+        bad = uv.copy()
+        bad[k] += 0.3 * np.linalg.norm(uv[1] - uv[0])
+        assert np.flatnonzero(_grid_outliers(bad, board)).tolist() == [k]
+
+
+def test_a_reduced_corner_off_the_grid_sends_the_search_finer(monkeypatch):
+    import cv2
+
+    T = _poses(1, 11)[0]
+    img = render_planar_target(CAM, T, BOARD, blur_sigma=0.7)
+    truth = CAM.project_points(BOARD.object_points(), T)
+    real = cv2.findChessboardCorners
+
+    def off_when_small(image, *a, **k):  # the reduced search returns one corner inside a square
+        found, c = real(image, *a, **k)
+        if found and image.shape[1] < CAM.width:
+            c = c.copy()
+            c[20, 0] += 5.0  # reduced px: ~0.5 of a square, out of the refinement's reach
+        return found, c
+
+    monkeypatch.setattr(cv2, "findChessboardCorners", off_when_small)
+    uv, info = detect_checkerboard(img, BOARD, full_output=True)
+    assert info["scale"] == 1 and info["unrefined"] == ()
+    assert _rms(uv, truth) < 0.05
