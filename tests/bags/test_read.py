@@ -124,3 +124,28 @@ def test_odometry_as_arrays(recording):
     assert_poses(odom["T"], recording.T_odom_base)
     assert np.allclose(odom["quaternion"][:, 3] ** 2 + np.sum(odom["quaternion"][:, :3] ** 2, 1), 1.0)
     assert np.array_equal(odom["linear"], np.tile([0.1, 0.2, 0.3], (len(odom.stamps), 1)))
+
+
+@pytest.mark.parametrize("fmt", ["rosbag1", "mcap"])
+@pytest.mark.parametrize("model, d", [("plumb_bob", [-0.1, 0.02, 1e-3, -2e-3, 0.004]),
+                                      ("rational_polynomial", [-0.1, 0.02, 1e-3, -2e-3, 0.004, 0.1, -0.01, 0.002]),
+                                      ("equidistant", [0.05, -0.01, 0.002, -1e-4]),
+                                      ("", [])])  # an uncalibrated driver: no model, no coefficients
+def test_camera_info_models(tmp_path, fmt, model, d):
+    from robocal.bags._simulate import _Writer
+    from robocal.camera import CameraModel, FisheyeCamera
+
+    path = tmp_path / ("c.bag" if fmt == "rosbag1" else "c")
+    K = [500.0, 0.0, 320.5, 0.0, 505.0, 240.25, 0.0, 0.0, 1.0]
+    with _Writer(path, fmt) as w:
+        names = ("D", "K", "R", "P") if fmt == "rosbag1" else ("d", "k", "r", "p")
+        roi = w.msg("sensor_msgs/msg/RegionOfInterest", x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
+        msg = w.msg("sensor_msgs/msg/CameraInfo", header=w.header(10**18, "cam"), height=480, width=640,
+                    distortion_model=model, binning_x=0, binning_y=0, roi=roi,
+                    **dict(zip(names, (np.array(d, float), np.array(K), np.eye(3).ravel(), np.zeros(12)))))
+        w.write("/cam/camera_info", "sensor_msgs/msg/CameraInfo", 10**18, msg)
+    cam = bags.read_camera_info(path, "/cam/camera_info")
+    if model == "equidistant":
+        assert cam == FisheyeCamera(500.0, 505.0, 320.5, 240.25, np.array(d), 640, 480)
+    else:
+        assert cam == CameraModel(500.0, 505.0, 320.5, 240.25, np.array(d or [0.0] * 5), 640, 480)
