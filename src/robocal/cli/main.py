@@ -26,6 +26,7 @@ import robocal
 from robocal.cli._bag import add_bag_command
 from robocal.cli._common import FORCE_HELP, OneLineErrorParser, RawHelp, examples_epilog, prepare_out_dir
 from robocal.cli._rig import DemoContext, demo_of, discover_rigs, registered_rig_names
+from robocal.cli._batch import add_batch_command
 from robocal.cli._workflow import add_report_command, add_workflow_commands
 from robocal.errors import InputError, RobocalError
 from robocal.io import CommandRun, preflight, set_command_line, write_result
@@ -86,6 +87,7 @@ def build_parser(rigs=None) -> argparse.ArgumentParser:
 
     # `robocal report` reads the rig from the result file: it loads every rig when it runs
     add_report_command(sub, lambda: {w.name: w for w in discover_rigs()})
+    add_batch_command(sub, registered_rig_names)  # robocal batch RIG MANIFEST (issue 17)
     add_bag_command(sub)
 
     for rig in rigs:
@@ -236,7 +238,7 @@ def main(argv=None) -> int:
             return 0
         words = _command_words(argv)
         run = CommandRun(command=shlex.join(["robocal", *words]), command_line=shlex.join(["robocal", *argv]),
-                         rig=words[0] if words and words[0] not in ("demo", "rigs", "report") else None,
+                         rig=words[0] if words and words[0] not in ("demo", "rigs", "report", "batch") else None,
                          force=bool(getattr(args, "force", False)), inputs=tuple(_input_files(args)))
         with run:
             preflight(getattr(args, "out", None))  # refuse a wrong --out before the work, not after it
