@@ -53,7 +53,8 @@ from robocal._lazy import lazy_exports
 _EXPORTS = {
     "AXXB_METHODS": "axxb", "solve_ax_xb": "axxb",
     "RobotWorldResult": "axzb", "calibrate_robot_world": "axzb",
-    "MAX_ALL_PAIRS": "motions", "MIN_AXIS_SPREAD": "motions", "MIN_ROTATION": "motions",
+    "MAX_ALL_PAIRS": "motions", "MAX_LONG_PAIRS": "motions", "LONG_PAIR_ANGLES": "motions",
+    "PAIR_MODES": "motions", "pair_indices": "motions", "pose_label": "motions", "MIN_AXIS_SPREAD": "motions", "MIN_ROTATION": "motions",
     "WEAK_AXIS_SPREAD": "motions", "MotionCheck": "motions", "check_motions": "motions",
     "relative_motions": "motions", "transform_error": "motions",
     "REACH_FACTOR": "plausibility", "ROT_TRY": "plausibility", "TRANS_FLOOR": "plausibility",

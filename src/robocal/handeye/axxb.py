@@ -79,23 +79,33 @@ def _qright(q):
     return np.array([[w, -x, -y, -z], [x, w, z, -y], [y, -z, w, x], [z, y, -x, w]])
 
 
+def _qleft_n(q):
+    """:func:`_qleft` of each row of q (n, 4): (n, 4, 4)."""
+    return np.moveaxis(_qleft(np.moveaxis(q, -1, 0)), (0, 1), (-2, -1))
+
+
+def _qright_n(q):
+    return np.moveaxis(_qright(np.moveaxis(q, -1, 0)), (0, 1), (-2, -1))
+
+
 def _matrix_from_wxyz(q):
     return matrix_from_quaternion(np.r_[q[1:], q[0]])
 
 
 def _rot_horaud(alpha, beta):
     """Horaud-Dornaika: q_A q_X = q_X q_B, smallest eigenvector of sum (L(q_A) - R(q_B))^T (...)."""
-    S = np.zeros((4, 4))
-    for a, b in zip(_quat_from_rotvec(alpha), _quat_from_rotvec(beta)):
-        Mi = _qleft(a) - _qright(b)
-        S += Mi.T @ Mi
+    Mi = _qleft_n(_quat_from_rotvec(alpha)) - _qright_n(_quat_from_rotvec(beta))
+    S = np.einsum("nki,nkj->ij", Mi, Mi)           # sum Mi^T Mi: 4 x 4 whatever the number of motions
     return _matrix_from_wxyz(np.linalg.eigh(S)[1][:, 0])
 
 
 def _rot_andreff(RA, RB):
     """Andreff: (R_A (x) I - I (x) R_B^T) vec(R_X) = 0 (row-major vec), null vector -> SO(3)."""
-    K = np.concatenate([np.kron(a, np.eye(3)) - np.kron(np.eye(3), b.T) for a, b in zip(RA, RB)])
-    v = np.linalg.svd(K, full_matrices=False)[2][-1]
+    I3 = np.eye(3)
+    K = np.einsum("nac,bd->nabcd", RA, I3) - np.einsum("ac,ndb->nabcd", I3, RB)   # kron(R_A, I) - kron(I, R_B^T)
+    K = K.reshape(len(RA), 9, 9)
+    # normal equations (9 x 9) rather than an SVD of the 9M x 9 stack: memory independent of M
+    v = np.linalg.eigh(np.einsum("nki,nkj->ij", K, K))[1][:, 0]
     Rx = v.reshape(3, 3)
     Rx *= np.sign(np.linalg.det(Rx)) / abs(np.linalg.det(Rx)) ** (1 / 3)
     return project_to_rotation(Rx)
@@ -106,9 +116,9 @@ def _translation(RA, tA, RB_tB_rot, Rx):
     tB = RB_tB_rot
     M = (RA - np.eye(3)).reshape(-1, 3)
     rhs = (np.einsum("ij,nj->ni", Rx, tB) - tA).reshape(-1)
-    s = np.linalg.svd(M, compute_uv=False)
-    if s[-1] < 1e-6 * s[0]:
-        v = np.linalg.svd(M, full_matrices=False)[2][-1]
+    w, V = np.linalg.eigh(M.T @ M)                # 3 x 3 normal matrix: singular values squared
+    if np.sqrt(max(w[0], 0.0)) < 1e-6 * np.sqrt(w[-1]):
+        v = V[:, 0]
         raise DegenerateGeometryError(
             f"the translation of X along {np.round(v, 3).tolist()} is undetermined (rotation axes parallel)")
     t, *_ = np.linalg.lstsq(M, rhs, rcond=None)
@@ -122,22 +132,20 @@ def _daniilidis(A, B):
     def dual(T, rv):
         q = _quat_from_rotvec(rv)
         t = np.concatenate([np.zeros((len(T), 1)), T[:, :3, 3]], axis=1)
-        qd = 0.5 * np.array([_qleft(ti) @ qi for ti, qi in zip(t, q)])
-        return q, qd
+        return q, 0.5 * np.einsum("nij,nj->ni", _qleft_n(t), q)
 
     qa, qda = dual(A, alpha)
     qb, qdb = dual(B, beta)
-    rows = []
-    for a, ad, b, bd in zip(qa, qda, qb, qdb):
-        S = np.zeros((6, 8))
-        S[:3, 0] = a[1:] - b[1:]
-        S[:3, 1:4] = skew(a[1:] + b[1:])
-        S[3:, 0] = ad[1:] - bd[1:]
-        S[3:, 1:4] = skew(ad[1:] + bd[1:])
-        S[3:, 4] = a[1:] - b[1:]
-        S[3:, 5:8] = skew(a[1:] + b[1:])
-        rows.append(S)
-    Vt = np.linalg.svd(np.concatenate(rows), full_matrices=False)[2]
+    S = np.zeros((len(A), 6, 8))
+    S[:, :3, 0] = qa[:, 1:] - qb[:, 1:]
+    S[:, :3, 1:4] = skew(qa[:, 1:] + qb[:, 1:])
+    S[:, 3:, 0] = qda[:, 1:] - qdb[:, 1:]
+    S[:, 3:, 1:4] = skew(qda[:, 1:] + qdb[:, 1:])
+    S[:, 3:, 4] = qa[:, 1:] - qb[:, 1:]
+    S[:, 3:, 5:8] = skew(qa[:, 1:] + qb[:, 1:])
+    # the right singular vectors of the 6M x 8 stack from its 8 x 8 normal matrix (economy, memory O(1) in
+    # M); its two smallest eigenvectors span the null space as the SVD's last two rows do
+    Vt = np.linalg.eigh(np.einsum("nki,nkj->ij", S, S))[1][:, ::-1].T
     u1, v1 = Vt[-2, :4], Vt[-2, 4:]
     u2, v2 = Vt[-1, :4], Vt[-1, 4:]
     a_, b_, c_ = u1 @ v1, u1 @ v2 + u2 @ v1, u2 @ v2
@@ -173,7 +181,7 @@ def _check_method(method: str) -> str:
 
 
 def solve_ax_xb(A, B, method: str = "tsai", *, min_rotation: float = MIN_ROTATION,
-                min_axis_spread: float = MIN_AXIS_SPREAD) -> tuple[np.ndarray, MotionCheck]:
+                min_axis_spread: float = MIN_AXIS_SPREAD, pairs=None, times=None) -> tuple[np.ndarray, MotionCheck]:
     """Closed-form solution of ``A_i X = X B_i``.
 
     Parameters
@@ -181,6 +189,9 @@ def solve_ax_xb(A, B, method: str = "tsai", *, min_rotation: float = MIN_ROTATIO
     A, B : array_like, shape (M, 4, 4)
         Paired relative motions (metres), M >= 2 with non-parallel rotation axes.
     method : {'tsai', 'park', 'horaud', 'andreff', 'daniilidis'}
+    pairs, times : optional
+        The pose pairs ``(i, j)`` behind the motions and the poses' times (s), so that
+        :func:`~robocal.handeye.motions.check_motions` names poses, not motions.
 
     Returns
     -------
@@ -194,7 +205,8 @@ def solve_ax_xb(A, B, method: str = "tsai", *, min_rotation: float = MIN_ROTATIO
         raise ShapeError(f"A has {len(A)} motions but B has {len(B)}: counts must match")
     if len(A) < 2:
         raise NotEnoughDataError(f"AX = XB needs at least 2 motions, got {len(A)}")
-    chk = check_motions(A, B, min_rotation=min_rotation, min_axis_spread=min_axis_spread)
+    chk = check_motions(A, B, min_rotation=min_rotation, min_axis_spread=min_axis_spread, pairs=pairs,
+                        times=times)
     if m == "daniilidis":
         R, t = _daniilidis(A, B)
     else:

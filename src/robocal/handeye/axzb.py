@@ -16,7 +16,7 @@ from robocal.errors import DegenerateGeometryError, NotEnoughDataError, ShapeErr
 from robocal.estimation import Problem, solve
 from robocal.geometry import PoseWithCovariance, invert_transform, project_to_rotation, transform_from
 from robocal.handeye.motions import (_LABELS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses,
-                                                       _pair_indices, _perturbed, _pose_residual, _sigmas,
+                                                       pair_indices, _perturbed, _pose_residual, _sigmas,
                                                        check_motions)
 from robocal.handeye.plausibility import judge_poses
 
@@ -68,7 +68,7 @@ def _rw_rotation(RA, RB):
 
 
 
-def calibrate_robot_world(T_cam_world, T_gripper_base, *, refine: bool = True,
+def calibrate_robot_world(T_cam_world, T_gripper_base, *, refine: bool = True, pairs: str = "auto",
                           min_rotation: float = MIN_ROTATION,
                           min_axis_spread: float = MIN_AXIS_SPREAD, accept_implausible: bool = False,
                           names=("T_base_gripper", "T_cam_world")) -> RobotWorldResult:
@@ -80,6 +80,8 @@ def calibrate_robot_world(T_cam_world, T_gripper_base, *, refine: bool = True,
         ``A``: the world (target) frame seen by the camera, metres.
     T_gripper_base : array_like, shape (N, 4, 4)
         ``B``: the inverse of the robot's forward kinematics.
+    pairs : {'auto', 'consecutive', 'all'}
+        The gripper motions of the excitation check (:func:`~robocal.handeye.motions.pair_indices`).
     accept_implausible, names
         As in :func:`calibrate_hand_eye` (the lists are judged as ``T_base_gripper = B^-1`` and
         ``T_cam_target = A``, by :func:`judge_poses`); ``names``: the robot's and the camera's files.
@@ -96,7 +98,7 @@ def calibrate_robot_world(T_cam_world, T_gripper_base, *, refine: bool = True,
     if len(TA) < 3:
         raise NotEnoughDataError(f"AX = ZB needs at least 3 poses, got {len(TA)}")
     # excitation: relative motions of the gripper (B_j^-1 B_i is a gripper motion in its own frame)
-    i, j = np.array(_pair_indices(len(TB), "all")).T
+    i, j = pair_indices(TB, pairs)
     chk = check_motions(TB[j] @ invert_transform(TB[i]), min_rotation=min_rotation,
                         min_axis_spread=min_axis_spread, what="X and Z")
     judged = judge_poses(invert_transform(TB), TA, names=names, accept=accept_implausible)

@@ -45,6 +45,10 @@ HANDEYE = Workflow(
         Option("--method", default="tsai", choices=["tsai", "park", "horaud", "andreff", "daniilidis"],
                help="closed-form AX = XB solver (then refined unless --no-refine)"),
         Option("--no-refine", action="store_true", help="closed form only (no covariance)"),
+        Option("--pairs", default="auto", choices=["auto", "consecutive", "all"],
+               help="pose pairs of the closed form's relative motions: all (every pair, n^2/2), consecutive "
+                    "(i, i+1), auto (default: all up to 200 poses, else consecutive plus at most 20,000 longer "
+                    "pairs turning 10-150 deg; memory linear in the number of poses)"),
     ),
     calibrate_examples=(f"robocal handeye calibrate {EXAMPLES}/gripper_poses.csv {EXAMPLES}/target_poses.csv "
                         "--method park --out he",),

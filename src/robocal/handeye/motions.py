@@ -17,8 +17,9 @@ from robocal.geometry import (PoseWithCovariance, invert_transform, matrix_from_
                               transform_from)
 from robocal.validation import check_transform
 
-__all__ = ["MIN_ROTATION", "MIN_AXIS_SPREAD", "WEAK_AXIS_SPREAD", "MAX_ALL_PAIRS", "MotionCheck",
-           "relative_motions", "check_motions", "transform_error"]
+__all__ = ["MIN_ROTATION", "MIN_AXIS_SPREAD", "WEAK_AXIS_SPREAD", "MAX_ALL_PAIRS", "MAX_LONG_PAIRS",
+           "LONG_PAIR_ANGLES", "PAIR_MODES", "MotionCheck", "pair_indices", "relative_motions", "check_motions",
+           "transform_error", "pose_label"]
 
 #: Default smallest useful relative rotation (rad): below it the axis is noise.
 MIN_ROTATION = np.deg2rad(2.0)
@@ -46,32 +47,73 @@ def _check_poses(T, name: str) -> np.ndarray:
     return T
 
 
-#: Most relative motions "all" pairs gives (n <= 200 poses); beyond, "all" takes the pairs (i, i + k) for
-#: strides k = 1, 2, 4, ... < n: O(n log n) motions instead of n^2 / 2 (10^4 poses: 1.3e5 instead of
-#: 5e7 motions, 6.4 GB of 4x4 matrices), every pose still in motions of every scale.
+#: ``pairs="auto"`` takes every pair up to this many (n <= 200 poses); beyond, consecutive pairs plus a
+#: bounded set of longer ones (:func:`pair_indices`).
 MAX_ALL_PAIRS = 20_000
+#: At most this many longer pairs ``(i, i + k)``, k >= 2, beside the consecutive ones (``pairs="auto"``).
+MAX_LONG_PAIRS = 20_000
+#: The gripper rotation (rad) a longer pair must have to be taken: well above the axis noise of small
+#: rotations, away from the half-turn where a rotation axis' sign is arbitrary.
+LONG_PAIR_ANGLES = (np.deg2rad(10.0), np.deg2rad(150.0))
+#: The pair selections (``--pairs``).
+PAIR_MODES = ("auto", "consecutive", "all")
+#: Working memory of the closed forms per motion (bytes): A, B and their temporaries (tracemalloc peaks on
+#: 2e4 motions: 600 B Tsai/Park, 950 B Daniilidis, 1.6 KB Andreff; x2.5 for margin).
+BYTES_PER_MOTION = 4096
 
 
-def _pair_indices(n: int, pairs: str) -> list[tuple[int, int]]:
-    if pairs == "all" and n * (n - 1) // 2 > MAX_ALL_PAIRS:
-        out, k = [], 1
-        while k < n:
-            out += [(i, i + k) for i in range(n - k)]
-            k *= 2
-        return out
-    if pairs == "all":
-        return [(i, j) for i in range(n) for j in range(i + 1, n)]
+def pair_indices(T_base_gripper, pairs: str = "auto") -> tuple[np.ndarray, np.ndarray]:
+    """The pose pairs ``(i, j)``, ``i < j``, whose relative motions the closed forms use: two int arrays.
+
+    * ``"consecutive"``: ``(i, i + 1)``, n - 1 pairs.
+    * ``"all"``: every ``i < j``, n (n - 1) / 2 pairs (refused with a one-line
+      :class:`~robocal.errors.ResourceError` when they do not fit in memory).
+    * ``"auto"``: all pairs while there are at most :data:`MAX_ALL_PAIRS` (n <= 200); beyond, the
+      consecutive pairs plus, for each stride ``k = 2, 4, 8, ... < n``, up to
+      ``MAX_LONG_PAIRS / (number of strides)`` pairs ``(i, i + k)`` evenly spaced in ``i``, kept when the
+      gripper turns by :data:`LONG_PAIR_ANGLES` (10-150 deg) between them: long motions are well
+      conditioned (a consecutive pair of a dense stream turns by a fraction of a degree: its axis is
+      noise) and every pose still takes part through its consecutive pairs. At most
+      ``n - 1 + MAX_LONG_PAIRS`` pairs: memory linear in n.
+    """
+    Tg = np.asarray(T_base_gripper, float)
+    n = len(Tg)
+    if pairs not in PAIR_MODES:
+        raise InputError(f"pairs must be one of {', '.join(PAIR_MODES)}, got {pairs!r}")
+    if pairs == "all" or (pairs == "auto" and n * (n - 1) // 2 <= MAX_ALL_PAIRS):
+        from robocal.resources import require_memory
+
+        m = n * (n - 1) // 2
+        require_memory(m * (BYTES_PER_MOTION + 16), f"the relative motions of all {m} pairs of {n} poses "
+                       "(--pairs all)")
+        i, j = np.triu_indices(n, 1)
+        return i, j
+    cons = np.arange(n - 1)
     if pairs == "consecutive":
-        return [(i, i + 1) for i in range(n - 1)]
-    raise InputError(f"pairs must be 'all' or 'consecutive', got {pairs!r}")
+        return cons, cons + 1
+    strides = 2 ** np.arange(1, max(int(np.ceil(np.log2(n))), 1))
+    strides = strides[strides < n]
+    per = max(MAX_LONG_PAIRS // max(len(strides), 1), 1)
+    li = [np.unique(np.linspace(0, n - 1 - k, min(per, n - k)).round().astype(np.intp)) for k in strides]
+    lj = [i + k for i, k in zip(li, strides)]
+    li, lj = (np.concatenate(li), np.concatenate(lj)) if li else (np.zeros(0, np.intp),) * 2
+    R = Tg[:, :3, :3]
+    cos = np.clip((np.einsum("nab,nab->n", R[li], R[lj]) - 1) / 2, -1, 1)
+    ang = np.arccos(cos)
+    keep = (ang >= LONG_PAIR_ANGLES[0]) & (ang <= LONG_PAIR_ANGLES[1])
+    return np.concatenate([cons, li[keep]]), np.concatenate([cons + 1, lj[keep]])
 
 
-def relative_motions(T_base_gripper, T_cam_target, *, pairs: str = "all"):
+def _motions(Tg, Tc, i, j):
+    """``A = Tg[j]^-1 Tg[i]``, ``B = Tc[j] Tc[i]^-1`` for index arrays ``i``, ``j``."""
+    return invert_transform(Tg[j]) @ Tg[i], Tc[j] @ invert_transform(Tc[i])
+
+
+def relative_motions(T_base_gripper, T_cam_target, *, pairs: str = "auto"):
     """Relative motions ``(A, B)`` (M, 4, 4) with ``A X = X B`` from absolute poses.
 
     ``A = T_base_gripper[j]^-1 T_base_gripper[i]``, ``B = T_cam_target[j] T_cam_target[i]^-1``
-    for the pairs ``(i, j)`` (all ``i < j`` up to :data:`MAX_ALL_PAIRS` of them, else strides of powers
-    of two; or consecutive ones).
+    for the pairs ``(i, j)`` of :func:`pair_indices` (``"auto"``, ``"consecutive"`` or ``"all"``).
     """
     Tg = _check_poses(T_base_gripper, "T_base_gripper")
     Tc = _check_poses(T_cam_target, "T_cam_target")
@@ -79,11 +121,7 @@ def relative_motions(T_base_gripper, T_cam_target, *, pairs: str = "all"):
         raise ShapeError(f"T_base_gripper has {len(Tg)} poses but T_cam_target has {len(Tc)}: counts must match")
     if len(Tg) < 3:
         raise NotEnoughDataError(f"hand-eye calibration needs at least 3 poses (2 motions), got {len(Tg)}")
-    idx = _pair_indices(len(Tg), pairs)
-    i, j = np.array(idx).T
-    A = invert_transform(Tg[j]) @ Tg[i]
-    B = Tc[j] @ invert_transform(Tc[i])
-    return A, B
+    return _motions(Tg, Tc, *pair_indices(Tg, pairs))
 
 
 def _axes_angles(R: np.ndarray):
@@ -93,9 +131,35 @@ def _axes_angles(R: np.ndarray):
     return axes, ang
 
 
+def pose_label(k: int, times=None) -> str:
+    """``"pose 12"`` or ``"pose 12 (t = 3.400 s)"``: a pose as the user finds it (numbered from 0, the order
+    of the file and of the report's per-pose figures)."""
+    return f"pose {int(k)}" + ("" if times is None else f" (t = {float(times[int(k)]):.3f} s)")
+
+
+def _poses_of_pairs(i, j, bad, n: int) -> np.ndarray:
+    """The poses behind flagged pairs: those more than half of whose pairs are flagged (one bad pose spoils
+    every pair it is in, its partners only one each); failing that, every pose of a flagged pair."""
+    used = np.bincount(np.r_[i, j], minlength=n)
+    hit = np.bincount(np.r_[i[bad], j[bad]], minlength=n)
+    poses = np.flatnonzero(2 * hit > used)
+    return poses if poses.size else np.flatnonzero(hit)
+
+
+def _name_poses(poses, times=None, limit: int = 8) -> str:
+    shown = ", ".join(pose_label(k, times) for k in poses[:limit])
+    return shown + (f" and {len(poses) - limit} more" if len(poses) > limit else "")
+
+
 def check_motions(A, B=None, *, min_rotation: float = MIN_ROTATION, min_axis_spread: float = MIN_AXIS_SPREAD,
-                  what: str = "X") -> MotionCheck:
+                  what: str = "X", pairs=None, times=None) -> MotionCheck:
     """Check that relative motions determine a hand-eye transform.
+
+    ``pairs`` (two index arrays ``(i, j)``, :func:`pair_indices`) and ``times`` (s, per pose) let the
+    ``inconsistent_data`` warning name POSE numbers (and times), never motion indices.
+
+    Memory: O(M) for M motions (the axis spread is the 3 x 3 scatter of the axes, not an SVD of the
+    M x 3 stack with its M x M left factor).
 
     Raises
     ------
@@ -111,7 +175,7 @@ def check_motions(A, B=None, *, min_rotation: float = MIN_ROTATION, min_axis_spr
         With a ``weakly_determined`` diagnostic when the spread is below 10 deg
         and an ``inconsistent_data`` one when |angle(A_i) - angle(B_i)| is
         large (the pair is not a rigid motion of one body: wrong pairing,
-        timestamps, or units).
+        timestamps, or units); its ``indices`` are the poses to blame.
     """
     A = np.asarray(A, float)
     _, ang = _axes_angles(A[:, :3, :3])
@@ -123,11 +187,12 @@ def check_motions(A, B=None, *, min_rotation: float = MIN_ROTATION, min_axis_spr
             "rotate the sensor about at least two different axes")
     axes, _ = _axes_angles(A[ang >= min_rotation, :3, :3])
     if len(axes) >= 2:
-        # sign-free spread: singular values of the stacked axes; for two axes at
-        # angle phi the ratio s2/s1 is tan(phi/2).
-        s = np.linalg.svd(axes, compute_uv=False)
+        # sign-free spread from the 3 x 3 scatter S = sum a a^T (eigenvalues = squared singular values of
+        # the stacked axes); for two axes at angle phi the ratio s2/s1 is tan(phi/2).
+        w, V = np.linalg.eigh(axes.T @ axes)
+        s = np.sqrt(np.maximum(w[::-1], 0.0))
         spread = float(2 * np.arctan(s[1] / s[0]))
-        common = np.linalg.svd(axes, full_matrices=False)[2][0]
+        common = V[:, -1]
     else:
         spread, common = 0.0, axes[0]
     if spread < min_axis_spread:
@@ -143,14 +208,22 @@ def check_motions(A, B=None, *, min_rotation: float = MIN_ROTATION, min_axis_spr
     if B is not None:
         _, angB = _axes_angles(np.asarray(B, float)[:, :3, :3])
         diff = np.abs(ang - angB)
-        bad = np.flatnonzero(diff > max(np.deg2rad(1.0), 10 * np.median(diff)))
-        if bad.size:
-            warns.append(Diagnostic("inconsistent_data",
-                                    f"{bad.size} motion pair(s) rotate by different angles in the two streams "
-                                    f"(worst {np.rad2deg(diff.max()):.3g} deg): mispaired poses or timestamps?",
-                                    indices=tuple(int(k) for k in bad)))
+        bad = diff > max(np.deg2rad(1.0), 10 * np.median(diff))
+        if bad.any():
+            if pairs is not None:
+                i, j = (np.asarray(a, np.intp) for a in pairs)
+                poses = _poses_of_pairs(i, j, bad, int(max(i.max(), j.max())) + 1)
+                msg = (f"{_name_poses(poses, times)}: the robot and the sensor rotate by different angles in "
+                       f"the motions to and from {'it' if len(poses) == 1 else 'them'} (worst "
+                       f"{np.rad2deg(diff.max()):.3g} deg over {int(bad.sum())} motion(s)): mispaired poses, "
+                       "timestamps or an outlier?")
+                indices = tuple(int(k) for k in poses)
+            else:
+                msg = (f"{int(bad.sum())} motion(s) rotate by different angles in the two streams "
+                       f"(worst {np.rad2deg(diff.max()):.3g} deg): mispaired poses or timestamps?")
+                indices = tuple(int(k) for k in np.flatnonzero(bad))
+            warns.append(Diagnostic("inconsistent_data", msg, indices=indices))
     return MotionCheck(ang, spread, None if spread >= min_axis_spread else common, tuple(warns))
-
 
 
 def transform_error(T_est, T_true) -> tuple[float, float]:

@@ -45,10 +45,10 @@ def closure_residuals(T_base_gripper, T_cam_target, method: str = "tsai", *, pai
     try:
         X, _ = solve_ax_xb(A, B, method)
     except DegenerateGeometryError:
-        if pairs == "all":
+        if pairs != "consecutive":
             raise
-        # consecutive motions about one axis can still span several with all pairs
-        X, _ = solve_ax_xb(*relative_motions(Tg, Tc, pairs="all"), method)
+        # consecutive motions about one axis can still span several with more pairs
+        X, _ = solve_ax_xb(*relative_motions(Tg, Tc, pairs="auto"), method)
     Yall = Tg @ X @ Tc
     Y = transform_from(project_to_rotation(np.mean(Yall[:, :3, :3], axis=0)), Yall[:, :3, 3].mean(axis=0))
     r = _pose_residual(Yall, Y[None])

@@ -13,11 +13,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from robocal.errors import NotEnoughDataError, ShapeError
 from robocal.estimation import Problem, solve
 from robocal.geometry import PoseWithCovariance, project_to_rotation, transform_from
 from robocal.handeye.axxb import _check_method, solve_ax_xb
 from robocal.handeye.motions import (_LABELS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses,
-                                                       _perturbed, _pose_residual, _sigmas, relative_motions)
+                                                       _motions, _perturbed, _pose_residual, _sigmas,
+                                     pair_indices)
 from robocal.handeye.plausibility import judge_poses
 from robocal.validation import check_array, check_transform
 
@@ -70,7 +72,7 @@ def _std_dict(res, prefix: str) -> dict:
 
 
 def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, refine: bool = True,
-                       pairs: str = "all", min_rotation: float = MIN_ROTATION,
+                       pairs: str = "auto", times=None, min_rotation: float = MIN_ROTATION,
                        min_axis_spread: float = MIN_AXIS_SPREAD, accept_implausible: bool = False,
                        names=("T_base_gripper", "T_cam_target")) -> HandEyeResult:
     """Eye-in-hand calibration ``X = T_gripper_cam`` from absolute poses.
@@ -88,9 +90,12 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
         per-pose closure ``T_base_gripper[i] X T_cam_target[i] = Y``
         (rotation and translation residuals weighted by their RMS after the
         closed form), which gives the covariance of X.
-    pairs : {'all', 'consecutive'}
-        Relative motions used by the closed form ('all': every pair up to 200 poses, beyond that
-        the pairs ``(i, i + 2^k)``, see :data:`MAX_ALL_PAIRS`).
+    pairs : {'auto', 'consecutive', 'all'}
+        Relative motions used by the closed form (:func:`~robocal.handeye.motions.pair_indices`; 'auto':
+        every pair up to 200 poses, beyond that the consecutive ones and a bounded set of
+        well-conditioned longer ones: memory linear in the number of poses).
+    times : array_like, shape (N,), optional
+        The poses' times (s), only to name poses in warnings.
     accept_implausible : bool
         Go on (with an ``implausible_input`` warning) when :func:`judge_poses` finds the lists
         implausible; by default that raises :class:`~robocal.errors.ImplausibleInputError`.
@@ -103,15 +108,22 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
     """
     Tg = _check_poses(T_base_gripper, "T_base_gripper")
     Tc = _check_poses(T_cam_target, "T_cam_target")
-    A, B = relative_motions(Tg, Tc, pairs=pairs)
+    if len(Tg) != len(Tc):
+        raise ShapeError(f"T_base_gripper has {len(Tg)} poses but T_cam_target has {len(Tc)}: counts must match")
+    if len(Tg) < 3:
+        raise NotEnoughDataError(f"hand-eye calibration needs at least 3 poses (2 motions), got {len(Tg)}")
     m = _check_method(method)
-    X0, chk = solve_ax_xb(A, B, m, min_rotation=min_rotation, min_axis_spread=min_axis_spread)
+    ij = pair_indices(Tg, pairs)
+    A, B = _motions(Tg, Tc, *ij)
+    X0, chk = solve_ax_xb(A, B, m, min_rotation=min_rotation, min_axis_spread=min_axis_spread, pairs=ij,
+                          times=times)
+    del A, B                                    # the refinement works on the poses
     warnings = judge_poses(Tg, Tc, names=names, accept=accept_implausible) + list(chk.warnings)
     Yall = Tg @ X0 @ Tc
     Y0 = transform_from(project_to_rotation(np.mean(Yall[:, :3, :3], axis=0)), Yall[:, :3, 3].mean(axis=0))
     r0 = _pose_residual(Yall, Y0[None])
     out = HandEyeResult(X=X0, method=m, Y=Y0, rot_rms=float(np.sqrt(np.mean(r0[:, :3] ** 2))),
-                        trans_rms=float(np.sqrt(np.mean(r0[:, 3:] ** 2))), n_motions=len(A), warnings=warnings)
+                        trans_rms=float(np.sqrt(np.mean(r0[:, 3:] ** 2))), n_motions=len(ij[0]), warnings=warnings)
     if not refine:
         return out
     sr, st = _sigmas(r0)
@@ -134,7 +146,7 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
     idx = [res.free_labels.index(f"X.{k}") for k in _LABELS]
     return HandEyeResult(X=X, method=f"{m}+refine", Y=Y, cov=res.cov[np.ix_(idx, idx)], std=_std_dict(res, "X"),
                          rot_rms=float(np.sqrt(np.mean(r[:, :3] ** 2))),
-                         trans_rms=float(np.sqrt(np.mean(r[:, 3:] ** 2))), n_motions=len(A),
+                         trans_rms=float(np.sqrt(np.mean(r[:, 3:] ** 2))), n_motions=len(ij[0]),
                          warnings=warnings + list(res.warnings), lsq=res)
 
 

@@ -34,6 +34,7 @@ class PosePair:
     T_cam_target: np.ndarray
     gripper_path: Path
     target_path: Path
+    t: np.ndarray | None = None
 
     @property
     def names(self) -> tuple[str, str]:
@@ -88,34 +89,27 @@ def load_pose_pair(gripper_poses, target_poses) -> PosePair:
         raise ShapeError(f"{gripper_poses} has {len(Tg)} poses but {target_poses} has {len(Tc)}: "
                          "without timestamps in both lists the counts must match (pose i with pose i)")
     tick()
-    return PosePair(Tg, Tc, gripper_poses, target_poses)
+    return PosePair(Tg, Tc, gripper_poses, target_poses, tc if tc is not None else tg)
 
 
 # ----------------------------------------------------------------------------- AX = XB
 def calibrate(pair: PosePair, *, method: str = "tsai", no_refine: bool = False, accept_implausible: bool = False,
-              progress: bool = True, **_):
+              pairs: str = "auto", progress: bool = True, **_):
     """``X = T_gripper_cam`` (:func:`~robocal.handeye.calibrate_hand_eye`) and the
     other closed forms on the same motions, for the report's comparison.
 
     Returns ``(HandEyeResult, comparison)``; ``comparison`` lists per closed-form method the
     rotation (rad) and translation (m) difference of its X from the estimate and its closure RMS
-    (on all pose pairs up to :data:`~robocal.handeye.MAX_ALL_PAIRS` of them, else
-    consecutive pairs).
+    (on the estimate's own pose pairs, ``pairs``: :func:`~robocal.handeye.pair_indices`).
     """
     from robocal.errors import RobocalError
-    from robocal.handeye import (AXXB_METHODS, MAX_ALL_PAIRS, calibrate_hand_eye, closure_residuals,
-                                                   transform_error)
+    from robocal.handeye import AXXB_METHODS, calibrate_hand_eye, closure_residuals, transform_error
 
     tick = _stages("handeye: solve", 1, enabled=progress)
     tick()
-    res = calibrate_hand_eye(pair.T_base_gripper, pair.T_cam_target, method, refine=not no_refine,
-                             accept_implausible=accept_implausible, names=pair.names)
+    res = calibrate_hand_eye(pair.T_base_gripper, pair.T_cam_target, method, refine=not no_refine, pairs=pairs,
+                             times=pair.t, accept_implausible=accept_implausible, names=pair.names)
     comparison = []
-    n = len(pair.T_base_gripper)
-    # the estimate's own motions up to MAX_ALL_PAIRS; beyond, consecutive pairs: the comparison (Andreff's
-    # and Daniilidis' closed forms loop over the motions) would otherwise cost ~15 x the calibration itself
-    # (10^4 poses: 34 s CPU against 2.4 s)
-    pairs = "all" if n * (n - 1) // 2 <= MAX_ALL_PAIRS else "consecutive"
     for m in AXXB_METHODS:
         try:
             rot_rms, trans_rms, Xm = closure_residuals(pair.T_base_gripper, pair.T_cam_target, m, pairs=pairs)
@@ -123,7 +117,7 @@ def calibrate(pair: PosePair, *, method: str = "tsai", no_refine: bool = False, 
             comparison.append({"method": m, "error": str(exc)})
             continue
         rot, trans = transform_error(Xm, res.X)
-        comparison.append({"method": m, "pairs": pairs, "rotation_diff_rad": rot, "translation_diff_m": trans,
+        comparison.append({"method": m, "pairs": pairs, "n_motions": res.n_motions, "rotation_diff_rad": rot, "translation_diff_m": trans,
                            "rotation_rms_rad": rot_rms, "translation_rms_m": trans_rms})
     tick()
     return res, comparison
@@ -159,6 +153,7 @@ def to_result(calibration, pair: PosePair) -> CalibrationResult:
     result.add_pose("T_base_target", res.Y, std_rotation=yr, std_translation=yt, **_BASE_TARGET)
     result.diagnostics = {
         "rotation_rms_rad": res.rot_rms, "n_motions": res.n_motions, "n_poses": len(pair.T_base_gripper),
+        "pairs": next((c["pairs"] for c in comparison if "pairs" in c), None),
         "convention": "A X = X B, X = T_gripper_cam, Y = T_base_target = T_base_gripper[i] X T_cam_target[i]; "
                       "std as rotation vector of R_perturbed R^T (rad) and translation (m); quaternions scalar-last",
         "closure_residuals": _closure(pair.T_base_gripper, pair.T_cam_target, res.X, res.Y),
@@ -287,9 +282,14 @@ def build_report(result, *, base_dir=None):
                  "translation RMS [mm]": None if "error" in c else 1e3 * c["translation_rms_m"],
                  **({"failed": c["error"]} if any("error" in e for e in cmp) else {})} for c in cmp]
         pairs = next((c["pairs"] for c in cmp if "pairs" in c), "all")
+        nm = next((c["n_motions"] for c in cmp if "n_motions" in c), None)
+        which = {"all": "the relative motions of all pose pairs",
+                 "consecutive": "the motions between consecutive poses",
+                 "auto": "the estimate's motions (--pairs auto: all pairs up to 200 poses, else consecutive "
+                         "ones and well-conditioned longer ones)"}.get(pairs, pairs)
         rep.section("Closed-form solvers compared").table(
-            rows, digits=4, caption="each closed form against the estimate above, on "
-            + ("the relative motions of all pose pairs" if pairs == "all" else "the motions between consecutive poses"))
+            rows, digits=4, caption="each closed form against the estimate above, on " + which
+            + ("" if nm is None else f" ({nm} motions)"))
     solver_section(rep.section("Solver (refinement)"), d.get("solver") or {})
     return rep
 
