@@ -141,20 +141,54 @@ def test_keys_beside_file_override_the_file(tmp_path):
     assert json.loads(path.read_text())["fx"] == CAM.fx
 
 
+RATIONAL = [*CAM.dist, 0.0123, -0.00456, 0.000789]
+PRISM = [*RATIONAL, 1.1e-3, -2.3e-4, 3.4e-4, -4.5e-5]
+
+
 @pytest.mark.parametrize("fmt,name", FORMATS)
-def test_rational_model_round_trip(tmp_path, fmt, name):
-    """OpenCV's 8-term rational model (ROS rational_polynomial) keeps all its terms through every format."""
-    try:
-        cam = CameraModel(CAM.fx, CAM.fy, CAM.cx, CAM.cy, dist=[*CAM.dist, 0.0123, -0.00456, 0.000789],
-                          width=640, height=480)
-    except InputError:
-        pytest.skip("this CameraModel holds 5 distortion terms at most")
+@pytest.mark.parametrize("dist", [RATIONAL, PRISM], ids=["rational8", "prism12"])
+def test_rational_and_thin_prism_models_round_trip_through_every_rig(tmp_path, fmt, name, dist):
+    """OpenCV's 8-term rational model (ROS rational_polynomial) and the 12-term thin-prism one (what
+    calibrate_intrinsics(model="opencv8"/"opencv12") gives) keep all their terms through every format and rig."""
+    cam = CameraModel(CAM.fx, CAM.fy, CAM.cx, CAM.cy, dist=dist, width=640, height=480)
+    if fmt == "ros" and len(dist) == 12:
+        # camera_info's models hold 5 or 8 terms: refused in one line naming the formats that can
+        with pytest.raises(InputError, match="ROS's distortion models hold 5 .* or 8 .* coefficients, this camera "
+                                             "has 12: write it as format='opencv' or 'json'"):
+            write_camera(tmp_path / name, cam, format=fmt)
+        return
     path = write_camera(tmp_path / name, cam, format=fmt)
     if fmt == "ros":
         assert yaml.safe_load(path.read_text())["distortion_model"] == "rational_polynomial"
-    back = load_camera(path)
-    assert back == cam and back.dist.size == 8
-    np.testing.assert_allclose(back.project(_points()), cam.project(_points()), rtol=0, atol=1e-9)
+    # bit-identical parameters (17 significant digits): 1e-9 px is rounding margin as in _same_projection
+    for back in (load_camera(path), _humanoid_camera(tmp_path, {"file": str(path)})[0],
+                 _mirror_camera(tmp_path, {"file": str(path)})):
+        assert back == cam and back.dist.size == len(dist)
+        np.testing.assert_allclose(back.project(_points()), cam.project(_points()), rtol=0, atol=1e-9)
+
+
+@pytest.mark.slow  # ~10 s: a rendered session calibrated through the CLI, report included
+def test_files_the_camera_rig_writes_are_read_by_every_camera_rig(tmp_path, capsys):
+    """The issue's round trip end to end: `robocal camera calibrate` writes its camera in the three formats;
+    the humanoid and mirror rigs read each (camera: {file: ...}) and project as the calibrated camera does."""
+    from robocal.cli.main import main
+    from robocal.io import load_result
+    from robocal.rigs.camera.simulate import simulate_session
+    from robocal.rigs.camera.workflow import CAMERA_FILES, camera_from_result
+
+    sim = simulate_session(tmp_path / "sim", np.random.default_rng(4), views=6, width=320, height=240)
+    code = main(["camera", "calibrate", str(sim.session), "--out", str(tmp_path / "cal")])
+    assert code == 0, capsys.readouterr().err
+    cam = camera_from_result(load_result(tmp_path / "cal" / "result.json"))
+    assert set(CAMERA_FILES) == {"camera.yaml", "camera_info.yaml", "camera.json"}  # OpenCV, ROS, JSON
+    uv = cam.project(_points())
+    for name in CAMERA_FILES:
+        path = tmp_path / "cal" / name
+        (tmp_path / name).mkdir()  # each rig's data set in a folder of its own
+        for back in (load_camera(path), _humanoid_camera(tmp_path / name, {"file": str(path)})[0],
+                     _mirror_camera(tmp_path / name, {"file": str(path)})):
+            assert back == cam, name
+            np.testing.assert_allclose(back.project(_points()), uv, rtol=0, atol=1e-9, err_msg=name)
 
 
 FISH = FisheyeCamera(400.123456789, 401.5, 639.25, 479.75, k=[0.05, -0.01, 0.002, -3e-4], width=1280, height=960)
