@@ -44,6 +44,7 @@ RIG = Workflow(
     simulate_examples=("robocal mirror simulate --out mirror-sim",
                        "robocal mirror simulate --placements 4 --sigma 0.5 --seed 3 --out mirror-sim",
                        "robocal mirror simulate --images --out mirror-sim   # rendered images, ArUco body tags",
+                       "robocal mirror simulate --markerless --mirrors 4 --points 3 --out mirror-sim   # no markers",
                        "robocal mirror calibrate mirror-sim/mirror_input.yaml --out mirror-cal"),
     simulate_options=(
         Option("--placements", type=number_at_least(int, 1), default=1, help="number of mirror placements (images)"),
@@ -52,6 +53,13 @@ RIG = Workflow(
                     "(not used with --images: images get 0.6 px blur and grey-level noise 2)"),
         Option("--images", action="store_true",
                help="render images with ArUco tags on the body instead of writing image points"),
+        Option("--markerless", action="store_true",
+               help="the markerless form: no markers on the mirror, reference points seen in --mirrors poses "
+                    "(Takahashi et al. 2012; docs/rigs/mirror.md, 'Markerless input')"),
+        Option("--mirrors", type=number_at_least(int, 3), default=3,
+               help="with --markerless: number of mirror poses (>= 3)"),
+        Option("--points", type=number_at_least(int, 3), default=20,
+               help="with --markerless: number of reference points (3..20, well spread body points)"),
     ),
     calibrate_help="estimate the camera pose in the robot frame: result.json + report.html",
     calibrate_description=(
@@ -64,6 +72,7 @@ RIG = Workflow(
                         f"robocal mirror calibrate {EXAMPLES}/four_placements.yaml --out mirror-cal",
                         f"robocal mirror calibrate {EXAMPLES}/aruco_images.yaml --out mirror-cal",
                         f"robocal mirror calibrate {EXAMPLES}/own_camera.yaml --out mirror-cal   # OpenCV camera file",
+                        f"robocal mirror calibrate {EXAMPLES}/markerless.yaml --out mirror-cal   # no mirror markers",
                         f"robocal mirror calibrate {EXAMPLES}/published_single.yaml --no-refine --out mirror-cal"),
     calibrate_options=(
         Option("--no-refine", action="store_true",

@@ -36,6 +36,23 @@ Layout (lengths in the unit given by ``units.length`` or inline
         - {id: 2, centre: [500, 0, 300], normal: [0, 0, 1], x_axis: [0, 1, 0]}  # on the top, x_tag = +y_r
     mirror_tags: {dictionary: DICT_4X4_50, ids: [40, 41, 42, 43]}   # optional (default): tags at A..D
 
+Markerless form (issue 14; :mod:`robocal.rigs.mirror.markerless`): no
+marker rectangle, the mirror stands in K >= 3 unknown poses::
+
+    units: {length: mm}
+    camera: {...}                # as above
+    sigma_px: 0.5                # optional
+    reference_points:            # >= 3 points in the robot frame r, seen only in the mirror
+      - [450, -250, 50]
+      - ...
+    mirror_poses:                # >= 3 poses, each seeing >= 3 of the points
+      - name: pose 0
+        uv: [[u, v], ...]        # image points of the reflections [px]
+        ids: [0, 1, 2]           # optional: reference_points row of each uv row (default: all, in order)
+
+A file with ``reference_points`` or ``mirror_poses`` is read in this form
+(``load_input`` returns a :class:`MarkerlessInput`).
+
 With ``body_tags`` the body points are the tag corners (4 per tag, in
 OpenCV's corner order, tag ``k`` -> rows ``4k..4k+3``). A tag's ``normal``
 is the outward normal of its face in ``r``; ``x_axis`` is the printed tag's
@@ -79,7 +96,8 @@ from robocal.rigs.mirror.observation import MirrorObservation
 from robocal.rigs.mirror.detect import detect_mirror_image
 from robocal.rigs.mirror.tags import _R_R_TAG_FRONT, ARUCO_DICT, BodyTags, MirrorTags, tag_rotation
 
-__all__ = ["MirrorInput", "load_input", "write_input", "load_camera", "read_camera_file"]
+__all__ = ["MirrorInput", "MarkerlessInput", "load_input", "write_input", "write_markerless_input", "load_camera",
+           "read_camera_file"]
 
 
 @dataclass
@@ -153,6 +171,8 @@ def load_input(path) -> MirrorInput:
     if isinstance(cam_raw, dict) and isinstance(cam_raw.get("file"), str):
         cf = Path(cam_raw["file"])
         camera_file = str(cf if cf.is_absolute() else path.parent / cf)
+    if "mirror_poses" in doc or "reference_points" in doc:
+        return _load_markerless(doc, cam, src, camera_file)
     r = doc.sub("mirror_rectangle")
     try:
         rect = MarkerRectangle(r.float("width", kind="length", positive=True),
@@ -249,6 +269,95 @@ def load_input(path) -> MirrorInput:
 
     return MirrorInput(cam, rect, body, obs, sigma, tags, images, src, mirror_tags, camera_file,
                        declared_units(doc), _truth(doc))
+
+
+@dataclass
+class MarkerlessInput:
+    """A markerless input (``reference_points`` + ``mirror_poses``, issue 14), in SI units."""
+
+    camera: CameraModel
+    points_r: np.ndarray
+    observations: list
+    sigma_px: float | None = None
+    source: str = "<input>"
+    camera_file: str | None = None
+    #: unit ``reference_points`` was written in (``{"reference_points": "mm"}``), for the unit-slip check
+    declared: dict = field(default_factory=dict)
+    truth: np.ndarray | None = None
+    image_paths: dict = field(default_factory=dict)  # none: the markerless form takes image points
+
+
+def _load_markerless(doc: Document, cam: CameraModel, src: str, camera_file) -> MarkerlessInput:
+    """The markerless form (docs/rigs/mirror.md, 'Markerless input'): reference points + per pose their reflections."""
+    from robocal.rigs.mirror.markerless import MIN_POINTS, MarkerlessObservation
+    from robocal.rigs.mirror.observation import check_in_image
+
+    for key in ("mirror_rectangle", "body_points", "body_tags", "images"):
+        if key in doc:
+            raise doc.error(key, "a markerless input (reference_points + mirror_poses) takes no marker rectangle, "
+                                 "body points or images; poses with markers and without in one file are not "
+                                 "supported yet: calibrate them as two files")
+    for key in ("reference_points", "mirror_poses"):
+        if key not in doc:
+            raise doc.error(key, "missing: a markerless input needs reference_points (robot frame) and mirror_poses "
+                                 "(per pose the image points of their reflections)")
+    P = doc.array("reference_points", kind="length", shape=(None, 3))
+    if P.ndim != 2:
+        raise doc.error("reference_points", f"must be a list of [x, y, z] points, got shape {P.shape}")
+    if len(P) < MIN_POINTS:
+        raise doc.error("reference_points", f"need >= {MIN_POINTS} points (P3P per mirror pose), got {len(P)}")
+    sigma = doc.float("sigma_px", kind="pixel", default=None, positive=True) if "sigma_px" in doc else None
+    obs = []
+    for i, e in enumerate(doc.items_list("mirror_poses")):
+        name = e.str("name", default=f"mirror pose {i}")
+        uv = _uv(e, "uv")
+        if "ids" in e:
+            raw = e.raw("ids")
+            if not isinstance(raw, list) or not all(isinstance(v, int) and not isinstance(v, bool) for v in raw):
+                raise e.error("ids", "must be a list of integers (rows of reference_points)")
+            if len(raw) != len(uv):
+                raise e.error("ids", f"must have one entry per uv row ({len(uv)}), got {len(raw)}")
+            bad = [v for v in raw if not 0 <= v < len(P)]
+            if bad:
+                raise e.error("ids", f"must be rows of reference_points (0..{len(P) - 1}), got {bad[0]}")
+            ids = np.array(raw, dtype=int)
+        else:
+            if len(uv) != len(P):
+                raise e.error("uv", f"without ids, needs one row per reference point ({len(P)}), got {len(uv)}; "
+                                    f"give ids when a point is missing")
+            ids = np.arange(len(P))
+        try:
+            check_in_image(cam, uv, f"{e.prefix}.uv")
+            obs.append(MarkerlessObservation(uv, ids, name))
+        except RobocalError as exc:
+            raise (exc if exc.source else exc.with_source(src)) from None
+    unit = doc.data.get("reference_points") if isinstance(doc.data, dict) else None
+    declared = {"reference_points": str(unit["unit"]) if isinstance(unit, dict) and "unit" in unit
+                else doc.units.get("length")}
+    return MarkerlessInput(cam, P, obs, sigma, src, camera_file, declared, _truth(doc))
+
+
+def write_markerless_input(path, camera: CameraModel, points_r, observations, *, sigma_px: float | None = None,
+                           comment: str = "") -> Path:
+    """Write a markerless input file (lengths in mm) that :func:`load_input` reads back."""
+    cam = camera.to_dict()
+    cam.pop("units", None)
+    cam.pop("model", None)
+    doc = {"units": {"length": "mm", "pixel": "px"}, "camera": cam}
+    if sigma_px is not None:
+        doc["sigma_px"] = float(sigma_px)
+    doc["reference_points"] = np.round(np.asarray(points_r) * 1e3, 6).tolist()
+    poses = []
+    for o in observations:
+        e = {"name": o.name, "uv": np.round(o.uv, 4).tolist()}
+        if len(o.ids) != len(points_r) or np.any(o.ids != np.arange(len(o.ids))):
+            e["ids"] = [int(i) for i in o.ids]
+        poses.append(e)
+    doc["mirror_poses"] = poses
+    text = (f"# {comment}\n" if comment else "") + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)
+    path = Path(path)
+    atomic_write_text(path, text)
+    return path
 
 
 def _truth(doc: Document) -> np.ndarray | None:

@@ -101,8 +101,9 @@ __all__ = ["MarkerlessObservation", "MarkerlessCalibration", "calibrate_markerle
 MIN_POSES = 3
 MIN_POINTS = 3
 #: All normals within this angle of each other [deg] is refused: the rotations H_i H_j (twice the angle
-#: between normals) are then below ~1 deg and their axes, hence the normals, are noise.
-PARALLEL_NORMALS_DEG = 1.0
+#: between normals) are then a few degrees and their axes, hence the normals, are noise (measured: parallel
+#: mirrors seen through 3 points at 0.3 px give 0.9 deg; a usable set of poses differs by 10-30 deg).
+PARALLEL_NORMALS_DEG = 2.0
 #: Beyond this many PnP combinations only those of the first three poses are enumerated.
 MAX_COMBINATIONS = 256
 #: Closed-form starts refined (best by reprojection RMS).
@@ -142,7 +143,12 @@ class MarkerlessCalibration:
     the normal's angle std [rad] (largest tangent direction) and ``d``'s [m];
     ``T_r_c_closed_form`` the closed form's answer (before refinement);
     ``minima``: one dict per distinct minimum reached from the starts (best
-    first: ``cost``, ``rms_px``, ``T_r_c``, ``rotation_from_best_deg``,
+    first: ``cost``, ``delta_chi2`` (twice the cost above the best, in
+    noise units), ``rms_px``, ``T_r_c``, ``camera_distance_m`` (from the
+    nearest reference point) and ``plausible`` (within max(1 m, 2 x the
+    points' span): the camera is on the robot; an implausible minimum is
+    never the answer while a plausible one is within 9 chi-square units),
+    ``rotation_from_best_deg``,
     ``translation_from_best_mm``, ``starts``); ``conditioning``: see
     :func:`conditioning`; ``dropped``: names of poses left out (< 3 points).
     """
@@ -531,11 +537,17 @@ def calibrate_markerless(camera: CameraModel, points_r, observations, *, sigma_p
         return MarkerlessCalibration(T0, cov, n0, d0, None, T0, None, [], cond, warnings, obs, P, camera, dropped,
                                      n_comb)
     results = []
-    for rms_s, T_s, n_s, d_s, _ in starts[:max(1, int(n_starts))]:
+    for i, (rms_s, T_s, n_s, d_s, _) in enumerate(starts[:max(1, int(n_starts))]):
         prob, answer, B = _problem(camera, P, obs, T_s, n_s, d_s, sigma_px)
         try:
-            res = solve(prob, method="lm", absolute_sigma=sigma_px is not None, progress=progress)
+            # the best start gets SciPy's full budget; the others 20 steps per parameter: from a wrong P3P
+            # combination LM can crawl for a thousand steps (measured: 5 s a calibration), and a start that
+            # has not converged by then is no minimum to report
+            res = solve(prob, method="lm", absolute_sigma=sigma_px is not None, progress=progress,
+                        max_nfev=None if i == 0 else 20 * prob.n_free)
         except (np.linalg.LinAlgError, ValueError):
+            continue
+        if i > 0 and not res.success:
             continue
         T, n, d = answer(res.params)
         # (n, d) and (-n, -d) are one plane: keep the normal pointing away from the camera
@@ -544,8 +556,32 @@ def calibrate_markerless(camera: CameraModel, points_r, observations, *, sigma_p
     if not results:
         raise DegenerateGeometryError("mirror_poses: the refinement diverged from every closed-form start")
     results.sort(key=lambda r: r[0])
+    # the camera is mounted on the robot: a minimum that puts it far from the reference points is no answer
+    # (with 3 points the mirror-image solution often fits as well, 60-90 deg and 10 m away)
+    from robocal.rigs.mirror.single import CAMERA_BODY_MAX_M
+
+    limit = max(CAMERA_BODY_MAX_M, 2.0 * float(np.linalg.norm(np.ptp(P, axis=0))))
+    s2_of = (lambda r: 1.0) if sigma_px is not None else (lambda r: max(2.0 * r[0] / max(r[4].dof, 1), 1e-300))
+    near = [r for r in results if 2.0 * (r[0] - results[0][0]) / s2_of(results[0]) < 9.0
+            and _camera_distance(r[1], P) <= limit]
+    if near and near[0] is not results[0]:
+        results.remove(near[0])
+        results.insert(0, near[0])
     cost, T, n, d, res, B = results[0]
-    minima = _minima(results)
+    minima = _minima(results, P, limit)
+    if not minima[0]["plausible"]:
+        if degenerate_error is not None:
+            # the true P3P combination had parallel normals; what fits is a wrong combination's artefact
+            raise degenerate_error
+        from robocal.plausibility import check_slips
+
+        d_cam = minima[0]["camera_distance_m"]
+        warnings.extend(w for w in [check_slips(
+            what="camera's distance from the nearest reference point", residual=d_cam, unit="m", plausible=False,
+            threshold=limit, accept=accept_implausible,
+            reason=f"the best minimum puts the camera {d_cam:.3g} m from the nearest reference point (limit "
+                   f"{limit:.3g} m), but it is mounted on the robot: check that ids match the uv rows and the mirror "
+                   f"poses differ in tilt")] if w is not None)
     cov_full = res.cov
     cov = cov_full[:6, :6]
     K = len(obs)
@@ -556,20 +592,33 @@ def calibrate_markerless(camera: CameraModel, points_r, observations, *, sigma_p
                                np.sqrt(cov_full[6 + 2 * K + j, 6 + 2 * K + j])] for j in range(K)])
     cond = conditioning(cov, T, res)
     warnings.extend(res.warnings)
-    if len(minima) > 1:
-        second = minima[1]
+    # a second minimum the data cannot reject: its cost within 9 chi-square units (3 sigma) of the best, and
+    # a camera on the robot
+    s2 = s2_of(results[0])
+    for m in minima:
+        m["delta_chi2"] = float(2.0 * (m["cost"] - cost) / s2)
+    rivals = [m for m in minima[1:] if m["delta_chi2"] < 9.0 and m["plausible"]]
+    if rivals:
+        r = rivals[0]
         warnings.append(Diagnostic(
             "degenerate_geometry",
-            f"{len(minima)} distinct minima from {len(results)} starts; the next-best has cost "
-            f"{second['cost']:.4g} against {minima[0]['cost']:.4g} and differs by "
-            f"{second['rotation_from_best_deg']:.3g} deg / {second['translation_from_best_mm']:.3g} mm",
+            f"{len(rivals) + 1} minima fit the reflections equally well (chi-square difference "
+            f"{r['delta_chi2']:.2g} < 9): the next one differs by {r['rotation_from_best_deg']:.3g} deg / "
+            f"{r['translation_from_best_mm']:.3g} mm (diagnostics.minima); add reference points or mirror poses",
             params=("T_r_c",)))
     return MarkerlessCalibration(T, cov, n, d, plane_std, T0, res, minima, cond, warnings, obs, P, camera, dropped,
                                  n_comb)
 
 
-def _minima(results) -> list:
-    """Distinct minima (best first): a result within 1e-3 deg and 1e-3 mm of an earlier one is the same."""
+def _camera_distance(T_r_c, P) -> float:
+    return float(np.min(np.linalg.norm(P - np.asarray(T_r_c)[:3, 3], axis=1)))
+
+
+def _minima(results, P, limit) -> list:
+    """Distinct minima (answer first): a result within 1e-3 deg and 1e-3 mm of an earlier one is the same.
+
+    ``plausible``: the camera lies within ``limit`` [m] of the nearest reference point (it is on the robot).
+    """
     best = results[0][1]
     out = []
     for cost, T, n, d, res, _ in results:
@@ -582,6 +631,8 @@ def _minima(results) -> list:
                 break
         else:
             out.append({"cost": float(cost), "rms_px": float(res.rms), "T_r_c": T.tolist(),
+                        "camera_distance_m": _camera_distance(T, P),
+                        "plausible": bool(_camera_distance(T, P) <= limit),
                         "rotation_from_best_deg": dr, "translation_from_best_mm": dt, "starts": 1})
     return out
 

@@ -24,7 +24,8 @@ from robocal.rigs.mirror.result import pose_error
 from robocal.rigs.mirror.scene import perturbed_placements
 from robocal.rigs.mirror.simulate import default_setup, simulate_observations
 
-__all__ = ["pose_error", "single_image_study", "multi_placement_study", "StudyRow", "LABELS"]
+__all__ = ["pose_error", "single_image_study", "multi_placement_study", "markerless_study", "MarkerlessStudy",
+           "StudyRow", "LABELS"]
 
 LABELS = ["rot_x", "rot_y", "rot_z", "t_x", "t_y", "t_z"]
 
@@ -119,3 +120,68 @@ def multi_placement_study(Ks, n_trials: int, rng: np.random.Generator, *, sigma_
             n_trials=int(e.shape[0]),
         ))
     return rows
+
+
+@dataclass
+class MarkerlessStudy:
+    """Per-trial errors (``rotvec [rad], t [m]``, shape (n, 6)) of the markerless closed form, its refinement
+    and the patent path on the same scenes, and the refinement's reported std (n, 6).
+
+    ``failed``: trials whose markerless calibration raised (counted, not hidden); ``patent`` is None when the
+    patent path was not run. :attr:`z_rms` is the per-component RMS of ``error / reported std`` (1 when the
+    reported uncertainty is right)."""
+
+    closed_form: np.ndarray
+    refined: np.ndarray
+    std: np.ndarray
+    patent: np.ndarray | None
+    failed: int
+    seconds: float
+
+    @property
+    def z_rms(self) -> np.ndarray:
+        return np.sqrt(np.mean((self.refined / self.std) ** 2, axis=0))
+
+
+def markerless_study(n_trials: int, rng: np.random.Generator, *, mirrors: int = 4, points: int = 8,
+                     sigma_px: float = 0.5, patent: bool = False, progress: bool = False) -> MarkerlessStudy:
+    """The markerless method (:mod:`.markerless`) over ``n_trials`` simulated scenes.
+
+    Each trial draws its own scene (the published camera and body, ``mirrors``
+    mirror poses tilted by up to 30 deg, :func:`~robocal.rigs.mirror.workflow.markerless_setup`),
+    with ``points`` well-spread body points as the reference points, and
+    pixel noise ``sigma_px`` (declared to the calibration). ``patent``: also
+    run the patent's method + joint refinement on the same mirror poses (the
+    rectangle's markers imaged too) and the same points.
+    """
+    import time
+
+    from robocal.errors import RobocalError
+    from robocal.progress import progress as _progress
+    from robocal.rigs.mirror.markerless import calibrate_markerless, simulate_markerless
+    from robocal.rigs.mirror.workflow import markerless_setup
+
+    cf, ref, std, pat = [], [], [], []
+    failed = 0
+    t0 = time.perf_counter()
+    children = rng.spawn(int(n_trials))
+    trials = _progress(children, desc="markerless trials", total=len(children)) if progress else children
+    for r in trials:
+        cam, scene, P = markerless_setup(mirrors, r, points=points)
+        n, d = scene.planes()
+        obs = simulate_markerless(cam, scene.T_c_r, P, n, d, r, sigma_px=sigma_px)
+        try:
+            cal = calibrate_markerless(cam, P, obs, sigma_px=sigma_px)
+        except RobocalError:
+            failed += 1
+            continue
+        cf.append(pose_error(cal.T_r_c_closed_form, scene.T_r_c))
+        ref.append(pose_error(cal.T_r_c, scene.T_r_c))
+        std.append(np.r_[cal.std_rotation, cal.std_translation])
+        if patent:
+            s = MirrorScene(scene.T_c_r, scene.T_c_m, P, scene.rectangle)
+            pc = calibrate(cam, scene.rectangle, P, simulate_observations(cam, s, r, sigma_px=sigma_px),
+                           sigma_px=sigma_px)
+            pat.append(pose_error(pc.T_r_c, scene.T_r_c))
+    return MarkerlessStudy(np.array(cf), np.array(ref), np.array(std), np.array(pat) if patent else None, failed,
+                           time.perf_counter() - t0)

@@ -241,6 +241,10 @@ def build_report(result: CalibrationResult, *, base_dir=None, title: str = TITLE
     A result written before schema 2 (bare ``T_r_c``, ``T_c_m``) is read too
     (:func:`~robocal.rigs.mirror.result.upgraded`).
     """
+    if result.rig == "mirror" and (result.diagnostics or {}).get("markerless"):
+        from robocal.rigs.mirror.markerless_result import build_markerless_report
+
+        return build_markerless_report(result, base_dir=base_dir)
     result = upgraded(result)
     _check_record(result)
     d = result.diagnostics

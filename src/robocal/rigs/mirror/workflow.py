@@ -19,7 +19,7 @@ import yaml
 from robocal.errors import InputError
 from robocal.io import CalibrationResult, hash_inputs
 from robocal.rigs.mirror.calibrate import MirrorCalibration, calibrate
-from robocal.rigs.mirror.files import MirrorInput, load_input, write_input
+from robocal.rigs.mirror.files import MarkerlessInput, MirrorInput, load_input, write_input, write_markerless_input
 from robocal.rigs.mirror.model import MirrorScene
 from robocal.rigs.mirror.result import pose_error, relative_image_paths, result_from_calibration
 from robocal.rigs.mirror.simulate import default_setup, simulate_observations
@@ -37,13 +37,40 @@ def _truth_block(T_r_c) -> dict:
     return {"R_r_c": np.round(T[:3, :3], 12).tolist(), "t_r_c": np.round(T[:3, 3] * 1e3, 9).tolist()}
 
 
+#: Tilt size [deg] of the simulated markerless mirror poses: the accuracy comes from the angles between the
+#: normals (at the patent path's 8 deg, 3 poses of the published scene are often nearly degenerate).
+MARKERLESS_TILT_DEG = 30.0
+
+
+def spread_subset(P, k: int) -> np.ndarray:
+    """Row indices of ``k`` well-spread points of ``P`` (farthest-point order from row 0), sorted."""
+    P = np.asarray(P, dtype=float)
+    idx = [0]
+    dist = np.linalg.norm(P - P[0], axis=1)
+    while len(idx) < min(int(k), len(P)):
+        idx.append(int(np.argmax(dist)))
+        dist = np.minimum(dist, np.linalg.norm(P - P[idx[-1]], axis=1))
+    return np.sort(np.array(idx))
+
+
+def markerless_setup(mirrors: int, rng: np.random.Generator, *, points: int = 20):
+    """``(camera, scene, points_r)``: the published scene with ``mirrors`` poses tilted by up to
+    :data:`MARKERLESS_TILT_DEG`, and ``points`` of its body points as the reference points."""
+    cam, scene = default_setup(mirrors, rng, tilt_deg=MARKERLESS_TILT_DEG)
+    return cam, scene, scene.body_points_r[spread_subset(scene.body_points_r, points)]
+
+
 def simulate_files(out_dir, rng: np.random.Generator | None = None, *, placements: int = 1, sigma_px: float = 0.5,
-                   images: bool = False, seed: int = 0, progress: bool = False) -> list[Path]:
+                   images: bool = False, markerless: bool = False, mirrors: int = 3, points: int = 20,
+                   seed: int = 0, progress: bool = False) -> list[Path]:
     """Write ``mirror_input.yaml`` (and PNG images with ``images=True``) for the published scene.
 
     ``rng``: the run's random generator (default: ``np.random.default_rng(seed)``).
     The file carries a ``truth`` section (``R_r_c``, ``t_r_c`` in mm) that
     ``calibrate`` uses to check the answer (``diagnostics.truth_check``).
+    ``markerless``: the markerless form instead (no marker rectangle,
+    ``mirrors`` poses tilted by up to :data:`MARKERLESS_TILT_DEG`, ``points``
+    well-spread body points as reference points; ``placements`` unused).
     """
     import cv2
 
@@ -55,6 +82,24 @@ def simulate_files(out_dir, rng: np.random.Generator | None = None, *, placement
         raise InputError(f"sigma_px: must be >= 0, got {sigma_px}")
     out_dir = Path(out_dir)
     rng = np.random.default_rng(seed) if rng is None else rng
+    if markerless:
+        from robocal.rigs.mirror.markerless import MIN_POINTS, MIN_POSES, simulate_markerless
+
+        if images:
+            raise InputError("--images and --markerless: rendered markerless images are not implemented; "
+                             "--markerless writes image points")
+        if int(mirrors) < MIN_POSES or int(points) < MIN_POINTS:
+            raise InputError(f"--mirrors and --points: need >= {MIN_POSES} mirror poses and >= {MIN_POINTS} points, "
+                             f"got {mirrors} and {points}")
+        cam, scene, P = markerless_setup(int(mirrors), rng, points=int(points))
+        n, d = scene.planes()
+        obs = simulate_markerless(cam, scene.T_c_r, P, n, d, rng, sigma_px=sigma_px)
+        path = write_markerless_input(out_dir / INPUT_NAME, cam, P, obs, sigma_px=sigma_px if sigma_px > 0 else None,
+                                      comment=f"robocal mirror simulate --markerless: {mirrors} mirror poses, "
+                                              f"{len(P)} reference points, {sigma_px} px noise")
+        with open(path, "a", encoding="utf-8") as fh:
+            fh.write(yaml.safe_dump({"truth": _truth_block(scene.T_r_c)}, default_flow_style=None))
+        return [path]
     cam, scene = default_setup(placements, rng)
     written = []
     if images:
@@ -92,7 +137,7 @@ class MirrorRun:
     file (:func:`~robocal.rigs.mirror.result.relative_image_paths`).
     """
 
-    calibration: MirrorCalibration
+    calibration: MirrorCalibration  # or a MarkerlessCalibration (markerless input)
     base_dir: Path
 
 
@@ -105,6 +150,13 @@ def calibrate_input(inp: MirrorInput, *, out_dir=None, progress: bool = False, a
     written to (default: the current directory). ``accept_implausible``: see
     :func:`robocal.rigs.mirror.calibrate.calibrate`.
     """
+    if isinstance(inp, MarkerlessInput):
+        from robocal.rigs.mirror.markerless import calibrate_markerless
+
+        cal = calibrate_markerless(inp.camera, inp.points_r, inp.observations, sigma_px=inp.sigma_px,
+                                   refine=not no_refine, accept_implausible=accept_implausible,
+                                   declared=inp.declared, progress=progress)
+        return MirrorRun(cal, Path(out_dir) if out_dir is not None else Path.cwd())
     cal = calibrate(inp.camera, inp.rectangle, inp.body_points_r, inp.observations, sigma_px=inp.sigma_px,
                     refine=not no_refine, progress=progress, accept_implausible=accept_implausible,
                     declared=inp.declared)
@@ -114,6 +166,10 @@ def calibrate_input(inp: MirrorInput, *, out_dir=None, progress: bool = False, a
 def to_result(run: MirrorRun, inp: MirrorInput) -> CalibrationResult:
     """The result record (:func:`~robocal.rigs.mirror.result.result_from_calibration`) with the inputs' hashes."""
     inputs = hash_inputs([inp.source, *([inp.camera_file] if inp.camera_file else []), *inp.image_paths.values()])
+    if isinstance(inp, MarkerlessInput):
+        from robocal.rigs.mirror.markerless_result import result_from_markerless
+
+        return result_from_markerless(run.calibration, inputs=inputs, truth=inp.truth, sigma_px=inp.sigma_px)
     return result_from_calibration(run.calibration, inputs=inputs,
                                    image_paths=relative_image_paths(inp.image_paths, run.base_dir),
                                    truth=inp.truth, sigma_px=inp.sigma_px)
@@ -141,6 +197,10 @@ def summary(result: CalibrationResult) -> str:
     text = (f"t_r_c = [{t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}] mm  (std {s[0]:.1f}, {s[1]:.1f}, {s[2]:.1f} mm); "
             f"rotation std {np.degrees(pose.std_rotation).max():.3g} deg")
     line = planar_summary(result)
+    cond = (result.diagnostics.get("conditioning") or {}).get("text")
+    if cond:  # markerless: the conditioning in words
+        line = f"{line}\n" if line else ""
+        line += f"conditioning: {cond}"
     return f"{text}\n{line}" if line else text
 
 
@@ -149,9 +209,10 @@ def _error_text(e) -> str:
 
 
 def demo(ctx: DemoContext) -> DemoOutcome:
-    """Simulate -> calibrate -> check on the published scene (points, 4 placements) and one rendered image.
+    """Simulate -> calibrate -> check on the published scene (points, 4 placements), one rendered image, and the
+    markerless method next to the patent's on 4 mirror poses tilted by up to 30 deg.
 
-    Passes when both answers are consistent with their reported covariance
+    Passes when the three answers are consistent with their reported covariance
     (:func:`robocal.estimation.truth_check`, NEES over the 6 pose parameters).
     """
     import cv2
@@ -191,6 +252,30 @@ def demo(ctx: DemoContext) -> DemoOutcome:
         if s.title.startswith("Images"):
             report.extend([s], prefix="ArUco")
     report.write(out_dir / "report.html")
+    # markerless (issue 14) next to the patent's method on the same 4 mirror poses, tilted by up to 30 deg
+    from robocal.rigs.mirror.markerless import calibrate_markerless, simulate_markerless
+    from robocal.rigs.mirror.markerless_result import result_from_markerless
+
+    cam_ml, scene_ml, P_ml = markerless_setup(4, rng)
+    n_ml, d_ml = scene_ml.planes()
+    cal_ml = calibrate_markerless(cam_ml, P_ml, simulate_markerless(cam_ml, scene_ml.T_c_r, P_ml, n_ml, d_ml, rng,
+                                                                    sigma_px=0.5), sigma_px=0.5)
+    cal_pat = calibrate(cam_ml, scene_ml.rectangle, P_ml, simulate_observations(cam_ml, scene_ml, rng, sigma_px=0.5),
+                        sigma_px=0.5)
+    res_ml = result_from_markerless(cal_ml, truth=scene_ml.T_r_c, sigma_px=0.5)
+    check_ml = res_ml.diagnostics["truth_check"]
+    e_ml, e_cf = pose_error(cal_ml.T_r_c, scene_ml.T_r_c), pose_error(cal_ml.T_r_c_closed_form, scene_ml.T_r_c)
+    e_pat = pose_error(cal_pat.T_r_c, scene_ml.T_r_c)
+    sec = report.section("Markerless (no mirror markers) next to the patent's method, same 4 mirror poses")
+    sec.table([{"method": name, "error": _error_text(e), "reported std": std}
+               for name, e, std in (
+                   ("markerless closed form (Takahashi et al. 2012)", e_cf, "-"),
+                   ("markerless refined", e_ml, f"{np.linalg.norm(cal_ml.std_translation) * 1e3:.1f} mm / "
+                                                f"{np.degrees(np.linalg.norm(cal_ml.std_rotation)):.2f} deg"),
+                   ("patent + joint (markers)", e_pat, f"{np.linalg.norm(cal_pat.std_translation) * 1e3:.1f} mm / "
+                                                       f"{np.degrees(np.linalg.norm(cal_pat.std_rotation)):.2f} deg"))],
+              caption=f"{len(P_ml)} body points, 0.5 px; markerless NEES {check_ml['nees']:.2f} (limit "
+                      f"{check_ml['threshold']:.1f}). Conditioning: {cal_ml.conditioning['text']}")
     summary_ = {
         "1 image error": _error_text(e1),
         "4 placements error": _error_text(e4),
@@ -199,7 +284,10 @@ def demo(ctx: DemoContext) -> DemoOutcome:
         "4 placements NEES": f"{check4['nees']:.2f} (limit {check4['threshold']:.1f})",
         "ArUco image error": f"{np.linalg.norm(e_img[3:]) * 1e3:.1f} mm",
         "ArUco image NEES": f"{check_img['nees']:.2f} (limit {check_img['threshold']:.1f})",
+        "markerless 4 poses error": f"{_error_text(e_ml)} (closed form {_error_text(e_cf)}; patent on the same "
+                                    f"poses {_error_text(e_pat)})",
+        "markerless NEES": f"{check_ml['nees']:.2f} (limit {check_ml['threshold']:.1f})",
         "time": f"{time.perf_counter() - t0:.1f} s",
     }
-    passed = bool(check4["passed"] and check_img["passed"])
+    passed = bool(check4["passed"] and check_img["passed"] and check_ml["passed"])
     return DemoOutcome(summary=summary_, passed=passed, sections=list(report.sections), result=result)

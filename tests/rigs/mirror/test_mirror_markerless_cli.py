@@ -1,0 +1,115 @@
+"""The markerless form through the CLI (issue 14): the example, simulate --markerless, the report, bad input."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from robocal.cli.main import main
+from robocal.io import load_result
+from robocal.rigs.mirror.files import MarkerlessInput, load_input, write_markerless_input
+from robocal.rigs.mirror.markerless import simulate_markerless
+from robocal.rigs.mirror.workflow import markerless_setup
+
+EXAMPLE = Path(__file__).resolve().parents[3] / "examples" / "mirror" / "markerless.yaml"
+
+
+def test_the_example_runs_and_reports(tmp_path, capsys):
+    cal = tmp_path / "cal"
+    assert main(["mirror", "calibrate", str(EXAMPLE), "--out", str(cal)]) == 0
+    out = capsys.readouterr().out
+    assert "conditioning: rotation about" in out and " deg " in out
+    res = load_result(cal / "result.json")
+    d = res.diagnostics
+    assert d["markerless"] and len(d["mirror_planes"]) == 3 and len(d["reference_points_r"]) == 3
+    assert res.method.startswith("markerless")
+    pose = res.pose("T_r_c")  # the shared vocabulary: robot -> camera, left rotation std
+    assert res.poses["T_r_c"] == {"rotation_std": "left", "parent": "robot", "child": "camera"}
+    assert d["truth_check"]["passed"] and d["truth_check"]["dof"] == 6
+    assert np.all(pose.std_translation > 0)
+    html = (cal / "report.html").read_text()
+    assert "Conditioning:" in html and "Mirror planes" in html and "closed form" in html
+    # robocal report rebuilds it from result.json alone
+    assert main(["report", str(cal / "result.json"), "--out", str(tmp_path / "rep")]) == 0
+    assert "Mirror planes" in (tmp_path / "rep" / "report.html").read_text()
+
+
+def test_simulate_markerless_then_calibrate(tmp_path):
+    sim, cal = tmp_path / "sim", tmp_path / "cal"
+    assert main(["mirror", "simulate", "--markerless", "--mirrors", "4", "--points", "6", "--seed", "5",
+                 "--out", str(sim)]) == 0
+    inp = load_input(sim / "mirror_input.yaml")
+    assert isinstance(inp, MarkerlessInput) and len(inp.observations) == 4 and len(inp.points_r) == 6
+    assert inp.truth is not None
+    assert main(["mirror", "calibrate", str(sim / "mirror_input.yaml"), "--out", str(cal)]) == 0
+    res = json.loads((cal / "result.json").read_text())
+    assert res["diagnostics"]["truth_check"]["passed"]
+    assert len(res["diagnostics"]["closed_form_error"]) == 6
+
+
+def _write(tmp_path, mutate=None, *, mirrors=3, points=3, seed=2, parallel=False):
+    rng = np.random.default_rng(seed)
+    cam, scene, P = markerless_setup(mirrors, rng, points=points)
+    n, d = scene.planes()
+    if parallel:  # one mirror orientation, only shifted between poses
+        n, d = np.repeat(n[:1], mirrors, axis=0), d[0] + 0.05 * np.arange(mirrors)
+    obs = simulate_markerless(cam, scene.T_c_r, P, n, d, rng, sigma_px=0.3)
+    path = write_markerless_input(tmp_path / "in.yaml", cam, P, obs, sigma_px=0.3)
+    if mutate is not None:
+        doc = yaml.safe_load(path.read_text())
+        mutate(doc)
+        path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+def _two_poses(doc):
+    doc["mirror_poses"] = doc["mirror_poses"][:2]
+
+
+def _two_points(doc):
+    doc["reference_points"] = doc["reference_points"][:2]
+    for p in doc["mirror_poses"]:
+        p["uv"] = p["uv"][:2]
+
+
+def _mm_declared_m(doc):
+    doc["units"]["length"] = "m"
+
+
+def _bad_ids(doc):
+    doc["mirror_poses"][1]["ids"] = [0, 1, 7]
+
+
+@pytest.mark.parametrize("mutate, kw, expected", [
+    (_two_poses, {}, r"need >= 3 mirror poses that see >= 3 reference points each, got 2"),
+    (_two_points, {}, r"reference_points.*need >= 3 points \(P3P per mirror pose\), got 2"),
+    (None, {"parallel": True},
+     r"all mirror normals are parallel \(largest angle between two poses' normals [01]\.\d\d deg, need >= 2 deg"),
+    (_mm_declared_m, {}, r"`reference_points` looks like mm, not m: with /1000"),
+    (_bad_ids, {}, r"mirror_poses\[1\]\.ids.*must be rows of reference_points \(0\.\.2\), got 7"),
+], ids=["two_poses", "two_points", "parallel_normals", "mm_declared_m", "ids_out_of_range"])
+def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, mutate, kw, expected):
+    import re
+
+    path = _write(tmp_path, mutate, **kw)
+    assert main(["mirror", "calibrate", str(path), "--out", str(tmp_path / "cal")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and str(path) in err, err
+    assert re.search(expected, err), err
+    assert not (tmp_path / "cal" / "result.json").exists()
+
+
+def test_a_point_missing_in_a_pose_is_counted(tmp_path):
+    def drop(doc):
+        pose = doc["mirror_poses"][2]
+        pose["ids"] = [0, 1, 3]
+        del pose["uv"][2]
+
+    path = _write(tmp_path, drop, points=4, seed=3)
+    assert main(["mirror", "calibrate", str(path), "--out", str(tmp_path / "cal")]) == 0
+    res = load_result(tmp_path / "cal" / "result.json")
+    msg = [w.message for w in res.warnings if w.code == "dropped"]
+    assert any("1 reflection(s) not seen" in m and "11 of 12 used" in m for m in msg), msg
+    assert [p["n_points"] for p in res.diagnostics["mirror_planes"]] == [4, 4, 3]
