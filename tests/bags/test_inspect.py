@@ -60,3 +60,21 @@ def test_cli_bad_file_is_one_line_exit_2(tmp_path, capsys):
     assert main(["bag", "inspect", str(bad)]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and str(bad) in err and "truncated or unindexed" in err
+
+
+def test_long_reads_show_the_topic_and_the_fraction_read(recordings, monkeypatch):
+    import robocal.bags._reader as r
+
+    bars = []
+
+    def fake_progress(it, *, desc="", total=None, enabled=True):
+        bars.append((desc, total, enabled))
+        return it
+
+    monkeypatch.setattr(r, "progress", fake_progress)
+    monkeypatch.setattr(r, "PROGRESS_MIN_MESSAGES", 100)
+    bags.read_joint_states(recordings["rosbag1"].path)
+    assert bars == [("/joint_states", len(recordings["rosbag1"].joint_stamps_ns), True)]
+    bars.clear()
+    bags.read_tf(recordings["rosbag1"].path, show_progress=False)
+    assert bars[0][2] is False

@@ -156,11 +156,11 @@ def inspect_recording(path, *, show_progress: bool = True) -> RecordingSummary:
             topics.append(TopicSummary(info.name, info.msgtype, info.count, (recv[0] - t0) / 1e9 if len(recv) else 0.0,
                                        (recv[-1] - t0) / 1e9 if len(recv) else 0.0, 1 / period if period > 0 else 0.0,
                                        gaps, offset, _clock_flag(offset)))
-        tf_topics = [t for t in rec.topics_of_type(TF_TYPES)]
+        tf_topics = rec.topics_of_type(TF_TYPES)
         summary = dict(path=str(rec.path), format=fmt, size_bytes=rec.size_bytes, start_ns=t0, end_ns=rec.end_ns)
+        tree = read_tf(rec, topics=tuple(tf_topics), show_progress=show_progress) if tf_topics else None
     edges = ()
-    if tf_topics:
-        tree = read_tf(path, topics=tuple(tf_topics), show_progress=show_progress)
+    if tree is not None:
         edges = tuple((e.parent, e.child, "static" if e.static else "dynamic", e.rate, len(e.stamps_ns))
                       for e in tree.edges.values())
         # tf's own header stamps are per transform: their clock is judged from the tf samples

@@ -271,6 +271,7 @@ def read_arrays(path, topic: str, *, show_progress: bool = True) -> TopicArrays:
             stamps.append(stamp_ns(m.header.stamp))
             recv.append(r)
             frame = frame or m.header.frame_id
+        source = rec.path
     fields = {k: np.asarray([row[k] for row in rows], float) for k in (rows[0] if rows else {})}
     if "quaternion" in fields and "position" in fields:
         from scipy.spatial.transform import Rotation
@@ -278,7 +279,7 @@ def read_arrays(path, topic: str, *, show_progress: bool = True) -> TopicArrays:
         n = np.linalg.norm(fields["quaternion"], axis=1)
         bad = ~(np.abs(n - 1.0) < 1e-2)  # tf2's tolerance for a unit quaternion; also catches NaN
         if np.any(bad):
-            raise InputError(f"{path}: topic {topic}: {int(bad.sum())} orientation(s) not a unit quaternion, "
+            raise InputError(f"{source}: topic {topic}: {int(bad.sum())} orientation(s) not a unit quaternion, "
                              f"first at message {int(np.argmax(bad))} (|q| = {n[np.argmax(bad)]:.6g})")
         T = np.zeros((len(rows), 4, 4))
         T[:, :3, :3] = Rotation.from_quat(fields["quaternion"]).as_matrix()

@@ -85,20 +85,21 @@ class PoseStream:
         return Rotation.from_matrix(self.T[:, :3, :3]).as_quat()
 
 
-def _matrix(tf, where: str) -> np.ndarray:
+def _matrices(q: np.ndarray, p: np.ndarray, where: str) -> np.ndarray:
+    """(N, 4, 4) from quaternions (N, 4) scalar-last and translations (N, 3), one batch (SciPy)."""
     from scipy.spatial.transform import Rotation
 
-    r, t = tf.rotation, tf.translation
-    q, p = np.array([r.x, r.y, r.z, r.w], float), np.array([t.x, t.y, t.z], float)
     with np.errstate(over="ignore", invalid="ignore"):  # a damaged message's 1e300s are refused below, not warned
-        n = np.linalg.norm(q)
+        n = np.linalg.norm(q, axis=1)
     # tf2 itself refuses a quaternion off unit length by more than 0.01 (tf2::BufferCore::setTransform)
-    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(p)) and abs(n - 1.0) < 1e-2):
-        raise InputError(f"{where}: transform is not finite or its quaternion is not unit length "
-                         f"(|q| = {n:.6g}, translation {p.tolist()})")
-    T = np.eye(4)
-    T[:3, :3] = Rotation.from_quat(q).as_matrix()
-    T[:3, 3] = p
+    bad = ~((np.abs(n - 1.0) < 1e-2) & np.all(np.isfinite(p), axis=1))
+    if np.any(bad):
+        k = int(np.argmax(bad))
+        raise InputError(f"{where}: {int(bad.sum())} transform(s) not finite or with a quaternion not of unit length, "
+                         f"first sample {k} (|q| = {n[k]:.6g}, translation {p[k].tolist()})")
+    T = np.zeros((len(q), 4, 4))
+    T[:, :3, :3] = Rotation.from_quat(q).as_matrix()
+    T[:, :3, 3], T[:, 3, 3] = p, 1.0
     return T
 
 
@@ -235,13 +236,16 @@ def read_tf(path, *, topics=("/tf", "/tf_static"), show_progress: bool = True) -
                                      f"'{key['parent']}' ({'static' if key['static'] else 'dynamic'}) and "
                                      f"'{parent}' ({'static' if static else 'dynamic'}, on {topic})")
                 key["s"].append(stamp_ns(tr.header.stamp))
-                key["T"].append(_matrix(tr.transform, f"{rec.path}: {topic} {parent} -> {child}"))
+                r, t = tr.transform.rotation, tr.transform.translation
+                key["T"].append((r.x, r.y, r.z, r.w, t.x, t.y, t.z))
                 key["r"].append(recv)
         edges = {}
         for child, k in samples.items():
             s = np.asarray(k["s"], np.int64)
             order = np.argsort(s, kind="stable")
-            s, T, r = s[order], np.asarray(k["T"])[order], np.asarray(k["r"], np.int64)[order]
+            qp = np.asarray(k["T"], float)[order]
+            T = _matrices(qp[:, :4], qp[:, 4:], f"{rec.path}: tf {k['parent']} -> {child}")
+            s, r = s[order], np.asarray(k["r"], np.int64)[order]
             keep = np.append(s[1:] != s[:-1], True)  # a repeated stamp: the last one published wins
             edges[child] = TfEdge(k["parent"], child, k["static"], s[keep], T[keep], r[keep])
         return TfTree(edges, str(rec.path))
