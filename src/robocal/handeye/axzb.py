@@ -16,7 +16,7 @@ from robocal.errors import DegenerateGeometryError, NotEnoughDataError, ShapeErr
 from robocal.estimation import Problem, solve
 from robocal.geometry import PoseWithCovariance, invert_transform, project_to_rotation, transform_from
 from robocal.handeye.motions import (_LABELS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses,
-                                                       pair_indices, _perturbed, _pose_residual, _sigmas,
+                                                       pair_indices, _perturbed, _pose_residual, _sigmas, name_outliers,
                                                        check_motions)
 from robocal.handeye.plausibility import judge_poses
 
@@ -68,7 +68,7 @@ def _rw_rotation(RA, RB):
 
 
 
-def calibrate_robot_world(T_cam_world, T_gripper_base, *, refine: bool = True, pairs: str = "auto",
+def calibrate_robot_world(T_cam_world, T_gripper_base, *, refine: bool = True, pairs: str = "auto", times=None,
                           min_rotation: float = MIN_ROTATION,
                           min_axis_spread: float = MIN_AXIS_SPREAD, accept_implausible: bool = False,
                           names=("T_base_gripper", "T_cam_world")) -> RobotWorldResult:
@@ -82,6 +82,8 @@ def calibrate_robot_world(T_cam_world, T_gripper_base, *, refine: bool = True, p
         ``B``: the inverse of the robot's forward kinematics.
     pairs : {'auto', 'consecutive', 'all'}
         The gripper motions of the excitation check (:func:`~robocal.handeye.motions.pair_indices`).
+    times : array_like, shape (N,), optional
+        The poses' times (s), only to name poses in warnings.
     accept_implausible, names
         As in :func:`calibrate_hand_eye` (the lists are judged as ``T_base_gripper = B^-1`` and
         ``T_cam_target = A``, by :func:`judge_poses`); ``names``: the robot's and the camera's files.
@@ -128,5 +130,6 @@ def calibrate_robot_world(T_cam_world, T_gripper_base, *, refine: bool = True, p
     std = {f"X.{k}": res.std.get(f"X.{k}") for k in _LABELS} | {f"Z.{k}": res.std.get(f"Z.{k}") for k in _LABELS}
     return RobotWorldResult(X=X, Z=Z, method="shah+refine", cov=res.cov, std=std,
                             rot_rms=float(np.sqrt(np.mean(r[:, :3] ** 2))),
-                            trans_rms=float(np.sqrt(np.mean(r[:, 3:] ** 2))), warnings=warnings + list(res.warnings),
+                            trans_rms=float(np.sqrt(np.mean(r[:, 3:] ** 2))),
+                            warnings=warnings + name_outliers(res.warnings, times, what="A X = Z B"),
                             lsq=res)

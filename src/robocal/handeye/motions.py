@@ -19,7 +19,7 @@ from robocal.validation import check_transform
 
 __all__ = ["MIN_ROTATION", "MIN_AXIS_SPREAD", "WEAK_AXIS_SPREAD", "MAX_ALL_PAIRS", "MAX_LONG_PAIRS",
            "LONG_PAIR_ANGLES", "PAIR_MODES", "MotionCheck", "pair_indices", "relative_motions", "check_motions",
-           "transform_error", "pose_label"]
+           "transform_error", "pose_label", "name_outliers"]
 
 #: Default smallest useful relative rotation (rad): below it the axis is noise.
 MIN_ROTATION = np.deg2rad(2.0)
@@ -149,6 +149,21 @@ def _poses_of_pairs(i, j, bad, n: int) -> np.ndarray:
 def _name_poses(poses, times=None, limit: int = 8) -> str:
     shown = ", ".join(pose_label(k, times) for k in poses[:limit])
     return shown + (f" and {len(poses) - limit} more" if len(poses) > limit else "")
+
+
+def name_outliers(warnings, times=None, *, what: str) -> list:
+    """The solver's ``outliers`` warning with POSES named (one closure observation per pose, so its
+    observation numbers are pose numbers) and their times; other warnings unchanged."""
+    out = []
+    for w in warnings:
+        if w.code == "outliers" and w.indices:
+            poses = np.asarray(w.indices, int)
+            head = w.message.split(":")[0]
+            w = Diagnostic("outliers", f"{_name_poses(poses, times)}: the closure {what} of "
+                           f"{'this pose' if len(poses) == 1 else 'these poses'} is an outlier ({head})",
+                           params=w.params, indices=w.indices)
+        out.append(w)
+    return out
 
 
 def check_motions(A, B=None, *, min_rotation: float = MIN_ROTATION, min_axis_spread: float = MIN_AXIS_SPREAD,

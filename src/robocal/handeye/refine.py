@@ -19,7 +19,7 @@ from robocal.geometry import PoseWithCovariance, project_to_rotation, transform_
 from robocal.handeye.axxb import _check_method, solve_ax_xb
 from robocal.handeye.motions import (_LABELS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses,
                                                        _motions, _perturbed, _pose_residual, _sigmas,
-                                     pair_indices)
+                                     name_outliers, pair_indices)
 from robocal.handeye.plausibility import judge_poses
 from robocal.validation import check_array, check_transform
 
@@ -147,7 +147,8 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
     return HandEyeResult(X=X, method=f"{m}+refine", Y=Y, cov=res.cov[np.ix_(idx, idx)], std=_std_dict(res, "X"),
                          rot_rms=float(np.sqrt(np.mean(r[:, :3] ** 2))),
                          trans_rms=float(np.sqrt(np.mean(r[:, 3:] ** 2))), n_motions=len(ij[0]),
-                         warnings=warnings + list(res.warnings), lsq=res)
+                         warnings=warnings + name_outliers(res.warnings, times, what="T_base_gripper X "
+                                                           "T_cam_target = Y"), lsq=res)
 
 
 

@@ -173,7 +173,7 @@ def robot_world(pair: PosePair, *, no_refine: bool = False, accept_implausible: 
     tick = _stages("handeye robot-world: solve", 1)
     tick()
     res = calibrate_robot_world(pair.T_cam_target, invert_transform(pair.T_base_gripper), refine=not no_refine,
-                                accept_implausible=accept_implausible, names=pair.names)
+                                times=pair.t, accept_implausible=accept_implausible, names=pair.names)
     tick()
     return res
 
@@ -234,7 +234,8 @@ def run_robot_world(args) -> int:
 
 # ----------------------------------------------------------------------------- report, summary
 def summary(result) -> str:
-    """``T_gripper_cam translation [mm] (method): x +/- s, ...``: the line the commands print."""
+    """``T_gripper_cam translation [mm] (method): x +/- s, ...``: the line the commands print (the core prints
+    the warnings, with the poses they name, on stderr)."""
     t = result.estimate["T_gripper_cam.translation"]
     st = result.std.get("T_gripper_cam.translation") or [None] * 3
     head = "T_gripper_cam translation [mm]" + ("" if result.method.startswith("robot-world") else
