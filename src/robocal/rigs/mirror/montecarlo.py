@@ -152,7 +152,8 @@ def markerless_study(n_trials: int, rng: np.random.Generator, *, mirrors: int = 
     with ``points`` well-spread body points as the reference points, and
     pixel noise ``sigma_px`` (declared to the calibration). ``patent``: also
     run the patent's method + joint refinement on the same mirror poses (the
-    rectangle's markers imaged too) and the same points.
+    rectangle's markers imaged too) and the same points (NaN rows with fewer
+    than 4 points: the patent's body-point PnP needs 4).
     """
     import time
 
@@ -179,6 +180,9 @@ def markerless_study(n_trials: int, rng: np.random.Generator, *, mirrors: int = 
         ref.append(pose_error(cal.T_r_c, scene.T_r_c))
         std.append(np.r_[cal.std_rotation, cal.std_translation])
         if patent:
+            if len(P) < 4:  # the patent's body-point PnP needs 4 points: no figure, not a failure
+                pat.append(np.full(6, np.nan))
+                continue
             s = MirrorScene(scene.T_c_r, scene.T_c_m, P, scene.rectangle)
             pc = calibrate(cam, scene.rectangle, P, simulate_observations(cam, s, r, sigma_px=sigma_px),
                            sigma_px=sigma_px)
