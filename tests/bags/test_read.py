@@ -86,6 +86,7 @@ def test_joint_states_by_name_and_both_clocks(recording):
     assert np.array_equal(js.stamps_ns, recording.joint_stamps_ns)
     # receive time = header + the simulated transport latency (1 ms), to float64 rounding of epoch seconds
     assert np.all(js.receive_ns - js.stamps_ns == LATENCY_NS["joints"])
+    assert js.clock_offset == LATENCY_NS["joints"] / 1e9
     assert np.allclose(js.receive_stamps - js.stamps, LATENCY_NS["joints"] / 1e9, atol=1e-6)
 
 
@@ -149,3 +150,22 @@ def test_camera_info_models(tmp_path, fmt, model, d):
         assert cam == FisheyeCamera(500.0, 505.0, 320.5, 240.25, np.array(d), 640, 480)
     else:
         assert cam == CameraModel(500.0, 505.0, 320.5, 240.25, np.array(d or [0.0] * 5), 640, 480)
+
+
+def test_raw_image_rows_padding_and_byte_order():
+    from types import SimpleNamespace
+
+    from robocal.bags import image_from_message
+    from robocal.errors import FileFormatError
+
+    img = np.arange(12, dtype=np.uint16).reshape(3, 4) * 4099
+    big = np.zeros((3, 10), np.uint8)  # 8 bytes of pixels + 2 bytes of padding per row (step 10)
+    big[:, :8] = img.astype(">u2").view(np.uint8)
+    msg = SimpleNamespace(data=big.ravel(), encoding="mono16", height=3, width=4, step=10, is_bigendian=1)
+    out = image_from_message(msg, "sensor_msgs/msg/Image")
+    assert out.dtype == np.uint16 and np.array_equal(out, img)
+    short = SimpleNamespace(**{**vars(msg), "data": big.ravel()[:25]})
+    with pytest.raises(FileFormatError, match="4x3 mono16 image needs 3 rows of >= 8 bytes"):
+        image_from_message(short, "sensor_msgs/msg/Image", source="x.bag")
+    with pytest.raises(InputError, match="encoding 'yuv422' is not supported"):
+        image_from_message(SimpleNamespace(**{**vars(msg), "encoding": "yuv422"}), "sensor_msgs/msg/Image")

@@ -53,6 +53,11 @@ class JointStates:
         """Receive (log) times [s]."""
         return seconds_from_ns(self.receive_ns)
 
+    @property
+    def clock_offset(self) -> float:
+        """Median receive time minus header stamp [s]: milliseconds on one clock; see ``inspect_recording``'s flags."""
+        return float(np.median(self.receive_ns - self.stamps_ns)) / 1e9 if len(self.stamps_ns) else float("nan")
+
     def __getitem__(self, name: str) -> np.ndarray:
         """Positions (N,) of joint ``name``."""
         if name not in self.names:
@@ -83,6 +88,11 @@ class TopicArrays:
     def receive_stamps(self) -> np.ndarray:
         """Receive (log) times [s]."""
         return seconds_from_ns(self.receive_ns)
+
+    @property
+    def clock_offset(self) -> float:
+        """Median receive time minus header stamp [s]: milliseconds on one clock; see ``inspect_recording``'s flags."""
+        return float(np.median(self.receive_ns - self.stamps_ns)) / 1e9 if len(self.stamps_ns) else float("nan")
 
     def __getitem__(self, name: str) -> np.ndarray:
         if name not in self.fields:
