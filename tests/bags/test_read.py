@@ -169,3 +169,13 @@ def test_raw_image_rows_padding_and_byte_order():
         image_from_message(short, "sensor_msgs/msg/Image", source="x.bag")
     with pytest.raises(InputError, match="encoding 'yuv422' is not supported"):
         image_from_message(SimpleNamespace(**{**vars(msg), "encoding": "yuv422"}), "sensor_msgs/msg/Image")
+
+
+@pytest.mark.parametrize("fmt", ["rosbag1", "rosbag2", "mcap"])
+def test_compressed_recordings(tmp_path, fmt):
+    truth = bags.simulate_recording(tmp_path / ("z.bag" if fmt == "rosbag1" else "z"), format=fmt, duration=0.5,
+                                    image_size=(48, 32), encodings=("mono8",), compress=True)
+    with bags.open_recording(truth.path) as rec:
+        assert_poses(bags.poses(rec, "odom", "base_link").T, truth.T_odom_base)
+        assert np.array_equal(bags.read_joint_states(rec).position, truth.joint_positions)
+        assert all(np.array_equal(img, want) for (_, img), want in zip(bags.images(rec, "/camera/image_raw"), truth.images))

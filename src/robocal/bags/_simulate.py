@@ -105,17 +105,21 @@ def _typestore(fmt: str):
 class _Writer:
     """One writer API over rosbags' ROS 1 and ROS 2 (sqlite3 / MCAP) writers."""
 
-    def __init__(self, path: Path, fmt: str):
+    def __init__(self, path: Path, fmt: str, compress: bool = False):
         self.fmt, self.ts = fmt, _typestore(fmt)
         if fmt == "rosbag1":
             from rosbags.rosbag1 import Writer
 
             self.w = Writer(path)
+            if compress:  # LZ4 chunks, as `rosbag record --lz4` writes them
+                self.w.set_compression(Writer.CompressionFormat.LZ4)
         else:
-            from rosbags.rosbag2 import StoragePlugin, Writer
+            from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 
             plugin = StoragePlugin.MCAP if fmt == "mcap" else StoragePlugin.SQLITE3
             self.w = Writer(path, version=8, storage_plugin=plugin)
+            if compress:  # zstd per message, as `ros2 bag record --compression-mode message` writes it
+                self.w.set_compression(CompressionMode.MESSAGE, CompressionFormat.ZSTD)
         self.conns = {}
 
     def __enter__(self):
@@ -220,7 +224,7 @@ def _render_views(camera, n: int, rng) -> list:
 def simulate_recording(path, *, format: str = "rosbag1", duration: float = 2.0, tf_rate: float = 50.0,
                        joint_rate: float = 100.0, image_rate: float = 2.0, image_size=(160, 120),
                        encodings=("mono8",), distinct_images: int | None = None, camera_clock_offset: float = 0.0,
-                       rng: np.random.Generator | None = None) -> RecordingTruth:
+                       compress: bool = False, rng: np.random.Generator | None = None) -> RecordingTruth:
     """Write a simulated recording to ``path`` and return its truth.
 
     Parameters
@@ -242,6 +246,8 @@ def simulate_recording(path, *, format: str = "rosbag1", duration: float = 2.0, 
         Render only this many views and repeat them (fast large bags for the benchmark).
     camera_clock_offset : float
         Seconds added to the camera topics' header stamps (another clock).
+    compress : bool
+        ROS 1: LZ4 chunks; ROS 2 and MCAP: zstd per message.
     rng : numpy.random.Generator, optional
         Image noise (default: seed 0).
     """
@@ -277,7 +283,7 @@ def simulate_recording(path, *, format: str = "rosbag1", duration: float = 2.0, 
     def at(stamp, kind, fn):
         events.append((int(stamp) + LATENCY_NS[kind], len(events), fn))
 
-    with _Writer(path, format) as w:
+    with _Writer(path, format, compress) as w:
         start = int(T0_NS)
         w.write("/tf_static", "tf2_msgs/msg/TFMessage", start, w.tf([
             w.transform(start, "base_link", "camera_link", T_bc),
