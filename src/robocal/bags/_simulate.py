@@ -5,8 +5,9 @@ the committed example ``examples/bags/``. The scene: a mobile base driving in
 ``odom`` (``odom -> base_link``, dynamic, on ``/tf``), an arm's flange
 (``base_link -> tool0``, dynamic), a camera bolted to the base
 (``base_link -> camera_link -> camera_optical``, static, on ``/tf_static``),
-the arm's joint states, rendered chessboard images with their CameraInfo,
-odometry and a velocity vector.
+the arm's joint states, rendered chessboard images with their CameraInfo
+(the board poses in the camera frame are part of the truth, not tied to the
+tf tree), and odometry.
 
 Clocks: receive time = header stamp + a fixed transport latency per topic;
 ``camera_clock_offset`` shifts the camera's header stamps (a driver on
@@ -54,6 +55,7 @@ class RecordingTruth:
     image_stamps_ns: np.ndarray
     images: list
     camera: object
+    T_cam_board: np.ndarray  # (N, 4, 4): the 7x5 chessboard (30 mm squares) in the camera frame, per image
     image_topics: dict = field(default_factory=dict)
 
     def pose(self, name: str, t_s) -> np.ndarray:
@@ -212,13 +214,16 @@ def _render_views(camera, n: int, rng) -> list:
     from robocal.camera import ChessboardTarget, render_target_view
 
     target = ChessboardTarget(rows=5, cols=7, square=0.03)
+    poses = board_poses(n)
+    return [render_target_view(camera, target, T, rng, noise_sigma=2.0) for T in poses], poses
+
+
+def board_poses(n: int) -> np.ndarray:
+    """(n, 4, 4) ``T_cam_board`` of the simulated views: the 7x5 board (30 mm squares) centred 0.45 m ahead, tilted."""
+    k = np.arange(n)
+    R = _rot(np.stack([0.25 * np.sin(k), 0.25 * np.cos(1.7 * k), 0.3 * np.sin(0.5 * k)], -1))
     centre = np.array([3 * 0.03, 2 * 0.03, 0.0])
-    views = []
-    for k in range(n):
-        R = _rot(np.array([0.25 * np.sin(k), 0.25 * np.cos(1.7 * k), 0.3 * np.sin(0.5 * k)]))
-        T = _pose(R, np.array([0.0, 0.0, 0.45]) - R @ centre)
-        views.append(render_target_view(camera, target, T, rng, noise_sigma=2.0))
-    return views
+    return _pose(R, np.array([0.0, 0.0, 0.45]) - R @ centre)
 
 
 def simulate_recording(path, *, format: str = "rosbag1", duration: float = 2.0, tf_rate: float = 50.0,
@@ -275,8 +280,9 @@ def simulate_recording(path, *, format: str = "rosbag1", duration: float = 2.0, 
     tj = (joint_ns - T0_NS)[:, None] / 1e9
     q, qd = amp * np.sin(w_j * tj + ph), amp * w_j * np.cos(w_j * tj + ph)
     n_views = len(image_ns) if distinct_images is None else min(distinct_images, len(image_ns))
-    views = _render_views(camera, n_views, rng)
+    views, view_poses = _render_views(camera, n_views, rng)
     images = [views[k % n_views] for k in range(len(image_ns))]
+    T_cam_board = view_poses[np.arange(len(image_ns)) % n_views]
     off = int(round(camera_clock_offset * 1e9))
 
     events = []  # (receive_ns, order, callable) written in receive order, like a recorder
@@ -310,7 +316,7 @@ def simulate_recording(path, *, format: str = "rosbag1", duration: float = 2.0, 
         for _, _, fn in sorted(events, key=lambda e: (e[0], e[1])):
             fn()
     return RecordingTruth(path, format, tf_ns, T_ob, tool_ns, T_bt, T_bc, T_co, names, joint_ns, q, qd,
-                          image_ns + off, images, camera, {e: IMAGE_TOPICS[e] for e in encodings})
+                          image_ns + off, images, camera, T_cam_board, {e: IMAGE_TOPICS[e] for e in encodings})
 
 
 def _write_odom(w: _Writer, s: int, T: np.ndarray) -> None:
