@@ -113,3 +113,26 @@ def test_a_point_missing_in_a_pose_is_counted(tmp_path):
     msg = [w.message for w in res.warnings if w.code == "dropped"]
     assert any("1 reflection(s) not seen" in m and "11 of 12 used" in m for m in msg), msg
     assert [p["n_points"] for p in res.diagnostics["mirror_planes"]] == [4, 4, 3]
+
+
+def test_mixed_file_with_and_without_markers(tmp_path):
+    from robocal.rigs.mirror.files import write_input
+    from robocal.rigs.mirror.model import MirrorScene
+    from robocal.rigs.mirror.simulate import simulate_observations
+
+    rng = np.random.default_rng(3)
+    cam, scene, P = markerless_setup(4, rng, points=8)
+    n, d = scene.planes()
+    with_markers = simulate_observations(cam, MirrorScene(scene.T_c_r, scene.T_c_m[:2], P, scene.rectangle), rng)
+    without = simulate_markerless(cam, scene.T_c_r, P, n[2:], d[2:], rng, sigma_px=0.5)
+    path = write_input(tmp_path / "mixed.yaml", cam, scene.rectangle, P, with_markers, sigma_px=0.5)
+    doc = yaml.safe_load(path.read_text())
+    doc["mirror_poses"] = [{"name": o.name, "uv": o.uv.tolist(), "ids": o.ids.tolist()} for o in without]
+    doc["truth"] = {"R_r_c": scene.T_r_c[:3, :3].tolist(), "t_r_c": (scene.T_r_c[:3, 3] * 1e3).tolist()}
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    assert main(["mirror", "calibrate", str(path), "--out", str(tmp_path / "cal")]) == 0
+    res = load_result(tmp_path / "cal" / "result.json")
+    assert res.method.startswith("mixed: 2 mirror pose(s) with markers") and res.diagnostics["mixed"]
+    assert res.diagnostics["truth_check"]["passed"]
+    assert len(res.diagnostics["marker_poses"]) == 2 and len(res.diagnostics["mirror_planes"]) == 2
+    assert "mirror poses with markers" in (tmp_path / "cal" / "report.html").read_text()

@@ -50,8 +50,12 @@ marker rectangle, the mirror stands in K >= 3 unknown poses::
         uv: [[u, v], ...]        # image points of the reflections [px]
         ids: [0, 1, 2]           # optional: reference_points row of each uv row (default: all, in order)
 
-A file with ``reference_points`` or ``mirror_poses`` is read in this form
-(``load_input`` returns a :class:`MarkerlessInput`).
+A file with ``reference_points``, or ``mirror_poses`` without ``images``, is
+read in this form (``load_input`` returns a :class:`MarkerlessInput`). Mixed
+data: ``mirror_poses`` next to ``images`` (and ``body_points``,
+``mirror_rectangle``) are markerless poses whose ``ids`` index
+``body_points`` (``MirrorInput.markerless_poses``), calibrated in one problem
+with the marker poses.
 
 With ``body_tags`` the body points are the tag corners (4 per tag, in
 OpenCV's corner order, tag ``k`` -> rows ``4k..4k+3``). A tag's ``normal``
@@ -118,6 +122,8 @@ class MirrorInput:
     declared: dict = field(default_factory=dict)
     #: ``T_r_c`` (4, 4) [m] of the file's ``truth`` section (written by ``robocal mirror simulate``), else None
     truth: np.ndarray | None = None
+    #: markerless mirror poses (``mirror_poses`` next to ``images``: mixed data), MarkerlessObservation each
+    markerless_poses: list = field(default_factory=list)
 
 
 def _uv(doc, key, n=None):
@@ -171,7 +177,7 @@ def load_input(path) -> MirrorInput:
     if isinstance(cam_raw, dict) and isinstance(cam_raw.get("file"), str):
         cf = Path(cam_raw["file"])
         camera_file = str(cf if cf.is_absolute() else path.parent / cf)
-    if "mirror_poses" in doc or "reference_points" in doc:
+    if "reference_points" in doc or ("mirror_poses" in doc and "images" not in doc):
         return _load_markerless(doc, cam, src, camera_file)
     r = doc.sub("mirror_rectangle")
     try:
@@ -267,8 +273,10 @@ def load_input(path) -> MirrorInput:
             raise exc.with_source(f"{src}: {e.prefix}") from None
     from robocal.rigs.mirror.slips import declared_units
 
+    # mixed data: poses with markers (images) and without (mirror_poses, indexing body_points) in one file
+    markerless = _markerless_poses(doc, cam, src, body, "body_points") if "mirror_poses" in doc else []
     return MirrorInput(cam, rect, body, obs, sigma, tags, images, src, mirror_tags, camera_file,
-                       declared_units(doc), _truth(doc))
+                       declared_units(doc), _truth(doc), markerless)
 
 
 @dataclass
@@ -289,14 +297,13 @@ class MarkerlessInput:
 
 def _load_markerless(doc: Document, cam: CameraModel, src: str, camera_file) -> MarkerlessInput:
     """The markerless form (docs/rigs/mirror.md, 'Markerless input'): reference points + per pose their reflections."""
-    from robocal.rigs.mirror.markerless import MIN_POINTS, MarkerlessObservation
-    from robocal.rigs.mirror.observation import check_in_image
+    from robocal.rigs.mirror.markerless import MIN_POINTS
 
     for key in ("mirror_rectangle", "body_points", "body_tags", "images"):
         if key in doc:
             raise doc.error(key, "a markerless input (reference_points + mirror_poses) takes no marker rectangle, "
-                                 "body points or images; poses with markers and without in one file are not "
-                                 "supported yet: calibrate them as two files")
+                                 "body points or images; for poses with markers and without in one file give "
+                                 "body_points (not reference_points), mirror_rectangle, images and mirror_poses")
     for key in ("reference_points", "mirror_poses"):
         if key not in doc:
             raise doc.error(key, "missing: a markerless input needs reference_points (robot frame) and mirror_poses "
@@ -307,6 +314,18 @@ def _load_markerless(doc: Document, cam: CameraModel, src: str, camera_file) -> 
     if len(P) < MIN_POINTS:
         raise doc.error("reference_points", f"need >= {MIN_POINTS} points (P3P per mirror pose), got {len(P)}")
     sigma = doc.float("sigma_px", kind="pixel", default=None, positive=True) if "sigma_px" in doc else None
+    obs = _markerless_poses(doc, cam, src, P)
+    unit = doc.data.get("reference_points") if isinstance(doc.data, dict) else None
+    declared = {"reference_points": str(unit["unit"]) if isinstance(unit, dict) and "unit" in unit
+                else doc.units.get("length")}
+    return MarkerlessInput(cam, P, obs, sigma, src, camera_file, declared, _truth(doc))
+
+
+def _markerless_poses(doc: Document, cam: CameraModel, src: str, P, field: str = "reference_points") -> list:
+    """The ``mirror_poses`` entries (``uv``, optional ``ids`` into ``P``) as MarkerlessObservation's."""
+    from robocal.rigs.mirror.markerless import MarkerlessObservation
+    from robocal.rigs.mirror.observation import check_in_image
+
     obs = []
     for i, e in enumerate(doc.items_list("mirror_poses")):
         name = e.str("name", default=f"mirror pose {i}")
@@ -314,16 +333,16 @@ def _load_markerless(doc: Document, cam: CameraModel, src: str, camera_file) -> 
         if "ids" in e:
             raw = e.raw("ids")
             if not isinstance(raw, list) or not all(isinstance(v, int) and not isinstance(v, bool) for v in raw):
-                raise e.error("ids", "must be a list of integers (rows of reference_points)")
+                raise e.error("ids", f"must be a list of integers (rows of {field})")
             if len(raw) != len(uv):
                 raise e.error("ids", f"must have one entry per uv row ({len(uv)}), got {len(raw)}")
             bad = [v for v in raw if not 0 <= v < len(P)]
             if bad:
-                raise e.error("ids", f"must be rows of reference_points (0..{len(P) - 1}), got {bad[0]}")
+                raise e.error("ids", f"must be rows of {field} (0..{len(P) - 1}), got {bad[0]}")
             ids = np.array(raw, dtype=int)
         else:
             if len(uv) != len(P):
-                raise e.error("uv", f"without ids, needs one row per reference point ({len(P)}), got {len(uv)}; "
+                raise e.error("uv", f"without ids, needs one row per {field} row ({len(P)}), got {len(uv)}; "
                                     f"give ids when a point is missing")
             ids = np.arange(len(P))
         try:
@@ -331,10 +350,7 @@ def _load_markerless(doc: Document, cam: CameraModel, src: str, camera_file) -> 
             obs.append(MarkerlessObservation(uv, ids, name))
         except RobocalError as exc:
             raise (exc if exc.source else exc.with_source(src)) from None
-    unit = doc.data.get("reference_points") if isinstance(doc.data, dict) else None
-    declared = {"reference_points": str(unit["unit"]) if isinstance(unit, dict) and "unit" in unit
-                else doc.units.get("length")}
-    return MarkerlessInput(cam, P, obs, sigma, src, camera_file, declared, _truth(doc))
+    return obs
 
 
 def write_markerless_input(path, camera: CameraModel, points_r, observations, *, sigma_px: float | None = None,

@@ -675,6 +675,16 @@ class MixedCalibration:
     lsq: LSQResult
     conditioning: dict
     warnings: list
+    observations: list = field(default_factory=list)  # the markerless poses
+    marker_observations: list = field(default_factory=list)
+    points_r: np.ndarray | None = None
+    camera: CameraModel | None = None
+    #: the start: the marker path's estimate (or the markerless closed form without marker poses)
+    T_r_c_closed_form: np.ndarray | None = None
+    plane_std: np.ndarray | None = None
+    minima: list = field(default_factory=list)
+    n_combinations: int = 1
+    dropped: list = field(default_factory=list)
 
     @property
     def std_rotation(self) -> np.ndarray:
@@ -683,6 +693,11 @@ class MixedCalibration:
     @property
     def std_translation(self) -> np.ndarray:
         return np.sqrt(np.diag(self.cov)[3:])
+
+    def residuals(self) -> list:
+        """Reprojection residuals [px] of the markerless poses' reflections, projected - observed."""
+        return markerless_residuals(self.camera, self.points_r, self.observations, self.T_r_c, self.normals,
+                                    self.distances)
 
 
 def _plane_given_pose(T_c_ri_candidates, T_r_c) -> tuple[np.ndarray, float]:
@@ -749,4 +764,4 @@ def calibrate_mixed(camera: CameraModel, rectangle, points_r, marker_observation
     T_c_m = poses(res.params)[1] if mk else np.zeros((0, 4, 4))
     cov = res.cov[:6, :6]
     warnings.extend(res.warnings)
-    return MixedCalibration(T, cov, T_c_m, n, d, res, conditioning(cov, T, res), warnings)
+    return MixedCalibration(T, cov, T_c_m, n, d, res, conditioning(cov, T, res), warnings, ml, mk, P, camera, T0)

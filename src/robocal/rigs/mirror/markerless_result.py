@@ -64,6 +64,13 @@ def result_from_markerless(cal, *, inputs=None, truth=None, sigma_px=None) -> Ca
         "sigma_px": None if sigma_px is None else float(sigma_px),
         "unobservable": UNOBSERVABLE_MARKERLESS,
     }
+    mixed = getattr(cal, "marker_observations", None)
+    if mixed:
+        diag["mixed"] = True
+        diag["start_label"] = "marker path (start)"
+        diag["marker_poses"] = [{"image": o.name, "T_c_m": np.asarray(T).tolist()}
+                                for o, T in zip(mixed, cal.T_c_m)]
+        diag["marker_observations"] = [o.to_dict() for o in mixed]
     if cal.lsq is not None:
         diag["solver"] = solver_record(cal.lsq)
     if truth is not None:
@@ -71,9 +78,13 @@ def result_from_markerless(cal, *, inputs=None, truth=None, sigma_px=None) -> Ca
         diag["truth_T_r_c"] = truth.tolist()
         diag["truth_check"] = truth_check(pose_error(cal.T_r_c, truth), cal.cov, names=TRUTH_NAMES).to_dict()
         diag["closed_form_error"] = pose_error(cal.T_r_c_closed_form, truth).tolist()
+    method = METHOD if cal.lsq is not None else METHOD.split(" + ")[0]
+    if mixed:
+        method = (f"mixed: {len(mixed)} mirror pose(s) with markers (patent path) + {len(cal.observations)} "
+                  f"markerless, one joint refinement")
     result = CalibrationResult(
-        rig="mirror", method=METHOD if cal.lsq is not None else METHOD.split(" + ")[0],
-        estimate={}, residual_rms=float(np.sqrt(np.mean(res ** 2))), residual_unit="px",
+        rig="mirror", method=method,
+        estimate={}, residual_rms=float(cal.lsq.rms if mixed else np.sqrt(np.mean(res ** 2))), residual_unit="px",
         warnings=list(cal.warnings), inputs=dict(inputs or {}), diagnostics=diag)
     result.add_pose("T_r_c", cal.T_r_c, std_rotation=cal.std_rotation, std_translation=cal.std_translation,
                     parent="robot", child="camera", rotation_std="left")
@@ -108,7 +119,7 @@ def build_markerless_report(result: CalibrationResult, *, base_dir=None, title: 
     if "truth_T_r_c" in d:
         rows = [_error_row("refined", pose_error(T_r_c, d["truth_T_r_c"]))]
         if "closed_form_error" in d:
-            rows.insert(0, _error_row("closed form", np.asarray(d["closed_form_error"])))
+            rows.insert(0, _error_row(d.get("start_label", "closed form"), np.asarray(d["closed_form_error"])))
         s.table(rows, digits=4, caption="estimate - simulated truth")
         if "truth_check" in d:
             truth_section(s, d["truth_check"])
@@ -132,6 +143,10 @@ def build_markerless_report(result: CalibrationResult, *, base_dir=None, title: 
                  digits=4, caption=f"distinct minima reached from the best closed-form starts "
                                    f"({d.get('n_combinations', 1)} PnP combination(s) scored); a minimum less than 9 "
                                    f"chi-square units above the best is not rejected by the data (warning)")
+    if d.get("marker_poses"):
+        s2.table([{"image": m["image"], "t_c_m [mm]": np.round(np.asarray(m["T_c_m"])[:3, 3] * 1e3, 1).tolist()}
+                  for m in d["marker_poses"]], digits=4,
+                 caption="mirror poses with markers (patent path), camera -> mirror, in the same joint problem")
     s3 = rep.section("Residuals and solver")
     r = np.concatenate(markerless_residuals(cam, P, obs, T_r_c, np.asarray([p["normal"] for p in d["mirror_planes"]]),
                                             np.asarray([p["d"] for p in d["mirror_planes"]])))

@@ -157,6 +157,12 @@ def calibrate_input(inp: MirrorInput, *, out_dir=None, progress: bool = False, a
                                    refine=not no_refine, accept_implausible=accept_implausible,
                                    declared=inp.declared, progress=progress)
         return MirrorRun(cal, Path(out_dir) if out_dir is not None else Path.cwd())
+    if inp.markerless_poses:  # mixed data: poses with markers and without, one joint problem
+        from robocal.rigs.mirror.markerless import calibrate_mixed
+
+        cal = calibrate_mixed(inp.camera, inp.rectangle, inp.body_points_r, inp.observations, inp.markerless_poses,
+                              sigma_px=inp.sigma_px, accept_implausible=accept_implausible)
+        return MirrorRun(cal, Path(out_dir) if out_dir is not None else Path.cwd())
     cal = calibrate(inp.camera, inp.rectangle, inp.body_points_r, inp.observations, sigma_px=inp.sigma_px,
                     refine=not no_refine, progress=progress, accept_implausible=accept_implausible,
                     declared=inp.declared)
@@ -166,7 +172,7 @@ def calibrate_input(inp: MirrorInput, *, out_dir=None, progress: bool = False, a
 def to_result(run: MirrorRun, inp: MirrorInput) -> CalibrationResult:
     """The result record (:func:`~robocal.rigs.mirror.result.result_from_calibration`) with the inputs' hashes."""
     inputs = hash_inputs([inp.source, *([inp.camera_file] if inp.camera_file else []), *inp.image_paths.values()])
-    if isinstance(inp, MarkerlessInput):
+    if isinstance(inp, MarkerlessInput) or getattr(inp, "markerless_poses", None):
         from robocal.rigs.mirror.markerless_result import result_from_markerless
 
         return result_from_markerless(run.calibration, inputs=inputs, truth=inp.truth, sigma_px=inp.sigma_px)
