@@ -9,8 +9,10 @@ distortion. For every intrinsic: truth, bias, Monte Carlo RMSE, the RMS of
 the reported std, their ratio (the issue's claim: 0.8-1.25x over >= 100 data
 sets) with the ratio's sampling std ``ratio / sqrt(2 trials)``; then the
 largest difference to ``cv2.calibrateCamera`` on the same corners (in
-reported stds), the RMS of both, and CPU time per calibration (BLAS on one
-thread; the machine is shared, wall time would measure the neighbours).
+reported stds; with ``noise="pooled"``, cv2's objective, and how often and
+how far the default per-view weights depart from it), the RMS of both, and
+CPU time per calibration (BLAS on one thread; the machine is shared, wall
+time would measure the neighbours).
 
 ``--rendered``: the data sets of tests/camera/test_calibrate_rendered_montecarlo.py
 (rendered images -> ``detect_targets`` -> ``calibrate_intrinsics``: 7 views of
@@ -55,7 +57,7 @@ def main() -> None:
     cam = CameraModel(600.0, 605.0, 321.3, 238.7, (-0.28, 0.11, 8e-4, -6e-4, -0.02), 640, 480)
     truth = np.array([cam.fx, cam.fy, cam.cx, cam.cy, *cam.dist])
     board = Checkerboard(6, 9, 0.03).object_points()
-    err, var, dcv, rms, rms_cv, t_ours, t_cv, n_out = [], [], [], [], [], [], [], 0
+    err, var, dcv, rms, rms_cv, t_ours, t_cv, n_out, d_weighted = [], [], [], [], [], [], [], 0, []
     for k in range(args.trials):
         views, _ = simulate_target_views(cam, board, args.views, np.random.default_rng([args.seed, k]),
                                          noise_px=args.noise)
@@ -71,8 +73,14 @@ def main() -> None:
         n_out += len(cal.outliers)
         err.append(cal.values - truth)
         var.append(cal.std_array ** 2)
-        dcv.append(np.abs(cal.values - cv) / cal.std_array)
-        rms.append(cal.rms * np.sqrt(2))  # cv2's definition: sqrt(sum |r|^2 / corners)
+        # cv2's objective is one noise level for all corners: compared with noise="pooled" on the same corners;
+        # the default differs from it only where Cochran's test finds the views' noise levels unequal
+        pooled = cal if len(set(cal.view_sigma.values())) == 1 else calibrate_intrinsics(views, cam.size,
+                                                                                           noise="pooled")
+        if pooled is not cal:
+            d_weighted.append(np.max(np.abs(cal.values - pooled.values) / pooled.std_array))
+        dcv.append(np.abs(pooled.values - cv) / pooled.std_array)
+        rms.append(pooled.rms * np.sqrt(2))  # cv2's definition: sqrt(sum |r|^2 / corners)
         rms_cv.append(r_cv)
     err, var = np.array(err), np.array(var)
     rmse = np.sqrt(np.mean(err ** 2, axis=0))
@@ -86,9 +94,13 @@ def main() -> None:
         print(f"| {lab} | {truth[i]:.6g} | {err[:, i].mean():+.3g} | {rmse[i]:.3g} | {rstd[i]:.3g} | "
               f"{ratio[i]:.3f} | {ratio[i] / np.sqrt(2 * args.trials):.3f} |")
     print(f"\nratio within 0.8-1.25 for every intrinsic: {bool(np.all((ratio > 0.8) & (ratio < 1.25)))}")
-    print(f"max |ours - cv2.calibrateCamera| on the same corners: {np.max(dcv):.2g} reported std")
-    print(f"RMS [px, cv2's definition]: ours {np.mean(rms):.6f}, cv2 {np.mean(rms_cv):.6f}; ours <= cv2 in "
-          f"{np.mean(np.array(rms) <= np.array(rms_cv) * (1 + 1e-7)):.0%} of data sets")
+    print(f"views weighted by their own noise (Cochran's test rejects one level, 5 % expected): "
+          f"{len(d_weighted)} of {args.trials} data sets, max |per_view - pooled| "
+          f"{max(d_weighted, default=0.0):.2g} reported std")
+    print(f"max |ours (pooled) - cv2.calibrateCamera| on the same corners: {np.max(dcv):.2g} reported std")
+    # 1e-6: cv2 reads the corners as float32 (rounded at ~1e-5 px), as the tests allow
+    print(f"RMS [px, cv2's definition]: ours {np.mean(rms):.6f}, cv2 {np.mean(rms_cv):.6f}; ours <= cv2 "
+          f"(1 + 1e-6) in {np.mean(np.array(rms) <= np.array(rms_cv) * (1 + 1e-6)):.0%} of data sets")
     print(f"CPU per calibration: ours {np.median(t_ours) * 1e3:.0f} ms (includes cv2's start), "
           f"cv2.calibrateCamera {np.median(t_cv) * 1e3:.0f} ms (median)")
 

@@ -71,6 +71,8 @@ SPARSE_ABOVE_PARAMS = 620
 REWEIGHT_ROUNDS = 4
 #: The views' noise levels have settled when none changes by more than this fraction.
 REWEIGHT_TOL = 0.02
+#: Views whose noise levels pass Cochran's homogeneity test at this level share the pooled one (_view_noise).
+HOMOGENEITY_P = 0.05
 #: How the pixel noise is modelled: one level for all corners, or one per view.
 NOISE_MODELS = ("per_view", "pooled")
 _DIST_LABELS = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4")
@@ -321,7 +323,10 @@ def _view_noise(res, views, n_intr: int) -> dict:
     :func:`robocal.estimation.solve` corrected for the truncation (so a gross
     outlier neither inflates its view's noise nor hides behind it); ``s^2``
     likewise over all views. Each ratio ``z_i = s_i^2 / s^2`` scatters by
-    ``2 / dof_i`` from sampling alone; the true spread ``tau^2`` is what the
+    ``2 / dof_i`` from sampling alone. When ``Q = sum (z_i - 1)^2 dof_i / 2``
+    is within chi-square(n_views - 1)'s ``1 - HOMOGENEITY_P`` quantile
+    (Cochran, Biometrics 10, 1954) the views are taken to share one level,
+    the pooled one. Otherwise the true spread ``tau^2`` is what the
     observed scatter has beyond that (method of moments, DerSimonian & Laird,
     Controlled Clinical Trials 7, 1986), and each view keeps the share
     ``lambda_i = tau^2 / (tau^2 + 2 / dof_i)`` of its deviation:
@@ -329,6 +334,8 @@ def _view_noise(res, views, n_intr: int) -> dict:
     (nearly) equal weights, the fit of one noise level, instead of weights
     that carry their own sampling noise into the estimate.
     """
+    from scipy import special
+
     from robocal.estimation._solve import _clipped_variance  # the solver's own robust noise estimate
 
     m = 2 * sum(len(v) for v in views)
@@ -344,6 +351,10 @@ def _view_noise(res, views, n_intr: int) -> dict:
         dof.append(max(mi - p, 1.0))
         z.append(_clipped_variance(q[v.name], np.full(len(v), 2), mi, p, 3.0) / pooled)
     z, samp = np.array(z), 2.0 / np.array(dof)
+    # Cochran's homogeneity test first: views whose levels scatter no more than sampling allows (5 % level)
+    # keep the pooled one exactly; a spread estimated > 0 by chance would only add the weights' noise
+    if np.sum((z - 1.0) ** 2 / samp) <= special.chdtri(len(views) - 1, HOMOGENEITY_P):
+        return {v.name: float(np.sqrt(pooled)) for v in views}
     tau2 = max(float(np.mean((z - 1.0) ** 2 - samp)), 0.0)
     lam = tau2 / (tau2 + samp)
     s2 = pooled * np.maximum(1.0 + lam * (z - 1.0), 1e-6)
@@ -527,6 +538,9 @@ def calibrate_intrinsics(views, image_size, *, model: str = "opencv5", fix=(), m
             # few evaluations), so that the outlier test below judges a corner against its own view's noise
             for _ in range(REWEIGHT_ROUNDS):
                 new = _view_noise(res, used, n_intr)
+                if sig is None and len(set(new.values())) == 1:
+                    sig = new  # one level for all views: the unweighted fit is already the fit with these weights
+                    break
                 settled = sig is not None and all(abs(new[k] / sig[k] - 1.0) < REWEIGHT_TOL for k in new)
                 if settled:
                     break
