@@ -44,6 +44,7 @@ def main() -> None:
     print("| poses K | points N | trials (failed) | closed form rot [deg] / t [mm] | refined rot [deg] / t [mm] | "
           "patent + markers rot [deg] / t [mm] | refined RMS(error/std) per component | time [s] |")
     print("|---|---|---|---|---|---|---|---|")
+    failures = []
     for k, (K, N) in enumerate(CONFIGS):
         trials = max(10, n // 2) if N == 3 else n
         st = markerless_study(trials, np.random.default_rng(7000 + k), mirrors=K, points=N, sigma_px=0.5,
@@ -53,6 +54,9 @@ def main() -> None:
         z = " ".join(f"{v:.2f}" for v in st.z_rms)
         print(f"| {K} | {N} | {len(st.refined)} ({st.failed}) | {cf[0]:.2f} / {cf[1]:.0f} | {ref[0]:.2f} / "
               f"{ref[1]:.0f} | {pat_text} | {z} | {st.seconds:.0f} |", flush=True)
+        failures.extend(f"K={K}, N={N}, trial {i}: {msg}" for i, msg in st.failures)
+    for line in failures:
+        print(f"failed: {line}")
 
 
 if __name__ == "__main__":

@@ -137,6 +137,8 @@ class MarkerlessStudy:
     patent: np.ndarray | None
     failed: int
     seconds: float
+    #: ``(trial index, one-line error)`` of each failed trial
+    failures: list = None
 
     @property
     def z_rms(self) -> np.ndarray:
@@ -164,17 +166,19 @@ def markerless_study(n_trials: int, rng: np.random.Generator, *, mirrors: int = 
 
     cf, ref, std, pat = [], [], [], []
     failed = 0
+    failures = []
     t0 = time.perf_counter()
     children = rng.spawn(int(n_trials))
     trials = _progress(children, desc="markerless trials", total=len(children)) if progress else children
-    for r in trials:
+    for i, r in enumerate(trials):
         cam, scene, P = markerless_setup(mirrors, r, points=points)
         n, d = scene.planes()
         obs = simulate_markerless(cam, scene.T_c_r, P, n, d, r, sigma_px=sigma_px)
         try:
             cal = calibrate_markerless(cam, P, obs, sigma_px=sigma_px)
-        except RobocalError:
+        except RobocalError as exc:
             failed += 1
+            failures.append((i, str(exc)))
             continue
         cf.append(pose_error(cal.T_r_c_closed_form, scene.T_r_c))
         ref.append(pose_error(cal.T_r_c, scene.T_r_c))
@@ -188,4 +192,4 @@ def markerless_study(n_trials: int, rng: np.random.Generator, *, mirrors: int = 
                            sigma_px=sigma_px)
             pat.append(pose_error(pc.T_r_c, scene.T_r_c))
     return MarkerlessStudy(np.array(cf), np.array(ref), np.array(std), np.array(pat) if patent else None, failed,
-                           time.perf_counter() - t0)
+                           time.perf_counter() - t0, failures)
