@@ -188,6 +188,10 @@ class TfTree:
             q_ns = max(dyn, key=lambda e: len(e.stamps_ns)).stamps_ns if dyn else np.zeros(1, np.int64)
             if dyn:  # only the stamps every edge covers
                 q_ns = q_ns[(q_ns >= max(e.stamps_ns[0] for e in dyn)) & (q_ns <= min(e.stamps_ns[-1] for e in dyn))]
+                if not len(q_ns):
+                    raise InputError(f"{self.source}: the dynamic tf edges from '{parent}' to '{child}' "
+                                     f"({', '.join(f'{e.parent} -> {e.child}' for e in dyn)}) are never recorded "
+                                     "at the same time")
         else:
             st = np.atleast_1d(np.asarray(stamps))
             q_ns = st.astype(np.int64) if np.issubdtype(st.dtype, np.integer) else np.round(st * 1e9).astype(np.int64)
