@@ -24,6 +24,9 @@ def test_summary_of_the_simulated_recording(recording):
     text = s.text()
     assert "    base_link  <- odom  (dynamic, 50.0 Hz, 101 samples)" in text
     assert "gaps (> 3x the topic's median period): none" in text
+    assert by["/camera/image_rgb"].detail == "160x120 rgb8"
+    assert by["/camera/image_raw/compressed"].detail == "compressed (png)"
+    assert by["/camera/camera_info"].detail == "160x120, distortion_model plumb_bob"
 
 
 def test_a_camera_on_another_clock_is_flagged(tmp_path):

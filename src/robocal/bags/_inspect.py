@@ -43,6 +43,7 @@ class TopicSummary:
     gaps: tuple
     clock_offset: float | None
     clock_flag: str = ""
+    detail: str = ""
 
 
 @dataclass(frozen=True)
@@ -95,6 +96,10 @@ class RecordingSummary:
         for t in self.topics:
             clock = "-" if t.clock_offset is None else f"{1e3 * t.clock_offset:+.1f} ms"
             out.append(f"{t.name:32s} {t.msgtype:34s} {t.count:7d} {t.rate:8.2f} {clock:>10s}")
+        details = [t for t in self.topics if t.detail]
+        if details:
+            out += ["", "images and cameras (first message):"]
+            out += [f"  {t.name}: {t.detail}" for t in details]
         out += ["", "clock: receive time minus header stamp (median); '-' for messages without a header"]
         for t in self.flagged_clocks:
             out.append(f"  FLAG {t.name}: {t.clock_flag}")
@@ -129,6 +134,19 @@ def _clock_flag(offset: float | None) -> str:
     return ""
 
 
+def _detail(rec, topic: str, msgtype: str, data) -> str:
+    """``640x480 mono8`` of an image, ``png`` of a compressed one, the model and size of a CameraInfo."""
+    if data is None or msgtype not in ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage",
+                                       "sensor_msgs/msg/CameraInfo"):
+        return ""
+    m = rec.deserialize(topic, data)
+    if msgtype.endswith("/Image"):
+        return f"{m.width}x{m.height} {m.encoding}"
+    if msgtype.endswith("CompressedImage"):
+        return f"compressed ({m.format})"
+    return f"{m.width}x{m.height}, distortion_model {m.distortion_model or '(none)'}"
+
+
 def inspect_recording(path, *, show_progress: bool = True) -> RecordingSummary:
     """Read every message's stamps (not its content, except tf's) and summarise the recording."""
     topics = []
@@ -140,8 +158,9 @@ def inspect_recording(path, *, show_progress: bool = True) -> RecordingSummary:
         t0 = rec.start_ns
         for info in rec.topics.values():
             header = _has_header(typestore, info.msgtype)
-            recv, head = [], []
+            recv, head, first = [], [], None
             for _, r, data in rec.raw(info.name, show_progress=show_progress):
+                first = bytes(data) if first is None else first
                 recv.append(r)
                 if header:
                     head.append(rec.header_stamp_ns(data))
@@ -155,7 +174,8 @@ def inspect_recording(path, *, show_progress: bool = True) -> RecordingSummary:
             offset = float(np.median(recv - np.asarray(head, np.int64))) / 1e9 if head else None
             topics.append(TopicSummary(info.name, info.msgtype, info.count, (recv[0] - t0) / 1e9 if len(recv) else 0.0,
                                        (recv[-1] - t0) / 1e9 if len(recv) else 0.0, 1 / period if period > 0 else 0.0,
-                                       gaps, offset, _clock_flag(offset)))
+                                       gaps, offset, _clock_flag(offset),
+                                       _detail(rec, info.name, info.msgtype, first)))
         tf_topics = rec.topics_of_type(TF_TYPES)
         summary = dict(path=str(rec.path), format=fmt, size_bytes=rec.size_bytes, start_ns=t0, end_ns=rec.end_ns)
         tree = read_tf(rec, topics=tuple(tf_topics), show_progress=show_progress) if tf_topics else None
@@ -170,6 +190,7 @@ def inspect_recording(path, *, show_progress: bool = True) -> RecordingSummary:
                 offs.setdefault("/tf", []).extend((e.receive_ns - e.stamps_ns).tolist())
         topics = [t if t.name not in offs or not offs[t.name] else
                   TopicSummary(t.name, t.msgtype, t.count, t.start, t.end, t.rate, t.gaps,
-                               float(np.median(offs[t.name])) / 1e9, _clock_flag(float(np.median(offs[t.name])) / 1e9))
+                               float(np.median(offs[t.name])) / 1e9, _clock_flag(float(np.median(offs[t.name])) / 1e9),
+                               t.detail)
                   for t in topics]
     return RecordingSummary(**summary, topics=tuple(topics), tf_edges=edges)
