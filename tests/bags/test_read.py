@@ -179,3 +179,21 @@ def test_compressed_recordings(tmp_path, fmt):
         assert_poses(bags.poses(rec, "odom", "base_link").T, truth.T_odom_base)
         assert np.array_equal(bags.read_joint_states(rec).position, truth.joint_positions)
         assert all(np.array_equal(img, want) for (_, img), want in zip(bags.images(rec, "/camera/image_raw"), truth.images))
+
+
+def test_joint_states_from_two_drivers_on_one_topic(tmp_path):
+    from robocal.bags._simulate import _Writer
+
+    path = tmp_path / "two.bag"
+    with _Writer(path, "rosbag1") as w:
+        for k, (names, pos, vel) in enumerate([(["a", "b"], [1.0, 2.0], [0.1, 0.2]), (["c"], [3.0], []),
+                                               (["b", "a"], [5.0, 4.0], [0.5, 0.4])]):
+            w.write("/joint_states", "sensor_msgs/msg/JointState", 10**18 + k, w.msg(
+                "sensor_msgs/msg/JointState", header=w.header(10**18 + k, ""), name=names,
+                position=np.array(pos), velocity=np.array(vel), effort=np.zeros(0)))
+    js = bags.read_joint_states(path)
+    assert js.names == ("a", "b", "c")
+    nan = np.nan
+    assert np.array_equal(js.position, [[1, 2, nan], [nan, nan, 3], [4, 5, nan]], equal_nan=True)
+    assert np.array_equal(js.velocity, [[0.1, 0.2, nan], [nan, nan, nan], [0.4, 0.5, nan]], equal_nan=True)
+    assert np.all(np.isnan(js.effort))

@@ -101,27 +101,31 @@ class TopicArrays:
 
 
 def read_joint_states(path, topic: str = "/joint_states", *, show_progress: bool = True) -> JointStates:
-    """Every ``sensor_msgs/JointState`` of ``topic``, by joint name."""
+    """Every ``sensor_msgs/JointState`` of ``topic``, by joint name.
+
+    Messages may name different joints (several drivers on one topic): the
+    columns are the union, NaN where a message does not give a joint; an
+    empty ``velocity`` or ``effort`` (allowed by the message) is NaN too.
+    """
     stamps, recv, rows = [], [], []
-    names: list = []
     with open_recording(path) as rec:
         topic = rec.topic(topic, JOINT_TYPES).name
         for _, r, data in rec.raw(topic, show_progress=show_progress):
             m = rec.deserialize(topic, data)
-            for n in m.name:
-                if n not in names:
-                    names.append(n)
-            rows.append((list(m.name), np.asarray(m.position, float), np.asarray(m.velocity, float),
-                         np.asarray(m.effort, float)))
+            rows.append((tuple(m.name), m.position, m.velocity, m.effort))
             stamps.append(stamp_ns(m.header.stamp))
             recv.append(r)
-    out = np.full((3, len(rows), len(names)), np.nan)
+    layouts = list(dict.fromkeys(row[0] for row in rows))  # distinct name lists, first seen first
+    names = list(dict.fromkeys(n for layout in layouts for n in layout))
     col = {n: j for j, n in enumerate(names)}
-    for i, (nm, *vals) in enumerate(rows):
-        idx = [col[n] for n in nm]
-        for k, v in enumerate(vals):
-            if v.size == len(idx):  # velocity / effort may be empty: NaN then
-                out[k, i, idx] = v
+    out = np.full((3, len(rows), len(names)), np.nan)
+    for layout in layouts:  # one vectorised fill per distinct name list (usually one)
+        sel = [i for i, row in enumerate(rows) if row[0] == layout]
+        idx = [col[n] for n in layout]
+        for k in range(3):
+            ok = [i for i in sel if len(rows[i][k + 1]) == len(idx)]
+            if ok:
+                out[k][np.ix_(ok, idx)] = np.array([rows[i][k + 1] for i in ok], float)
     return JointStates(topic, tuple(names), np.asarray(stamps, np.int64), np.asarray(recv, np.int64), *out)
 
 
