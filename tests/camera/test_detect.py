@@ -174,7 +174,8 @@ def test_large_image_is_searched_reduced_and_refined_at_full_size(large_view, mo
 
     img, truth = large_view
     uv, info = detect_checkerboard(img, BOARD, full_output=True)
-    assert info["scale"] == 4 and info["detector"] == "classic" and info["unrefined"] == ()  # searched at 320x240
+    # searched reduced (here at 320x240, scale 4; a coarser OpenCV might need 640x480)
+    assert info["scale"] in (2, 4) and info["detector"] == "classic" and info["unrefined"] == ()
     # The same noise-limited accuracy as at 640x480 (test_render_detect_recovers_corners_and_pose).
     assert _rms(uv, truth) < 0.06
     # the reduced search only seeds the refinement: from the full-size detector's corners it converges to
