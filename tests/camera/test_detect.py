@@ -238,3 +238,23 @@ def test_a_reduced_corner_off_the_grid_sends_the_search_finer(monkeypatch):
     uv, info = detect_checkerboard(img, BOARD, full_output=True)
     assert info["scale"] == 1 and info["unrefined"] == ()
     assert _rms(uv, truth) < 0.05
+
+
+def test_a_corner_that_wanders_from_the_reduced_estimate_sends_the_search_finer(monkeypatch):
+    import cv2
+
+    T = _poses(1, 11)[0]
+    img = render_planar_target(CAM, T, BOARD, blur_sigma=0.7)
+    real, calls = cv2.cornerSubPix, []
+
+    def wander_first(image, corners, *a):  # from the reduced search's estimate, corner 5 meets an edge
+        out = real(image, corners, *a)
+        calls.append(1)
+        if len(calls) == 1:
+            out[5, 0, 0] += 20.0
+        return out
+
+    monkeypatch.setattr(cv2, "cornerSubPix", wander_first)
+    uv, info = detect_checkerboard(img, BOARD, full_output=True)
+    assert len(calls) == 2 and info["scale"] == 1 and info["unrefined"] == ()
+    assert _rms(uv, CAM.project_points(BOARD.object_points(), T)) < 0.05

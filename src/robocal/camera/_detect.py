@@ -170,7 +170,8 @@ def _grid_outliers(corners: np.ndarray, board: Checkerboard) -> np.ndarray:
             p = g[r0:r1, c0:c1]
             a, b, c = g[r0 + dr:r1 + dr, c0:c1], g[r0:r1, c0 + dc:c1 + dc], g[r0 + dr:r1 + dr, c0 + dc:c1 + dc]
             side = np.minimum(np.linalg.norm(a - c, axis=-1), np.linalg.norm(b - c, axis=-1))
-            err = np.linalg.norm(a + b - c - p, axis=-1) / side
+            with np.errstate(divide="ignore", invalid="ignore"):  # a collapsed cell: NaN, off the grid
+                err = np.linalg.norm(a + b - c - p, axis=-1) / side
             best[r0:r1, c0:c1] = np.minimum(best[r0:r1, c0:c1], err)
     return ~(best <= GRID_TOLERANCE).reshape(-1)
 
@@ -285,8 +286,9 @@ def detect_checkerboard(
             corners = corners.reshape(-1, 2).astype(np.float64) * scale + 0.5 * (scale - 1)
             refined = _refine_corners(img, corners, board)
             # A reduced corner out of the refinement's reach (inside a flat square) stays where it is
-            # (measured once in 600 views: 9 px off, squares of 11 reduced px): the grid shows it; search finer.
-            if _grid_outliers(refined[0], board).any():
+            # (measured once in 600 views: 9 px off, squares of 11 reduced px): the grid shows it; and one
+            # whose refinement wandered from the reduced estimate may not from a finer one: search finer.
+            if refined[2].any() or _grid_outliers(refined[0], board).any():
                 found, refined = False, None
                 continue
             break
