@@ -209,6 +209,8 @@ def claim_batch_folder(out, *, resume: bool = False) -> Path:
     """
     from robocal.io import INCOMPLETE, RUN_SCHEMA, RunFolder, active_run, prepare_out_dir, read_manifest
 
+    if out is None:  # a fresh robocal-out-batch-<time> folder
+        return prepare_out_dir(None, BATCH_LABEL)
     out = Path(out)
     earlier = read_manifest(out) if out.is_dir() else None
     run = active_run()

@@ -53,8 +53,6 @@ def run_batch_command(args) -> int:
     if wf is None or wf.calibrate is None:
         have = ", ".join(registered_rig_names())
         raise InputError(f"RIG: {args.rig!r} is not an installed rig with a calibrate command (have: {have})")
-    if args.out is None:
-        raise InputError("--out DIR is required: a batch writes one folder per data set into it")
     entries = load_manifest(args.manifest, rig=wf.name)
     out = claim_batch_folder(args.out, resume=args.resume)
     with open_executor(args.workers, args.scheduler) as ex:
