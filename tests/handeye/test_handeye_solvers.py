@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 from opencv_reference import opencv  # cv2 on OpenCV 4; outputs recorded from 4.x on OpenCV 5
 
-from robocal.errors import DegenerateGeometryError, InputError, NonFiniteError, NotEnoughDataError, ShapeError
+from robocal.errors import (DegenerateGeometryError, ImplausibleInputError, InputError, NonFiniteError,
+                            NotEnoughDataError, ShapeError)
 from robocal.geometry import invert_transform, matrix_from_angle, matrix_from_rotvec, rotvec_from_matrix, transform_from
 from robocal.handeye import (
     AXXB_METHODS,
@@ -130,9 +131,13 @@ def test_weak_spread_and_mispaired_poses_are_named():
     assert "weakly_determined" in [w.code for w in res.warnings]
     X2, _, Tg2, Tc2 = scene(rng)
     Tc2[[2, 5]] = Tc2[[5, 2]]
-    res = calibrate_hand_eye(Tg2, Tc2, refine=False)
+    with pytest.raises(ImplausibleInputError) as e:     # the swap is named (issue 13)
+        calibrate_hand_eye(Tg2, Tc2, refine=False)
+    assert e.value.slip == "poses_swapped" and "pose 2 and pose 5 look swapped" in str(e.value)
+    res = calibrate_hand_eye(Tg2, Tc2, refine=False, accept_implausible=True)
     bad = [w for w in res.warnings if w.code == "inconsistent_data"]
-    assert bad and bad[0].indices
+    assert bad and set(bad[0].indices) == {2, 5}
+    assert [w.params for w in res.warnings if w.code == "implausible_input"] == [("poses_swapped",)]
 
 
 def test_bad_input_errors():

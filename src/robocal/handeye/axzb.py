@@ -103,7 +103,7 @@ def calibrate_robot_world(T_cam_world, T_gripper_base, *, refine: bool = True, p
     i, j = pair_indices(TB, pairs)
     chk = check_motions(TB[j] @ invert_transform(TB[i]), min_rotation=min_rotation,
                         min_axis_spread=min_axis_spread, what="X and Z")
-    judged = judge_poses(invert_transform(TB), TA, names=names, accept=accept_implausible)
+    judged = judge_poses(invert_transform(TB), TA, names=names, accept=accept_implausible, times=times)
     Rx, Rz = _rw_rotation(TA[:, :3, :3], TB[:, :3, :3])
     M = np.concatenate([np.hstack([a, -np.eye(3)]) for a in TA[:, :3, :3]])
     rhs = (np.einsum("ij,nj->ni", Rz, TB[:, :3, 3]) - TA[:, :3, 3]).reshape(-1)

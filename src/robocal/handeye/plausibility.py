@@ -11,11 +11,12 @@ from __future__ import annotations
 import numpy as np
 
 from robocal.errors import DegenerateGeometryError
-from robocal.geometry import invert_transform, project_to_rotation, transform_from
+from robocal.geometry import invert_transform, project_to_rotation, rotvec_from_matrix, transform_from
 from robocal.handeye.axxb import solve_ax_xb
 from robocal.handeye.motions import _pose_residual, relative_motions
 
-__all__ = ["TRANS_ROT_RATIO_MAX", "TRANS_FLOOR", "ROT_TRY", "REACH_FACTOR", "closure_residuals", "judge_poses"]
+__all__ = ["TRANS_ROT_RATIO_MAX", "TRANS_FLOOR", "ROT_TRY", "REACH_FACTOR", "ROT_IMPLAUSIBLE", "SWAP_CANDIDATES",
+           "closure_residuals", "judge_poses"]
 
 # Plausibility of the pose lists (:func:`judge_poses`). The closure T_base_gripper X T_cam_target = Y
 # turns a rotation error d into a translation error of about d times the lever (the target's distance
@@ -32,6 +33,11 @@ TRANS_FLOOR = 0.01
 ROT_TRY = 3e-3
 #: a camera farther from the gripper than this many times the robot's reach is implausible
 REACH_FACTOR = 10.0
+#: rotation residual (rad) that no slip explains but is refused anyway (5.7 deg: a camera on a robot
+#: gives well below 1 deg; one outlier pose of 4 deg among 20 gives ~1 deg RMS)
+ROT_IMPLAUSIBLE = 0.1
+#: how many of the worst poses (by each of two figures) are tried pairwise for a swap (<= 45 closed forms)
+SWAP_CANDIDATES = 5
 
 
 def closure_residuals(T_base_gripper, T_cam_target, method: str = "tsai", *, pairs: str = "consecutive"):
@@ -79,14 +85,63 @@ def _quat_scalar_first(T):
     return out
 
 
+def _swap_slips(Tg, Tc, X, lever, closure_of, names, times, k: int = SWAP_CANDIDATES) -> list:
+    """Slips "poses a and b swapped (mispaired)" for the ``k`` poses with the largest closure residual.
+
+    A swap spoils exactly two poses; any other pose keeps its closure. Up to 10 poses every pair is tried;
+    beyond, the ``k`` worst by closure residual and the ``k`` worst by the angle mismatch of their
+    consecutive motions, when the worst stands out (> 5 x the median). Each candidate pair costs one closed
+    form on consecutive pairs.
+    """
+    from robocal.handeye.motions import pose_label
+    from robocal.plausibility import Slip
+
+    Yall = Tg @ X @ Tc
+    Y = transform_from(project_to_rotation(np.mean(Yall[:, :3, :3], axis=0)), np.median(Yall[:, :3, 3], axis=0))
+    r = _pose_residual(Yall, Y[None])
+    per = np.hypot(np.linalg.norm(r[:, :3], axis=1), np.linalg.norm(r[:, 3:], axis=1) / lever)
+    # the closed-form X is itself spoilt by the swap; the angle mismatch of the consecutive motions
+    # (|angle A - angle B|, the motion check's figure) does not depend on X: a swapped pose spoils both
+    # of its motions
+    A, B = relative_motions(Tg, Tc, pairs="consecutive")
+    mis = np.abs(np.linalg.norm(rotvec_from_matrix(A[:, :3, :3]), axis=1)
+                 - np.linalg.norm(rotvec_from_matrix(B[:, :3, :3]), axis=1))
+    per_m = np.r_[mis, 0.0] + np.r_[0.0, mis]
+    n = len(per)
+    if n <= 10:
+        worst = np.arange(n)                     # 45 closed forms at most
+    elif per.max() > 5 * np.median(per) or per_m.max() > 5 * np.median(per_m):
+        worst = np.unique(np.r_[np.argsort(per)[::-1][:k], np.argsort(per_m)[::-1][:k]])
+    else:
+        return []
+    out = []
+    gname, tname = names
+    for ia in range(len(worst)):
+        for ib in range(ia + 1, len(worst)):
+            a, b = sorted((int(worst[ia]), int(worst[ib])))
+
+            def swapped(a=a, b=b):
+                T = Tc.copy()
+                T[[a, b]] = T[[b, a]]
+                return closure_of(Tg, T)
+            out.append(Slip("poses_swapped",
+                            f"{pose_label(a, times)} and {pose_label(b, times)} look swapped: pose {a} of {gname} "
+                            f"pairs with pose {b} of {tname} and the other way round",
+                            "with the two swapped", swapped))
+    return out
+
+
 def judge_poses(T_base_gripper, T_cam_target, *, names=("T_base_gripper", "T_cam_target"),
-                method: str = "tsai", accept: bool = False, source: str | None = None) -> list:
+                method: str = "tsai", accept: bool = False, source: str | None = None, times=None) -> list:
     """Judge two pose lists before calibration; name the slip when they are implausible.
 
     Two cheap figures of the closed-form closure (:func:`closure_residuals`, consecutive pairs):
 
     * **rotation residual**: above :data:`ROT_TRY` the lists are tried inverted (``T_a_b`` given as
-      ``T_b_a``) and with scalar-first quaternions; one that lowers the residual 5 x is named.
+      ``T_b_a``), with scalar-first quaternions, and with two poses swapped (the
+      :data:`SWAP_CANDIDATES` worst poses pairwise, when the worst stands out); one that lowers the
+      closure residual (rotation and translation over the lever, in mrad) 5 x is named. Above
+      :data:`ROT_IMPLAUSIBLE` with no slip explaining it the lists are refused all the same.
     * **translations**: the translation residual against the rotation residual times the lever
       (:data:`TRANS_ROT_RATIO_MAX`, above :data:`TRANS_FLOOR`), and ``|t_gripper_cam|`` against the
       robot's reach (:data:`REACH_FACTOR`); when implausible, each list's translations are tried
@@ -98,6 +153,8 @@ def judge_poses(T_base_gripper, T_cam_target, *, names=("T_base_gripper", "T_cam
         As read (metres).
     names : (str, str)
         The two lists' files, for the message.
+    times : array_like, shape (N,), optional
+        The poses' times (s), to name swapped poses.
     accept : bool
         ``--accept-implausible``: a warning instead of :class:`~robocal.errors.ImplausibleInputError`.
 
@@ -113,19 +170,29 @@ def judge_poses(T_base_gripper, T_cam_target, *, names=("T_base_gripper", "T_cam
     out = []
     gname, tname = names
 
-    def rot_of(a, b):
-        return 1e3 * closure_residuals(a, b, method)[0]
+    # the figure the rotation-type slips are ranked by: the rotation residual and the translation residual
+    # over the lever (|t_cam_target| is the same for a pose and its inverse, so one lever for every trial).
+    # The rotations alone often cannot tell an inverted target list from an inverted gripper list or
+    # scalar-first quaternions (each turns the rotation residual back to the noise); the translations can.
+    lever = max(float(np.sqrt(np.mean(np.sum(Tc[:, :3, 3] ** 2, axis=1)))), 0.05)
 
+    def closure_of(a, b):
+        r, t, _ = closure_residuals(a, b, method)
+        return 1e3 * float(np.hypot(r, t / lever))
+
+    base = 1e3 * float(np.hypot(rot, trans / lever))
+    what = f"closure residual (rotation and translation over the {lever:.3g} m lever)"
     if rot > ROT_TRY:
         rslips = [
             Slip("target_poses_inverted", f"the poses of {tname} look inverted (T_target_cam given as T_cam_target)",
-                 "with them inverted", lambda: rot_of(Tg, invert_transform(Tc))),
+                 "with them inverted", lambda: closure_of(Tg, invert_transform(Tc))),
             Slip("gripper_poses_inverted", f"the poses of {gname} look inverted (T_gripper_base given as "
-                 "T_base_gripper)", "with them inverted", lambda: rot_of(invert_transform(Tg), Tc)),
+                 "T_base_gripper)", "with them inverted", lambda: closure_of(invert_transform(Tg), Tc)),
             Slip("target_quaternion_scalar_first", f"the quaternions of {tname} look scalar-first (w, x, y, z), "
-                 "not scalar-last", "with (w, x, y, z) read", lambda: rot_of(Tg, _quat_scalar_first(Tc))),
+                 "not scalar-last", "with (w, x, y, z) read", lambda: closure_of(Tg, _quat_scalar_first(Tc))),
             Slip("gripper_quaternion_scalar_first", f"the quaternions of {gname} look scalar-first (w, x, y, z), "
-                 "not scalar-last", "with (w, x, y, z) read", lambda: rot_of(_quat_scalar_first(Tg), Tc)),
+                 "not scalar-last", "with (w, x, y, z) read", lambda: closure_of(_quat_scalar_first(Tg), Tc)),
+            *_swap_slips(Tg, Tc, X, lever, closure_of, names, times),
         ]
         # on a poorly excited set (small rotations about few axes) several may explain the data about
         # equally: the best is named, the others within 10 % listed, rather than a guess
@@ -133,16 +200,29 @@ def judge_poses(T_base_gripper, T_cam_target, *, names=("T_base_gripper", "T_cam
 
         from robocal.plausibility import try_slips
 
-        trial = try_slips(rslips, 1e3 * rot, unit="mrad")
+        trial = try_slips(rslips, base, unit="mrad")
         if trial.best is not None:
-            also = [n for n, v in trial.tried if v is not None and n != trial.best.name
-                    and v <= 1.1 * trial.best_value]
+            also = list(dict.fromkeys(n for n, v in trial.tried if v is not None and n != trial.best.name
+                                      and v <= 1.1 * trial.best_value))
             describe = trial.best.describe if not also else \
                 f"{trial.best.describe} (or, as well explained by these motions: {', '.join(also)})"
             named = _replace(trial, best=_replace(trial.best, describe=describe))
-            d = check_slips(what="rotation residual", residual=1e3 * rot, unit="mrad", plausible=False,
+            d = check_slips(what=what, residual=base, unit="mrad", plausible=False,
                             reason="", trial=named, accept=accept, source=source)
             out.append(d)
+            return out
+        if rot > ROT_IMPLAUSIBLE:
+            # no slip explains it, but no rigid set-up turns the two lists into one fixed target either;
+            # the message lists each kind of slip once (the swap was tried for many pose pairs)
+            best: dict = {}
+            for nm, v in trial.tried:
+                best[nm] = v if best.get(nm) is None else (best[nm] if v is None else min(best[nm], v))
+            trial = _replace(trial, tried=tuple(best.items()))
+            out.append(check_slips(
+                what=what, residual=base, unit="mrad", plausible=False, trial=trial, accept=accept, source=source,
+                reason=(f"the rotation residual of {gname} and {tname} is {np.rad2deg(rot):.3g} deg RMS (a "
+                        f"camera on a robot: well below 1 deg): the two lists do not describe one camera on one "
+                        f"gripper viewing one fixed target")))
             return out
     ok, reason = _translations_plausible(Tg, Tc, rot, trans, X)
     if ok:

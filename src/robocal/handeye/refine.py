@@ -118,7 +118,7 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
     X0, chk = solve_ax_xb(A, B, m, min_rotation=min_rotation, min_axis_spread=min_axis_spread, pairs=ij,
                           times=times)
     del A, B                                    # the refinement works on the poses
-    warnings = judge_poses(Tg, Tc, names=names, accept=accept_implausible) + list(chk.warnings)
+    warnings = judge_poses(Tg, Tc, names=names, accept=accept_implausible, times=times) + list(chk.warnings)
     Yall = Tg @ X0 @ Tc
     Y0 = transform_from(project_to_rotation(np.mean(Yall[:, :3, :3], axis=0)), Yall[:, :3, 3].mean(axis=0))
     r0 = _pose_residual(Yall, Y0[None])
