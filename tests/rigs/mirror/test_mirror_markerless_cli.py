@@ -85,11 +85,15 @@ def _bad_ids(doc):
 @pytest.mark.parametrize("mutate, kw, expected", [
     (_two_poses, {}, r"need >= 3 mirror poses that see >= 3 reference points each, got 2"),
     (_two_points, {}, r"reference_points.*need >= 3 points \(P3P per mirror pose\), got 2"),
+    # 3 points: the right P3P combination has parallel normals, a wrong one fits with the camera off the robot
     (None, {"parallel": True},
+     r"camera .* m from the nearest reference point .* makes all mirror normals parallel \([01]\.\d\d deg apart\)"),
+    (None, {"parallel": True, "points": 6},
      r"all mirror normals are parallel \(largest angle between two poses' normals [01]\.\d\d deg, need >= 2 deg"),
     (_mm_declared_m, {}, r"`reference_points` looks like mm, not m: with /1000"),
     (_bad_ids, {}, r"mirror_poses\[1\]\.ids.*must be rows of reference_points \(0\.\.2\), got 7"),
-], ids=["two_poses", "two_points", "parallel_normals", "mm_declared_m", "ids_out_of_range"])
+], ids=["two_poses", "two_points", "parallel_normals_3_points", "parallel_normals_6_points", "mm_declared_m",
+        "ids_out_of_range"])
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, mutate, kw, expected):
     import re
 

@@ -248,10 +248,12 @@ def closed_form(T_c_ri) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     R = T[:, :3, :3]
     ang = _normal_angles(T)
     if ang.max() < np.radians(PARALLEL_NORMALS_DEG):
-        raise DegenerateGeometryError(
+        exc = DegenerateGeometryError(
             f"mirror_poses: all mirror normals are parallel (largest angle between two poses' normals "
             f"{np.degrees(ang.max()):.2f} deg, need >= {PARALLEL_NORMALS_DEG:g} deg, better 10-30 deg): with the "
             f"mirror only shifted, not tilted, the poses give no rotation axis; tilt it differently for each pose")
+        exc.angle_deg = float(np.degrees(ang.max()))
+        raise exc
     # axis of H_i H_j (= R_cri_i R_cri_j^T) times its angle: n_i x n_j scaled by how well it is determined
     rv = rotvec_from_matrix(np.einsum("iab,jcb->ijac", R, R))  # (K, K, 3)
     normals = np.zeros((K, 3))
@@ -571,18 +573,22 @@ def calibrate_markerless(camera: CameraModel, points_r, observations, *, sigma_p
     cost, T, n, d, res, B = results[0]
     minima = _minima(results, P, limit)
     if not minima[0]["plausible"]:
-        if degenerate_error is not None:
-            # the true P3P combination had parallel normals; what fits is a wrong combination's artefact
-            raise degenerate_error
         from robocal.plausibility import check_slips
 
         d_cam = minima[0]["camera_distance_m"]
+        if degenerate_error is not None and n_comb == 1:
+            raise degenerate_error  # the one combination there is has parallel normals
+        # with 3 points a combination of wrong P3P solutions can have parallel normals while the right one has
+        # not (measured: 1 of 100 scenes tilted by up to 30 deg), or the reverse: name both
+        hint = (f"; one combination of the poses' P3P solutions makes all mirror normals parallel "
+                f"({getattr(degenerate_error, 'angle_deg', float('nan')):.2f} deg apart): if the mirror was only "
+                f"shifted between poses, tilt it differently for each pose" if degenerate_error is not None else "")
         warnings.extend(w for w in [check_slips(
             what="camera's distance from the nearest reference point", residual=d_cam, unit="m", plausible=False,
             threshold=limit, accept=accept_implausible,
             reason=f"the best minimum puts the camera {d_cam:.3g} m from the nearest reference point (limit "
-                   f"{limit:.3g} m), but it is mounted on the robot: check that ids match the uv rows and the mirror "
-                   f"poses differ in tilt")] if w is not None)
+                   f"{limit:.3g} m), but it is mounted on the robot: check that ids match the uv rows, and add mirror "
+                   f"poses or points (this geometry is weak: see the conditioning){hint}")] if w is not None)
     cov_full = res.cov
     cov = cov_full[:6, :6]
     K = len(obs)
