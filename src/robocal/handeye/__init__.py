@@ -60,7 +60,8 @@ _EXPORTS = {
     "REACH_FACTOR": "plausibility", "ROT_TRY": "plausibility", "TRANS_FLOOR": "plausibility",
     "TRANS_ROT_RATIO_MAX": "plausibility", "closure_residuals": "plausibility", "judge_poses": "plausibility",
     "HandEyeResult": "refine", "calibrate_hand_eye": "refine", "invert_with_covariance": "refine",
-    "HandEyeSimulation": "simulate", "simulate_eye_in_hand": "simulate",
+    "HandEyeSimulation": "simulate", "simulate_eye_in_hand": "simulate", "simulate_eye_to_hand": "simulate",
+    "SETUPS": "refine",
 }
 
 __all__ = list(_EXPORTS)

@@ -37,14 +37,21 @@ HANDEYE = Workflow(
         Option("--poses", type=number_at_least(int, 3, why="AX = XB needs 2 motions, i.e. 3 poses or more"),
                default=16, help="number of simulated views of the target"),
         Option("--noise-free", action="store_true", help="no measurement noise"),
+        Option("--setup", default="eye-in-hand", choices=["eye-in-hand", "eye-to-hand"],
+               help="eye-in-hand: a camera on the gripper views a fixed target; eye-to-hand: a fixed camera "
+                    "views a target on the gripper"),
     ),
     simulate_examples=("robocal handeye simulate --out handeye-sim --seed 1",),
-    calibrate_help="eye-in-hand X = T_gripper_cam from two pose lists",
+    calibrate_help="X = T_gripper_cam (eye-in-hand) or T_base_cam (eye-to-hand) from two pose lists",
     input_arguments=_PAIR,
     calibrate_options=(
         Option("--method", default="tsai", choices=["tsai", "park", "horaud", "andreff", "daniilidis"],
                help="closed-form AX = XB solver (then refined unless --no-refine)"),
         Option("--no-refine", action="store_true", help="closed form only (no covariance)"),
+        Option("--setup", default="eye-in-hand", choices=["eye-in-hand", "eye-to-hand"],
+               help="eye-in-hand (camera on the gripper, fixed target): X = T_gripper_cam, target pose "
+                    "T_base_target; eye-to-hand (fixed camera, target on the gripper): X = T_base_cam, "
+                    "target pose T_gripper_target"),
         Option("--pairs", default="auto", choices=["auto", "consecutive", "all"],
                help="pose pairs of the closed form's relative motions: all (every pair, n^2/2), consecutive "
                     "(i, i+1), auto (default: all up to 200 poses, else consecutive plus at most 20,000 longer "

@@ -187,7 +187,8 @@ def judge_poses(T_base_gripper, T_cam_target, *, names=("T_base_gripper", "T_cam
             Slip("target_poses_inverted", f"the poses of {tname} look inverted (T_target_cam given as T_cam_target)",
                  "with them inverted", lambda: closure_of(Tg, invert_transform(Tc))),
             Slip("gripper_poses_inverted", f"the poses of {gname} look inverted (T_gripper_base given as "
-                 "T_base_gripper)", "with them inverted", lambda: closure_of(invert_transform(Tg), Tc)),
+                 "T_base_gripper), or the set-up is the other one (--setup eye-in-hand / eye-to-hand)",
+                 "with them inverted", lambda: closure_of(invert_transform(Tg), Tc)),
             Slip("target_quaternion_scalar_first", f"the quaternions of {tname} look scalar-first (w, x, y, z), "
                  "not scalar-last", "with (w, x, y, z) read", lambda: closure_of(Tg, _quat_scalar_first(Tc))),
             Slip("gripper_quaternion_scalar_first", f"the quaternions of {gname} look scalar-first (w, x, y, z), "

@@ -13,9 +13,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from robocal.errors import NotEnoughDataError, ShapeError
+from robocal.errors import InputError, NotEnoughDataError, ShapeError
 from robocal.estimation import Problem, solve
-from robocal.geometry import PoseWithCovariance, project_to_rotation, transform_from
+from robocal.geometry import PoseWithCovariance, invert_transform, project_to_rotation, transform_from
 from robocal.handeye.axxb import _check_method, solve_ax_xb
 from robocal.handeye.motions import (_LABELS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses,
                                                        _motions, _perturbed, _pose_residual, _sigmas,
@@ -23,7 +23,15 @@ from robocal.handeye.motions import (_LABELS, MIN_AXIS_SPREAD, MIN_ROTATION, _ch
 from robocal.handeye.plausibility import judge_poses
 from robocal.validation import check_array, check_transform
 
-__all__ = ["HandEyeResult", "calibrate_hand_eye", "invert_with_covariance"]
+__all__ = ["SETUPS", "HandEyeResult", "calibrate_hand_eye", "invert_with_covariance"]
+
+#: The two set-ups: the names of X and Y (``T_parent_child``) and their frames.
+#: eye-in-hand: a camera on the gripper views a fixed target, ``T_base_gripper X T_cam_target = Y``;
+#: eye-to-hand: a fixed camera views a target on the gripper, ``T_base_gripper^-1 X T_cam_target = Y``.
+SETUPS = {
+    "eye-in-hand": {"X": ("T_gripper_cam", "gripper", "camera"), "Y": ("T_base_target", "robot base", "target")},
+    "eye-to-hand": {"X": ("T_base_cam", "robot base", "camera"), "Y": ("T_gripper_target", "gripper", "target")},
+}
 
 
 @dataclass
@@ -33,11 +41,11 @@ class HandEyeResult:
     Attributes
     ----------
     X : ndarray, shape (4, 4)
-        ``T_gripper_cam`` (metres).
+        ``T_gripper_cam`` (eye-in-hand) or ``T_base_cam`` (eye-to-hand), metres.
     method : str
         Closed-form solver used (``+refine`` when refined).
     Y : ndarray, shape (4, 4) or None
-        ``T_base_target`` when absolute poses were given.
+        The target's pose: ``T_base_target`` (eye-in-hand) or ``T_gripper_target`` (eye-to-hand).
     cov : ndarray, shape (6, 6) or None
         Covariance of ``(rx, ry, rz, tx, ty, tz)`` of X (left rotation-vector
         perturbation in rad, translation in m); only after refinement.
@@ -60,6 +68,13 @@ class HandEyeResult:
     n_motions: int = 0
     warnings: list = field(default_factory=list)
     lsq: object = None
+    setup: str = "eye-in-hand"
+
+    @property
+    def names(self) -> tuple[str, str]:
+        """The names of X and Y in this set-up (:data:`SETUPS`): ``("T_gripper_cam", "T_base_target")`` or
+        ``("T_base_cam", "T_gripper_target")``."""
+        return SETUPS[self.setup]["X"][0], SETUPS[self.setup]["Y"][0]
 
     @property
     def X_pose(self) -> PoseWithCovariance:
@@ -72,10 +87,12 @@ def _std_dict(res, prefix: str) -> dict:
 
 
 def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, refine: bool = True,
-                       pairs: str = "auto", times=None, min_rotation: float = MIN_ROTATION,
+                       pairs: str = "auto", times=None, setup: str = "eye-in-hand",
+                       min_rotation: float = MIN_ROTATION,
                        min_axis_spread: float = MIN_AXIS_SPREAD, accept_implausible: bool = False,
                        names=("T_base_gripper", "T_cam_target")) -> HandEyeResult:
-    """Eye-in-hand calibration ``X = T_gripper_cam`` from absolute poses.
+    """Hand-eye calibration from absolute poses: ``X = T_gripper_cam`` (eye-in-hand) or ``T_base_cam``
+    (eye-to-hand).
 
     Parameters
     ----------
@@ -96,6 +113,11 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
         well-conditioned longer ones: memory linear in the number of poses).
     times : array_like, shape (N,), optional
         The poses' times (s), only to name poses in warnings.
+    setup : {'eye-in-hand', 'eye-to-hand'}
+        Eye-in-hand: the camera on the gripper, the target fixed; ``X = T_gripper_cam``,
+        ``Y = T_base_target``. Eye-to-hand: the camera fixed, the target on the gripper; the same
+        closure with the robot poses inverted, ``T_gripper_base[i] X T_cam_target[i] = Y``, gives
+        ``X = T_base_cam`` and ``Y = T_gripper_target`` (:data:`SETUPS`).
     accept_implausible : bool
         Go on (with an ``implausible_input`` warning) when :func:`judge_poses` finds the lists
         implausible; by default that raises :class:`~robocal.errors.ImplausibleInputError`.
@@ -108,6 +130,10 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
     """
     Tg = _check_poses(T_base_gripper, "T_base_gripper")
     Tc = _check_poses(T_cam_target, "T_cam_target")
+    if setup not in SETUPS:
+        raise InputError(f"setup must be one of {', '.join(SETUPS)}, got {setup!r}")
+    if setup == "eye-to-hand":
+        Tg = invert_transform(Tg)
     if len(Tg) != len(Tc):
         raise ShapeError(f"T_base_gripper has {len(Tg)} poses but T_cam_target has {len(Tc)}: counts must match")
     if len(Tg) < 3:
@@ -123,7 +149,8 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
     Y0 = transform_from(project_to_rotation(np.mean(Yall[:, :3, :3], axis=0)), Yall[:, :3, 3].mean(axis=0))
     r0 = _pose_residual(Yall, Y0[None])
     out = HandEyeResult(X=X0, method=m, Y=Y0, rot_rms=float(np.sqrt(np.mean(r0[:, :3] ** 2))),
-                        trans_rms=float(np.sqrt(np.mean(r0[:, 3:] ** 2))), n_motions=len(ij[0]), warnings=warnings)
+                        trans_rms=float(np.sqrt(np.mean(r0[:, 3:] ** 2))), n_motions=len(ij[0]), warnings=warnings,
+                        setup=setup)
     if not refine:
         return out
     sr, st = _sigmas(r0)
@@ -148,7 +175,7 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
                          rot_rms=float(np.sqrt(np.mean(r[:, :3] ** 2))),
                          trans_rms=float(np.sqrt(np.mean(r[:, 3:] ** 2))), n_motions=len(ij[0]),
                          warnings=warnings + name_outliers(res.warnings, times, what="T_base_gripper X "
-                                                           "T_cam_target = Y"), lsq=res)
+                                                           "T_cam_target = Y"), lsq=res, setup=setup)
 
 
 

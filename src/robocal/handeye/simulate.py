@@ -13,7 +13,7 @@ import numpy as np
 from robocal.errors import InputError
 from robocal.geometry import invert_transform, matrix_from_rotvec, transform_from
 
-__all__ = ["HandEyeSimulation", "default_hand_eye", "simulate_eye_in_hand"]
+__all__ = ["HandEyeSimulation", "default_hand_eye", "simulate_eye_in_hand", "simulate_eye_to_hand"]
 
 
 def default_hand_eye() -> np.ndarray:
@@ -25,8 +25,9 @@ def default_hand_eye() -> np.ndarray:
 
 @dataclass(frozen=True)
 class HandEyeSimulation:
-    """Simulated poses (N, 4, 4) with their truth ``X = T_gripper_cam``, ``Y = T_base_target`` and the sensor
-    noise (rad, m; 0 when noise-free)."""
+    """Simulated poses (N, 4, 4) with their truth ``X``, ``Y`` (eye-in-hand: ``T_gripper_cam``,
+    ``T_base_target``; eye-to-hand: ``T_base_cam``, ``T_gripper_target``) and the sensor noise (rad, m; 0
+    when noise-free)."""
 
     T_base_gripper: np.ndarray
     T_cam_target: np.ndarray
@@ -70,6 +71,29 @@ def simulate_eye_in_hand(rng: np.random.Generator, n_poses: int = 16, *, X=None,
     Tg = T_base_cam @ invert_transform(X)
     Tc = invert_transform(T_base_cam) @ Y
     sr, st = (sigma_rotation, sigma_translation) if noise else (0.0, 0.0)
+    if noise:
+        Tc = transform_from(matrix_from_rotvec(rng.normal(size=(n, 3)) * sr) @ Tc[:, :3, :3],
+                            Tc[:, :3, 3] + rng.normal(size=(n, 3)) * st)
+    return HandEyeSimulation(Tg, Tc, X, Y, float(sr), float(st))
+
+
+def simulate_eye_to_hand(rng: np.random.Generator, n_poses: int = 16, *, noise: bool = True,
+                         sigma_rotation: float = 1e-3, sigma_translation: float = 0.2e-3) -> HandEyeSimulation:
+    """``n_poses`` views of a target held by the gripper, from a camera fixed 1 m above the robot base.
+
+    The views (camera-target geometry) are those of :func:`simulate_eye_in_hand`; the truth is
+    ``X = T_base_cam`` (the camera at (0.6, 0, 1.0) m looking down) and ``Y = T_gripper_target`` (the
+    target 0.1 m out of the flange along its z, turned 90 deg about it), and
+    ``T_base_gripper[i] = X T_cam_target[i] Y^-1`` (noise-free); each ``T_cam_target`` gets the sensor
+    noise of :func:`simulate_eye_in_hand`.
+    """
+    views = simulate_eye_in_hand(rng, n_poses, noise=False)
+    X = transform_from(np.diag([1.0, -1.0, -1.0]) @ matrix_from_rotvec([0.02, -0.03, 0.4]), [0.6, 0.0, 1.0])
+    Y = transform_from(matrix_from_rotvec([0.0, 0.0, np.pi / 2]), [0.0, 0.0, 0.1])
+    Tc = views.T_cam_target
+    Tg = X @ Tc @ invert_transform(Y)
+    sr, st = (sigma_rotation, sigma_translation) if noise else (0.0, 0.0)
+    n = len(Tc)
     if noise:
         Tc = transform_from(matrix_from_rotvec(rng.normal(size=(n, 3)) * sr) @ Tc[:, :3, :3],
                             Tc[:, :3, 3] + rng.normal(size=(n, 3)) * st)

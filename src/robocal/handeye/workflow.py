@@ -93,8 +93,16 @@ def load_pose_pair(gripper_poses, target_poses) -> PosePair:
 
 
 # ----------------------------------------------------------------------------- AX = XB
+def _gripper(pair: PosePair, setup: str) -> np.ndarray:
+    """The robot poses as the closure takes them: ``T_base_gripper`` (eye-in-hand), their inverses
+    (eye-to-hand)."""
+    from robocal.geometry import invert_transform
+
+    return pair.T_base_gripper if setup == "eye-in-hand" else invert_transform(pair.T_base_gripper)
+
+
 def calibrate(pair: PosePair, *, method: str = "tsai", no_refine: bool = False, accept_implausible: bool = False,
-              pairs: str = "auto", progress: bool = True, **_):
+              pairs: str = "auto", setup: str = "eye-in-hand", progress: bool = True, **_):
     """``X = T_gripper_cam`` (:func:`~robocal.handeye.calibrate_hand_eye`) and the
     other closed forms on the same motions, for the report's comparison.
 
@@ -108,11 +116,12 @@ def calibrate(pair: PosePair, *, method: str = "tsai", no_refine: bool = False, 
     tick = _stages("handeye: solve", 1, enabled=progress)
     tick()
     res = calibrate_hand_eye(pair.T_base_gripper, pair.T_cam_target, method, refine=not no_refine, pairs=pairs,
-                             times=pair.t, accept_implausible=accept_implausible, names=pair.names)
+                             times=pair.t, setup=setup, accept_implausible=accept_implausible, names=pair.names)
     comparison = []
+    Tg = _gripper(pair, setup)
     for m in AXXB_METHODS:
         try:
-            rot_rms, trans_rms, Xm = closure_residuals(pair.T_base_gripper, pair.T_cam_target, m, pairs=pairs)
+            rot_rms, trans_rms, Xm = closure_residuals(Tg, pair.T_cam_target, m, pairs=pairs)
         except RobocalError as exc:             # one closed form may fail where another does not
             comparison.append({"method": m, "error": str(exc)})
             continue
@@ -142,21 +151,32 @@ def _std_of(lsq, prefix: str):
 
 
 def to_result(calibration, pair: PosePair) -> CalibrationResult:
-    """The result of :func:`calibrate`: ``T_gripper_cam`` and ``T_base_target`` (with std after refinement)."""
+    """The result of :func:`calibrate`: X and the target pose (with std after refinement), named by the set-up:
+    ``T_gripper_cam`` + ``T_base_target`` (eye-in-hand) or ``T_base_cam`` + ``T_gripper_target`` (eye-to-hand)."""
+    from robocal.handeye import SETUPS
+
     res, comparison = calibration
     result = CalibrationResult(
         rig="handeye", method=res.method, estimate={}, std={}, units={}, residual_rms=res.trans_rms,
         residual_unit="m", warnings=res.warnings, inputs=hash_inputs(pair.files))
-    xr, xt = _std_of(res.lsq, "X")
-    yr, yt = _std_of(res.lsq, "Y")
-    result.add_pose("T_gripper_cam", res.X, std_rotation=xr, std_translation=xt, **_GRIPPER_CAM)
-    result.add_pose("T_base_target", res.Y, std_rotation=yr, std_translation=yt, **_BASE_TARGET)
+    frames = SETUPS[res.setup]
+    for key, T in (("X", res.X), ("Y", res.Y)):
+        name, parent, child = frames[key]
+        sr, st = _std_of(res.lsq, key)
+        result.add_pose(name, T, std_rotation=sr, std_translation=st, parent=parent, child=child)
+    xn, yn = res.names
+    closure = ("T_base_gripper[i] X T_cam_target[i] = Y" if res.setup == "eye-in-hand"
+               else "T_base_gripper[i]^-1 X T_cam_target[i] = Y")
     result.diagnostics = {
         "rotation_rms_rad": res.rot_rms, "n_motions": res.n_motions, "n_poses": len(pair.T_base_gripper),
-        "pairs": next((c["pairs"] for c in comparison if "pairs" in c), None),
-        "convention": "A X = X B, X = T_gripper_cam, Y = T_base_target = T_base_gripper[i] X T_cam_target[i]; "
-                      "std as rotation vector of R_perturbed R^T (rad) and translation (m); quaternions scalar-last",
-        "closure_residuals": _closure(pair.T_base_gripper, pair.T_cam_target, res.X, res.Y),
+        "pairs": next((c["pairs"] for c in comparison if "pairs" in c), None), "setup": res.setup,
+        "convention": f"{res.setup}: A X = X B, X = {xn}, Y = {yn} = "
+                      + ("T_base_gripper[i] X T_cam_target[i]" if res.setup == "eye-in-hand"
+                         else "T_gripper_base[i] X T_cam_target[i]")
+                      + "; std as rotation vector of R_perturbed R^T (rad) and translation (m); quaternions "
+                        "scalar-last",
+        "closure": closure,
+        "closure_residuals": _closure(_gripper(pair, res.setup), pair.T_cam_target, res.X, res.Y),
         "solver_comparison": comparison,
         "solver": solver_record(res.lsq),
     }
@@ -236,10 +256,11 @@ def run_robot_world(args) -> int:
 def summary(result) -> str:
     """``T_gripper_cam translation [mm] (method): x +/- s, ...``: the line the commands print (the core prints
     the warnings, with the poses they name, on stderr)."""
-    t = result.estimate["T_gripper_cam.translation"]
-    st = result.std.get("T_gripper_cam.translation") or [None] * 3
-    head = "T_gripper_cam translation [mm]" + ("" if result.method.startswith("robot-world") else
-                                                f" ({result.method})")
+    name = "T_base_cam" if (result.diagnostics or {}).get("setup") == "eye-to-hand" else "T_gripper_cam"
+    t = result.estimate[f"{name}.translation"]
+    st = result.std.get(f"{name}.translation") or [None] * 3
+    head = f"{name} translation [mm]" + ("" if result.method.startswith("robot-world") else
+                                         f" ({result.method})")
     return f"{head}: " + ", ".join(f"{1e3 * v:.3f}" + ("" if s is None else f" +/- {1e3 * s:.3f}")
                                    for v, s in zip(t, st))
 
@@ -272,8 +293,8 @@ def build_report(result, *, base_dir=None):
                 a.plot(n, v, ".", ms=2)
             a.set_xlabel("pose")
             a.set_ylabel(label)
-        rep.section("Residuals").figure(fig, "closure residual per pose: T_base_gripper[i] X T_cam_target[i] "
-                                             "against Y = T_base_target")
+        rep.section("Residuals").figure(fig, "closure residual per pose: " + d.get(
+            "closure", "T_base_gripper[i] X T_cam_target[i] = Y") + " (Y: the target's pose)")
     cmp = d.get("solver_comparison")
     if cmp:
         rows = [{"closed form": c["method"],
@@ -297,16 +318,19 @@ def build_report(result, *, base_dir=None):
 
 # ----------------------------------------------------------------------------- simulate
 def simulate_files(out_dir: Path, rng: np.random.Generator, *, poses: int = 16, noise_free: bool = False,
-                   progress: bool = True, **_) -> list[Path]:
+                   setup: str = "eye-in-hand", progress: bool = True, **_) -> list[Path]:
     """``robocal handeye simulate``: ``gripper_poses.csv``, ``target_poses.csv`` and their truth ``truth.yaml``.
 
     :func:`.simulate.simulate_eye_in_hand`: ``poses`` views of a fixed target by a camera on the gripper;
-    1 mrad / 0.2 mm sensor noise unless ``noise_free``.
+    1 mrad / 0.2 mm sensor noise unless ``noise_free``; ``setup="eye-to-hand"``: a fixed camera viewing a
+    target on the gripper (:func:`.simulate.simulate_eye_to_hand`), truth ``T_base_cam``, ``T_gripper_target``.
     """
-    from robocal.handeye.simulate import simulate_eye_in_hand
+    from robocal.handeye import SETUPS
+    from robocal.handeye.simulate import simulate_eye_in_hand, simulate_eye_to_hand
     from robocal.io import atomic_write_text, write_poses
 
-    sim = simulate_eye_in_hand(rng, poses, noise=not noise_free)
+    sim = (simulate_eye_in_hand if setup == "eye-in-hand" else simulate_eye_to_hand)(rng, poses, noise=not noise_free)
+    xn, yn = SETUPS[setup]["X"][0], SETUPS[setup]["Y"][0]
     out = Path(out_dir)
     t = np.arange(poses) * 0.1
     paths = [write_poses(out / "gripper_poses.csv", sim.T_base_gripper, t),
@@ -316,6 +340,6 @@ def simulate_files(out_dir: Path, rng: np.random.Generator, *, poses: int = 16, 
         return "{rotation: %s, translation: %s}" % (np.round(T[:3, :3], 12).tolist(), np.round(T[:3, 3], 12).tolist())
     paths.append(atomic_write_text(out / "truth.yaml", (
         "# ground truth of the simulated pose lists (m); not an input of 'robocal handeye calibrate'\n"
-        f"T_gripper_cam: {pose(sim.X)}\nT_base_target: {pose(sim.Y)}\n"
+        f"setup: {setup}\n{xn}: {pose(sim.X)}\n{yn}: {pose(sim.Y)}\n"
         f"noise: {{rotation_rad: {sim.sigma_rotation}, translation_m: {sim.sigma_translation}}}\n")))
     return [Path(p) for p in paths]
