@@ -27,7 +27,6 @@ import io
 import json
 import os
 import shutil
-import sys
 import time
 import uuid
 from dataclasses import dataclass, field
@@ -335,7 +334,3 @@ def _csv(rows) -> str:
         w.writerow([r["id"], r["status"], r["error"], f"{r['seconds']:.3f}",
                     "" if r["residual_rms"] is None else f"{r['residual_rms']:.6g}", ";".join(r["inputs"])])
     return buf.getvalue()
-
-
-def _stderr(line: str) -> None:
-    print(f"robocal: {line}", file=sys.stderr)
