@@ -138,3 +138,17 @@ def test_mixed_poses_with_and_without_markers_in_one_problem():
     only = calibrate(cam, scene.rectangle, P, with_markers, sigma_px=0.5)
     assert np.all(mix.std_translation < only.std_translation)
     assert "rotation about" in mix.conditioning["text"]
+
+
+def test_many_poses_enumerate_only_the_first_three_poses_combinations(monkeypatch):
+    import robocal.rigs.mirror.markerless as ml
+
+    monkeypatch.setattr(ml, "MAX_COMBINATIONS", 1)  # force the first-three path (else taken beyond 256)
+    cam, scene, rng = _scene(8, K=5)
+    P = scene.body_points_r[THREE]
+    n, d = scene.planes()
+    obs = simulate_markerless(cam, scene.T_c_r, P, n, d, rng, sigma_px=0.0)
+    cal = calibrate_markerless(cam, P, obs)
+    assert cal.n_combinations > 1
+    # noise-free: the rest of the poses' P3P solutions chosen by the reflection test, refined to rounding
+    assert np.abs(pose_error(cal.T_r_c, scene.T_r_c)).max() < 1e-9

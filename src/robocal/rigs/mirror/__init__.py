@@ -13,7 +13,9 @@ planar-ambiguity choice), :mod:`.joint` (the joint problem over K placements),
 rectangle, handedness and marker-fit checks of a user's inputs),
 :mod:`.slips`, :mod:`.crossratio`, :mod:`.simulate`, :mod:`.tags`,
 :mod:`.render` (rendered images), :mod:`.detect` (the ArUco path),
-:mod:`.montecarlo`, :mod:`.files`, :mod:`.report`, :mod:`.workflow` (the
+:mod:`.montecarlo`, :mod:`.markerless` (no mirror markers, K >= 3 mirror poses; mixed data),
+:mod:`.markerless_result`, :mod:`.mirrored_target` (planar targets seen in a mirror),
+:mod:`.files`, :mod:`.report`, :mod:`.workflow` (the
 rig's steps for :mod:`robocal.workflow`), :mod:`.cli` (the declaration).
 
 The names in ``__all__`` are imported from their submodule on first access
@@ -34,6 +36,8 @@ _EXPORTS = {
     "MirrorObservation": "observation",
     **dict.fromkeys(("PlanarChoice", "SingleImageResult", "calibrate_single", "choose_planar_solution"), "single"),
     "predicted_covariance": "joint",
+    **dict.fromkeys(("MarkerlessObservation", "calibrate_markerless", "calibrate_mixed"), "markerless"),
+    **dict.fromkeys(("detect_mirrored_target", "check_mirrored_order"), "mirrored_target"),
     "diagonal_points": "crossratio",
     **dict.fromkeys(("F_X", "T_M_OM", "MirrorScene", "PatentSteps", "householder_compose", "mirror_plane",
                      "patent_compose", "ri_from_r_points", "virtual_transform"), "model"),
@@ -49,6 +53,8 @@ __all__ = [
     "ri_from_r_points", "virtual_transform", "MirrorObservation", "PlanarChoice", "SingleImageResult",
     "MirrorCalibration", "calibrate_single", "calibrate", "choose_planar_solution", "predicted_covariance",
     "diagonal_points", "PUBLISHED", "published_scene", "default_camera", "default_setup", "simulate_observations",
+    "MarkerlessObservation", "calibrate_markerless", "calibrate_mixed", "detect_mirrored_target",
+    "check_mirrored_order",
 ]
 
 

@@ -289,7 +289,10 @@ def _combinations(cands: list, first_three_only: bool):
         yield from itertools.product(*[range(len(c)) for c in cands])
         return
     for head in itertools.product(*[range(len(c)) for c in cands[:3]]):
-        T_r_c, *_ = closed_form(np.stack([cands[j][i] for j, i in enumerate(head)]))
+        try:
+            T_r_c, *_ = closed_form(np.stack([cands[j][i] for j, i in enumerate(head)]))
+        except DegenerateGeometryError:
+            continue  # these three poses' normals parallel in this combination: no R_cr to choose the rest by
         R_cr = T_r_c[:3, :3].T
         tail = tuple(int(np.argmin([_reflection_defect(T[:3, :3], R_cr) for T in c])) for c in cands[3:])
         yield head + tail
