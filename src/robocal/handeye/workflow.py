@@ -35,6 +35,7 @@ class PosePair:
     gripper_path: Path
     target_path: Path
     t: np.ndarray | None = None
+    forms: tuple[str, str] = ("", "")
 
     @property
     def names(self) -> tuple[str, str]:
@@ -89,7 +90,7 @@ def load_pose_pair(gripper_poses, target_poses) -> PosePair:
         raise ShapeError(f"{gripper_poses} has {len(Tg)} poses but {target_poses} has {len(Tc)}: "
                          "without timestamps in both lists the counts must match (pose i with pose i)")
     tick()
-    return PosePair(Tg, Tc, gripper_poses, target_poses, tc if tc is not None else tg)
+    return PosePair(Tg, Tc, gripper_poses, target_poses, tc if tc is not None else tg, (g.form, c.form))
 
 
 # ----------------------------------------------------------------------------- AX = XB
@@ -142,6 +143,11 @@ def _closure(Tg, Tc, X, Y) -> dict:
             "translation_m": np.linalg.norm(r[:, 3:], axis=1).tolist()}
 
 
+def _forms(pair: PosePair) -> dict:
+    """What the pose reader found in each file (:attr:`robocal.io.PoseList.form`)."""
+    return {str(pair.gripper_path.name): pair.forms[0], str(pair.target_path.name): pair.forms[1]}
+
+
 def _std_of(lsq, prefix: str):
     """(rotation std (3,), translation std (3,)) of block ``prefix`` from the solver, or (None, None)."""
     if lsq is None:
@@ -170,6 +176,7 @@ def to_result(calibration, pair: PosePair) -> CalibrationResult:
     result.diagnostics = {
         "rotation_rms_rad": res.rot_rms, "n_motions": res.n_motions, "n_poses": len(pair.T_base_gripper),
         "pairs": next((c["pairs"] for c in comparison if "pairs" in c), None), "setup": res.setup,
+        "pose_files": _forms(pair),
         "convention": f"{res.setup}: A X = X B, X = {xn}, Y = {yn} = "
                       + ("T_base_gripper[i] X T_cam_target[i]" if res.setup == "eye-in-hand"
                          else "T_gripper_base[i] X T_cam_target[i]")
@@ -220,7 +227,7 @@ def robot_world_result(res, pair: PosePair) -> CalibrationResult:
             sr, st = inv.std_rotation.tolist(), inv.std_translation.tolist()
         result.add_pose(name, invert_transform(T), std_rotation=sr, std_translation=st, **frames)
     result.diagnostics = {
-        "rotation_rms_rad": res.rot_rms, "n_poses": len(pair.T_cam_target),
+        "rotation_rms_rad": res.rot_rms, "n_poses": len(pair.T_cam_target), "pose_files": _forms(pair),
         "convention": "A X = Z B, A = T_cam_target, B = T_gripper_base (inverse of the robot's T_base_gripper), "
                       "X = T_target_base, Z = T_cam_gripper; std as rotation vector of R_perturbed R^T (rad) and "
                       "translation (m), of the inverses by first-order propagation; quaternions scalar-last",
@@ -254,15 +261,18 @@ def run_robot_world(args) -> int:
 
 # ----------------------------------------------------------------------------- report, summary
 def summary(result) -> str:
-    """``T_gripper_cam translation [mm] (method): x +/- s, ...``: the line the commands print (the core prints
-    the warnings, with the poses they name, on stderr)."""
+    """``read g.csv: <form>; c.csv: <form>`` (what the pose reader found) and ``T_gripper_cam translation [mm]
+    (method): x +/- s, ...``: the lines the commands print (the core prints the warnings, with the poses they
+    name, on stderr)."""
     name = "T_base_cam" if (result.diagnostics or {}).get("setup") == "eye-to-hand" else "T_gripper_cam"
     t = result.estimate[f"{name}.translation"]
     st = result.std.get(f"{name}.translation") or [None] * 3
     head = f"{name} translation [mm]" + ("" if result.method.startswith("robot-world") else
                                          f" ({result.method})")
-    return f"{head}: " + ", ".join(f"{1e3 * v:.3f}" + ("" if s is None else f" +/- {1e3 * s:.3f}")
-                                   for v, s in zip(t, st))
+    forms = (result.diagnostics or {}).get("pose_files") or {}
+    read = ("read " + "; ".join(f"{k}: {v}" for k, v in forms.items()) + "\n") if any(forms.values()) else ""
+    return read + f"{head}: " + ", ".join(f"{1e3 * v:.3f}" + ("" if s is None else f" +/- {1e3 * s:.3f}")
+                                          for v, s in zip(t, st))
 
 
 def build_report(result, *, base_dir=None):

@@ -3,24 +3,38 @@
 Formats (``T_parent_child``, quaternions **scalar-last** ``(qx, qy, qz, qw)``
 as SciPy and ROS, units in the header or in ``units:``)::
 
-    # CSV, 3-D poses; the timestamp column is optional
+    # CSV with a header (commas, or spaces / tabs); the timestamp column is optional
     t [s], x [m], y [m], z [m], qx, qy, qz, qw
+    t [s], x [m], y [m], z [m], rx [rad], ry [rad], rz [rad]     # translation + axis-angle vector
 
     # CSV, planar poses (a ground robot's odometry or reference)
     t [s], x [m], y [m], theta [rad]
 
+    # CSV without a header (numbers only; # lines are comments; metres and radians),
+    # read by the number of values a row:
+    #   8: t x y z qx qy qz qw   (the TUM trajectory format)      7: x y z qx qy qz qw
+    #   6: x y z rx ry rz        (axis-angle)                       16 / 17: [t] 4x4 row-major
+    #   12 / 13: [t] 3x4 row-major [R | t]
+
     # YAML / JSON
     units: {length: mm}
     poses:
-      - {t: 0.0, p: [x, y, z], q: [qx, qy, qz, qw]}   # or R: 3x3 instead of q
+      - {t: 0.0, p: [x, y, z], q: [qx, qy, qz, qw]}   # or R: 3x3, or rotvec: [rx, ry, rz] (rad),
+      - {T: 4x4}                                       # or T: 4x4; an entry may be a bare 4x4 list,
+                                                       # and the file a bare list of entries
 
+    # OpenCV FileStorage (.yml/.yaml starting %YAML:1.0, or .xml): every 4x4 (or 3x4) matrix in file
+    # order, a sequence of them, or one (4N x 4) / (N x 16) matrix
+
+:attr:`PoseList.form` says which form was found (one line, for a summary).
 A non-unit quaternion, a matrix that is not a rotation, NaN, timestamps that
-do not increase and mixed timed/untimed entries are errors naming the file
-and the row.
+do not increase, rows of different lengths and mixed timed/untimed entries are
+one-line errors naming the file and the line (or entry).
 """
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,7 +42,8 @@ import numpy as np
 
 from robocal.errors import FileFormatError, InputError
 from robocal.io._atomic import atomic_write_text
-from robocal.io._load import load_csv, load_document
+from robocal.io._load import _parse_text, _read_text, load_csv, parse_document
+from robocal.io._units import to_si
 
 __all__ = ["PoseList", "load_poses", "write_poses", "interpolate_poses"]
 
@@ -53,6 +68,9 @@ class PoseList:
     heading : (N,) ndarray or None
         A planar file's ``theta`` [rad] as written (not wrapped to
         ``(-pi, pi]``: a heading past a full turn keeps its count).
+    form : str
+        The form the reader found, in words ("CSV without a header, 8 values a row: TUM t x y z qx qy
+        qz qw (m, rad)").
     """
 
     T: np.ndarray
@@ -60,6 +78,7 @@ class PoseList:
     planar: bool = False
     source: str = ""
     heading: np.ndarray | None = None
+    form: str = ""
 
     def __len__(self) -> int:
         return len(self.T)
@@ -102,50 +121,275 @@ def _check_times(t, src: str, where) -> None:
                               f"{t[k - 1]:.6f} s", source=src)
 
 
+_SEP = re.compile(r"[,;\s]+")
+#: a header cell may hold a unit in brackets with spaces ("x [m]"): split on whitespace outside brackets
+_HEADER_SEP = re.compile(r"\s+(?![^\[]*\])")
+
+#: headerless rows by their number of values: (description, has time, layout)
+_HEADERLESS = {
+    8: ("TUM t x y z qx qy qz qw", True, "quat"),
+    7: ("x y z qx qy qz qw", False, "quat"),
+    6: ("x y z rx ry rz (axis-angle)", False, "rotvec"),
+    16: ("4x4 row-major", False, "4x4"),
+    17: ("t + 4x4 row-major", True, "4x4"),
+    12: ("3x4 row-major [R | t]", False, "3x4"),
+    13: ("t + 3x4 row-major [R | t]", True, "3x4"),
+}
+
+
+#: the SI unit a header column without one is read in
+_SI_OF = {"t": "s", "x": "m", "y": "m", "z": "m", "rx": "rad", "ry": "rad", "rz": "rad", "theta": "rad"}
+
+
+def _is_number(tok: str) -> bool:
+    try:
+        float(tok)
+    except ValueError:
+        return False
+    return True
+
+
+def _check_rotations(R, src: str, where, atol: float = 1e-4) -> None:
+    """Vectorised :func:`~robocal.validation.check_rotation_matrix`: the first bad entry named."""
+    err = np.abs(R @ np.swapaxes(R, -1, -2) - np.eye(3)).max(axis=(-2, -1))
+    det = np.linalg.det(R)
+    bad = np.flatnonzero(~((err <= atol) & (det > 0)))
+    if bad.size:
+        k = int(bad[0])
+        raise FileFormatError(f"{where(k)}: the rotation is not a rotation matrix (|R R^T - I| = {err[k]:.3g}, "
+                              f"det {det[k]:.3g}; expected orthonormal with det +1)", source=src)
+
+
+def _from_matrices(M, src: str, where) -> tuple[np.ndarray, np.ndarray]:
+    """(R, p) of (N, 3, 4) or (N, 4, 4) matrices, checked (a 4x4's last row must be 0 0 0 1)."""
+    if M.shape[1] == 4:
+        last = np.abs(M[:, 3] - [0.0, 0.0, 0.0, 1.0]).max(axis=1)
+        bad = np.flatnonzero(~(last <= 1e-9))
+        if bad.size:
+            raise FileFormatError(f"{where(int(bad[0]))}: the last row of a 4x4 pose must be 0 0 0 1, got "
+                                  f"{np.round(M[bad[0], 3], 6).tolist()}", source=src)
+    R = M[:, :3, :3]
+    _check_rotations(R, src, where)
+    return R, M[:, :3, 3]
+
+
+def _load_headerless(kept, src: str) -> PoseList:
+    rows, lines, ncol = [], [], None
+    for n, ln in kept:
+        toks = _SEP.split(ln.strip())
+        bad = next((tk for tk in toks if not _is_number(tk)), None)
+        if bad is not None:
+            raise FileFormatError(f"line {n}: {bad[:20]!r} is not a number (a pose file without a header holds "
+                                  "numbers only)", source=src)
+        if ncol is None:
+            ncol = len(toks)
+            if ncol not in _HEADERLESS:
+                raise FileFormatError(
+                    f"line {n}: {ncol} values a row; a pose file without a header has "
+                    + ", ".join(f"{k} ({d})" for k, (d, _, _) in _HEADERLESS.items())
+                    + "; or give a header row (t [s], x [m], ..., qx, qy, qz, qw)", source=src)
+        elif len(toks) != ncol:
+            raise FileFormatError(f"line {n}: {len(toks)} values, expected {ncol} as on line {kept[0][0]}",
+                                  source=src)
+        rows.append([float(tk) for tk in toks])
+        lines.append(n)
+    data = np.array(rows, float)
+    lines = np.array(lines)
+
+    def where(k):
+        return f"line {lines[k]}"
+    bad = np.argwhere(~np.isfinite(data))
+    if bad.size:
+        raise FileFormatError(f"{where(int(bad[0][0]))}: value {data[tuple(bad[0])]} is not finite", source=src)
+    desc, timed, layout = _HEADERLESS[ncol]
+    t, v = (data[:, 0], data[:, 1:]) if timed else (None, data)
+    if layout == "quat":
+        p, R = v[:, :3], _rotations_from_quats(v[:, 3:7], src, where)
+    elif layout == "rotvec":
+        from robocal.geometry import matrix_from_rotvec
+
+        p, R = v[:, :3], matrix_from_rotvec(v[:, 3:6])
+    else:
+        R, p = _from_matrices(v.reshape(len(v), -1, 4), src, where)
+    if t is not None:
+        _check_times(t, src, where)
+    return PoseList(_transforms(R, p), t, False, src,
+                    form=f"CSV without a header, {ncol} values a row: {desc} (m, rad)")
+
+
+def _load_table(path: Path, src: str) -> PoseList:
+    text = _read_text(path, src)
+    lines = text.splitlines()
+    kept = [(n, ln) for n, ln in enumerate(lines, 1) if ln.strip() and not ln.lstrip().startswith(("#", "%"))]
+    if not kept:
+        raise FileFormatError("no pose rows (only blank or # comment lines)", source=src)
+    head = kept[0][1]
+    cells = [c for c in (head.split(",") if "," in head else _HEADER_SEP.split(head.strip())) if c.strip()]
+    # a header names every column: a first row with any number in it is data (and its junk an error)
+    if any(_is_number(c.strip()) for c in cells):
+        return _load_headerless(kept, src)
+    # a header without units (the TUM order "t x y z qx qy qz qw" as a header row) is read in SI units, and
+    # said so; spaces / tabs as separators are rewritten as commas, line for line, so that the table's
+    # errors keep the file's line numbers
+    named = [c.strip() for c in cells]
+    assumed = [c for c in named if "[" not in c and c in _SI_OF]
+    header = ", ".join(f"{c} [{_SI_OF[c]}]" if c in assumed else c for c in named)
+    rows_text = [header if n == kept[0][0] else
+                 (ln if "," in head else ", ".join(c for c in _SEP.split(ln.strip()) if c)) if ln.strip()
+                 and not ln.lstrip().startswith(("#", "%")) else ln for n, ln in enumerate(lines, 1)]
+    text = "\n".join(rows_text)
+    tab = load_csv(path, text=text)
+    if all(c in tab for c in ("x", "y", "z", "qx", "qy", "qz", "qw")):
+        p = np.column_stack([tab.column(c, kind="length") for c in "xyz"])
+        R = _rotations_from_quats(np.column_stack([tab.column(c) for c in ("qx", "qy", "qz", "qw")]), src,
+                                  tab.where)
+        planar, heading, what = False, None, "x y z qx qy qz qw"
+    elif all(c in tab for c in ("x", "y", "z", "rx", "ry", "rz")):
+        from robocal.geometry import matrix_from_rotvec
+
+        p = np.column_stack([tab.column(c, kind="length") for c in "xyz"])
+        R = matrix_from_rotvec(np.column_stack([tab.column(c, kind="angle") for c in ("rx", "ry", "rz")]))
+        planar, heading, what = False, None, "x y z rx ry rz (axis-angle)"
+    elif all(c in tab for c in ("x", "y", "theta")):
+        xy = np.column_stack([tab.column("x", kind="length"), tab.column("y", kind="length")])
+        th = tab.column("theta", kind="angle")
+        c, s = np.cos(th), np.sin(th)
+        R = np.zeros((len(th), 3, 3))
+        R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, -s, s, c, 1.0
+        p = np.column_stack([xy, np.zeros(len(th))])
+        planar, heading, what = True, th, "planar x y theta"
+    else:
+        raise FileFormatError("a pose CSV needs the columns x, y, z, qx, qy, qz, qw (3-D poses), x, y, z, rx, "
+                              "ry, rz (axis-angle) or x, y, theta (planar poses), with units in the header "
+                              "(x [m]); or no header at all (TUM: t x y z qx qy qz qw)", source=src)
+    t = tab.column("t", kind="time") if "t" in tab else None
+    if t is not None:
+        _check_times(t, src, tab.where)
+        what = "t " + what
+    units = f"; no units in the header for {', '.join(assumed)}: SI assumed" if assumed else ""
+    return PoseList(_transforms(R, p), t, planar, src, heading,
+                    form=f"CSV with a header ({'commas' if ',' in head else 'spaces'}): {what}{units}")
+
+
+def _load_filestorage(path: Path, src: str) -> PoseList:
+    """Every 4x4 / 3x4 matrix of an OpenCV FileStorage file, in file order (or one stacked matrix)."""
+    import cv2
+
+    try:
+        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    except cv2.error as exc:
+        msg = str(exc).strip().splitlines()[-1] if str(exc).strip() else "parse error"
+        raise FileFormatError(f"not a readable OpenCV FileStorage file: {msg[:160]}", source=src) from None
+    if not fs.isOpened():
+        raise FileFormatError("not a readable OpenCV FileStorage file", source=src)
+    mats, keys = [], []
+
+    def take(node, key):
+        if node.isSeq():
+            for i in range(node.size()):
+                take(node.at(i), f"{key}[{i}]")
+            return
+        m = node.mat() if node.isMap() else None
+        if m is None:
+            return
+        m = np.asarray(m, float)
+        if m.ndim == 2 and m.shape in ((4, 4), (3, 4)):
+            mats.append(m[None]), keys.append(key)
+        elif m.ndim == 2 and m.shape[1] == 4 and m.shape[0] % 4 == 0:
+            mats.append(m.reshape(-1, 4, 4)), keys.extend(f"{key}[{i}]" for i in range(m.shape[0] // 4))
+        elif m.ndim == 2 and m.shape[1] in (16, 12):
+            mats.append(m.reshape(len(m), -1, 4)), keys.extend(f"{key}[{i}]" for i in range(len(m)))
+
+    root = fs.root()
+    for key in root.keys():
+        take(root.getNode(key), key)
+    fs.release()
+    if not mats:
+        raise FileFormatError("an OpenCV FileStorage pose file needs 4x4 (or 3x4) matrices, a sequence of them, "
+                              "or one (4N x 4) / (N x 16) matrix; found none", source=src)
+    shapes = {m.shape[1] for m in mats}
+    if len(shapes) > 1:
+        raise FileFormatError("mixes 4x4 and 3x4 matrices", source=src)
+    M = np.concatenate(mats)
+    if not np.all(np.isfinite(M)):
+        k = int(np.flatnonzero(~np.isfinite(M).all(axis=(1, 2)))[0])
+        raise FileFormatError(f"matrix {keys[k]}: a value is not finite", source=src)
+    R, p = _from_matrices(M, src, lambda k: f"matrix {keys[k]}")
+    span = keys[0] if len(keys) == 1 else f"{keys[0]} ... {keys[-1]}"
+    return PoseList(_transforms(R, p), None, False, src,
+                    form=f"OpenCV FileStorage: {len(keys)} {M.shape[1]}x4 matrices ({span}, m)")
+
+
 def load_poses(path) -> PoseList:
-    """Read a pose list (module docstring for the formats); SI units out."""
+    """Read a pose list (module docstring for the formats); SI units out; :attr:`PoseList.form` says which form."""
+    from robocal.io._load import Document
     from robocal.validation import check_rotation_matrix
 
     path = Path(path)
     src = str(path)
-    if path.suffix.lower() in (".csv", ".txt"):
-        tab = load_csv(path)
-        if all(c in tab for c in ("x", "y", "z", "qx", "qy", "qz", "qw")):
-            p = np.column_stack([tab.column(c, kind="length") for c in "xyz"])
-            R = _rotations_from_quats(np.column_stack([tab.column(c) for c in ("qx", "qy", "qz", "qw")]), src,
-                                      tab.where)
-            planar, heading = False, None
-        elif all(c in tab for c in ("x", "y", "theta")):
-            xy = np.column_stack([tab.column("x", kind="length"), tab.column("y", kind="length")])
-            th = tab.column("theta", kind="angle")
-            c, s = np.cos(th), np.sin(th)
-            R = np.zeros((len(th), 3, 3))
-            R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, -s, s, c, 1.0
-            p = np.column_stack([xy, np.zeros(len(th))])
-            planar, heading = True, th
-        else:
-            raise FileFormatError("a pose CSV needs the columns x, y, z, qx, qy, qz, qw (3-D poses) or "
-                                  "x, y, theta (planar poses), with units in the header (x [m])", source=src)
-        t = tab.column("t", kind="time") if "t" in tab else None
-        if t is not None:
-            _check_times(t, src, tab.where)
-        return PoseList(_transforms(R, p), t, planar, src, heading)
-    doc = load_document(path)
-    items = doc.items_list("poses")
-    if not items:
+    suffix = path.suffix.lower()
+    if suffix in (".csv", ".txt", ".tum"):
+        return _load_table(path, src)
+    if suffix == ".xml":
+        return _load_filestorage(path, src)
+    if suffix not in (".yaml", ".yml", ".json"):
+        raise FileFormatError(f"a pose file is .csv/.txt/.tum, .yaml/.yml/.json or an OpenCV .xml, got "
+                              f"{path.suffix or 'no suffix'!r}", source=src)
+    text = _read_text(path, src)
+    if text.lstrip().startswith("%YAML") or "!!opencv-matrix" in text:
+        return _load_filestorage(path, src)
+    data = _parse_text(text, suffix, src)
+    if isinstance(data, list):                  # a bare list of entries
+        doc = Document({"units": {"length": "m", "angle": "rad", "time": "s"}, "poses": data}, src)
+        form = "a YAML list of poses (no units: m, rad, s)"
+    else:
+        doc = parse_document(text, suffix=suffix, source=src)
+        form = "YAML 'poses:'"
+    raw = doc.raw("poses")
+    if not isinstance(raw, list):
+        raise FileFormatError(f"field 'poses' must be a list, got {type(raw).__name__}", source=src)
+    if not raw:
         raise FileFormatError("field 'poses' is empty", source=src)
-    Rs, ps, ts = [], [], []
-    for k, it in enumerate(items):
-        ps.append(it.array("p", kind="length", shape=(3,)))
-        if "q" in it:
-            Rs.append(_rotations_from_quats(it.array("q", shape=(4,))[None], src, lambda _, k=k: f"poses[{k}].q")[0])
-        elif "R" in it:
-            try:
-                Rs.append(check_rotation_matrix(it.array("R", shape=(3, 3)), f"poses[{k}].R", atol=1e-4))
-            except InputError as exc:
-                raise FileFormatError(exc.message, source=src) from None
+    Rs, ps, ts, kinds = [], [], [], set()
+    for k, v in enumerate(raw):
+        if isinstance(v, list):                     # a bare 4x4 (or 3x4) matrix, metres
+            M = np.asarray(v, float) if _numeric_matrix(v) else None
+            if M is None or M.shape not in ((4, 4), (3, 4)) or not np.all(np.isfinite(M)):
+                raise FileFormatError(f"poses[{k}]: expected a mapping (p + q / R / rotvec, or T) or a finite 4x4 "
+                                      f"matrix, got {str(v)[:40]}", source=src)
+            R, p = _from_matrices(M[None], src, lambda _, k=k: f"poses[{k}]")
+            Rs.append(R[0]), ps.append(p[0]), kinds.add("4x4")
+            continue
+        if not isinstance(v, dict):
+            raise FileFormatError(f"poses[{k}]: expected a mapping (p + q / R / rotvec, or T) or a 4x4 matrix, "
+                                  f"got {str(v)[:40]!r}", source=src)
+        it = Document(v, doc.source, f"poses[{k}]", dict(doc.units), doc.units_error)
+        if "T" in it:
+            M = it.array("T")
+            if M.shape not in ((4, 4), (3, 4)):
+                raise FileFormatError(f"poses[{k}].T: expected a 4x4 matrix, got shape {M.shape}", source=src)
+            R, p = _from_matrices(M[None], src, lambda _, k=k: f"poses[{k}].T")
+            unit = it.units.get("length")          # the document's length unit applies to T's translation
+            Rs.append(R[0]), ps.append(to_si(p[0], unit, "length") if unit else p[0]), kinds.add("T")
         else:
-            raise FileFormatError(f"poses[{k}] needs 'q' (qx, qy, qz, qw) or 'R'", source=src)
+            ps.append(it.array("p", kind="length", shape=(3,)))
+            if "q" in it:
+                Rs.append(_rotations_from_quats(it.array("q", shape=(4,))[None], src,
+                                                lambda _, k=k: f"poses[{k}].q")[0])
+                kinds.add("p + q")
+            elif "R" in it:
+                try:
+                    Rs.append(check_rotation_matrix(it.array("R", shape=(3, 3)), f"poses[{k}].R", atol=1e-4))
+                except InputError as exc:
+                    raise FileFormatError(exc.message, source=src) from None
+                kinds.add("p + R")
+            elif "rotvec" in it:
+                from robocal.geometry import matrix_from_rotvec
+
+                Rs.append(matrix_from_rotvec(it.array("rotvec", kind="angle", shape=(3,))))
+                kinds.add("p + rotvec")
+            else:
+                raise FileFormatError(f"poses[{k}] needs 'q' (qx, qy, qz, qw), 'R', 'rotvec' or 'T'", source=src)
         if "t" in it:
             ts.append(it.float("t", kind="time"))
     if ts and len(ts) != len(ps):
@@ -153,7 +397,16 @@ def load_poses(path) -> PoseList:
     t = np.array(ts) if ts else None
     if t is not None:
         _check_times(t, src, lambda k: f"poses[{k}].t")
-    return PoseList(_transforms(np.array(Rs), np.array(ps)), t, False, src)
+    return PoseList(_transforms(np.array(Rs), np.array(ps)), t, False, src,
+                    form=f"{form}, {len(ps)} entries ({', '.join(sorted(kinds))}){', timed' if t is not None else ''}")
+
+
+def _numeric_matrix(v) -> bool:
+    try:
+        a = np.asarray(v, float)
+    except (TypeError, ValueError):
+        return False
+    return a.ndim == 2
 
 
 def write_poses(path, T, t=None) -> Path:
