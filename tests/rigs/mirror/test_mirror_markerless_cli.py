@@ -140,3 +140,48 @@ def test_mixed_file_with_and_without_markers(tmp_path):
     assert res.diagnostics["truth_check"]["passed"]
     assert len(res.diagnostics["marker_poses"]) == 2 and len(res.diagnostics["mirror_planes"]) == 2
     assert "mirror poses with markers" in (tmp_path / "cal" / "report.html").read_text()
+
+
+def test_chessboard_through_the_mirror_image_set(tmp_path):
+    sim, cal = tmp_path / "sim", tmp_path / "cal"
+    assert main(["mirror", "simulate", "--markerless", "--images", "--mirrors", "3", "--seed", "1",
+                 "--out", str(sim)]) == 0
+    assert len(list(sim.glob("mirror_pose_*.png"))) == 3
+    assert main(["mirror", "calibrate", str(sim / "mirror_input.yaml"), "--out", str(cal)]) == 0
+    res = load_result(cal / "result.json")
+    assert res.diagnostics["truth_check"]["passed"]
+    assert [p["n_points"] for p in res.diagnostics["mirror_planes"]] == [35, 35, 35]  # 5 x 7 corners each
+    assert sum(k.endswith(".png") for k in res.inputs) == 3  # the images are hashed as inputs
+
+
+def _unflipped_uv_file(tmp_path, sim):
+    """The simulated file with pose 0's points as the plain (unflipped) detector labels them."""
+    from robocal.camera import ChessboardTarget, detect_target, read_image
+
+    doc = yaml.safe_load((sim / "mirror_input.yaml").read_text())
+    det = detect_target(read_image(sim / "mirror_pose_0.png"), ChessboardTarget(5, 7, 0.04))
+    assert det is not None  # the trap: found, labelled as a direct view
+    doc["mirror_poses"][0] = {"name": "mirror pose 0", "uv": det.image_points.tolist(),
+                              "ids": [int(i) for i in det.ids]}
+    path = sim / "unflipped.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+def test_a_target_in_unmirrored_order_is_refused_with_the_fix(tmp_path, capsys):
+    sim = tmp_path / "sim"
+    assert main(["mirror", "simulate", "--markerless", "--images", "--mirrors", "3", "--seed", "1",
+                 "--out", str(sim)]) == 0
+    path = _unflipped_uv_file(tmp_path, sim)
+    capsys.readouterr()
+    assert main(["mirror", "calibrate", str(path), "--out", str(tmp_path / "cal")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and str(path) in err and "mirror_poses[0].uv" in err, err
+    assert "unmirrored order" in err and "Fix: detect on the flipped image" in err and "i*7+j -> i*7+(6-j)" in err
+    # a target frame of the other handedness is refused too
+    doc = yaml.safe_load((sim / "mirror_input.yaml").read_text())
+    doc["reference_target"]["R_r_t"][0] = [-v for v in doc["reference_target"]["R_r_t"][0]]
+    bad = sim / "left_handed.yaml"
+    bad.write_text(yaml.safe_dump(doc, sort_keys=False))
+    assert main(["mirror", "calibrate", str(bad), "--out", str(tmp_path / "cal2")]) == 2
+    assert "must be a rotation" in capsys.readouterr().err

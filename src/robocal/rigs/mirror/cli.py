@@ -52,7 +52,8 @@ RIG = Workflow(
                help="pixel noise sigma [px] of point files; 0 = noise-free, sigma_px then left out of the file "
                     "(not used with --images: images get 0.6 px blur and grey-level noise 2)"),
         Option("--images", action="store_true",
-               help="render images with ArUco tags on the body instead of writing image points"),
+               help="render images with ArUco tags on the body instead of writing image points (with "
+                    "--markerless: a chessboard on the body seen in the mirror)"),
         Option("--markerless", action="store_true",
                help="the markerless form: no markers on the mirror, reference points seen in --mirrors poses "
                     "(Takahashi et al. 2012; docs/rigs/mirror.md, 'Markerless input')"),

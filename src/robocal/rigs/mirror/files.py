@@ -177,8 +177,8 @@ def load_input(path) -> MirrorInput:
     if isinstance(cam_raw, dict) and isinstance(cam_raw.get("file"), str):
         cf = Path(cam_raw["file"])
         camera_file = str(cf if cf.is_absolute() else path.parent / cf)
-    if "reference_points" in doc or ("mirror_poses" in doc and "images" not in doc):
-        return _load_markerless(doc, cam, src, camera_file)
+    if "reference_points" in doc or "reference_target" in doc or ("mirror_poses" in doc and "images" not in doc):
+        return _load_markerless(doc, cam, src, camera_file, path.parent)
     r = doc.sub("mirror_rectangle")
     try:
         rect = MarkerRectangle(r.float("width", kind="length", positive=True),
@@ -295,7 +295,28 @@ class MarkerlessInput:
     image_paths: dict = field(default_factory=dict)  # none: the markerless form takes image points
 
 
-def _load_markerless(doc: Document, cam: CameraModel, src: str, camera_file) -> MarkerlessInput:
+def _reference_target(doc: Document):
+    """``(target, T_r_t)`` of ``reference_target: {chessboard: {rows, cols, square}, R_r_t: 3x3, t_r_t: [x, y, z]}``."""
+    from robocal.camera import ChessboardTarget
+
+    t = doc.sub("reference_target")
+    if "chessboard" not in t:
+        raise t.error("chessboard", "missing: the reference target is a chessboard {rows, cols, square} (inner "
+                                    "corners; other targets: give reference_points and uv)")
+    c = t.sub("chessboard")
+    try:
+        target = ChessboardTarget(c.int("rows", minimum=3), c.int("cols", minimum=3),
+                                  c.float("square", kind="length", positive=True))
+    except RobocalError as exc:
+        raise (exc if exc.source else exc.with_source(f"{doc.source}: reference_target.chessboard")) from None
+    R = t.array("R_r_t", shape=(3, 3))
+    if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+        raise t.error("R_r_t", f"must be a rotation (target -> robot; det +1), got det {np.linalg.det(R):.3g}: a "
+                               f"target frame of the other handedness is a mirrored target file")
+    return target, transform_from(R, t.array("t_r_t", kind="length", shape=(3,)))
+
+
+def _load_markerless(doc: Document, cam: CameraModel, src: str, camera_file, base_dir=None) -> MarkerlessInput:
     """The markerless form (docs/rigs/mirror.md, 'Markerless input'): reference points + per pose their reflections."""
     from robocal.rigs.mirror.markerless import MIN_POINTS
 
@@ -304,31 +325,78 @@ def _load_markerless(doc: Document, cam: CameraModel, src: str, camera_file) -> 
             raise doc.error(key, "a markerless input (reference_points + mirror_poses) takes no marker rectangle, "
                                  "body points or images; for poses with markers and without in one file give "
                                  "body_points (not reference_points), mirror_rectangle, images and mirror_poses")
+    target = T_r_t = None
+    if "reference_target" in doc:
+        if "reference_points" in doc:
+            raise doc.error("reference_target", "give reference_points or reference_target, not both")
+        target, T_r_t = _reference_target(doc)
+        P = target.object_points() @ T_r_t[:3, :3].T + T_r_t[:3, 3]
     for key in ("reference_points", "mirror_poses"):
-        if key not in doc:
-            raise doc.error(key, "missing: a markerless input needs reference_points (robot frame) and mirror_poses "
-                                 "(per pose the image points of their reflections)")
-    P = doc.array("reference_points", kind="length", shape=(None, 3))
+        if key not in doc and not (key == "reference_points" and target is not None):
+            raise doc.error(key, "missing: a markerless input needs reference_points (robot frame) or "
+                                 "reference_target, and mirror_poses (per pose the image points of their reflections)")
+    if target is None:
+        P = doc.array("reference_points", kind="length", shape=(None, 3))
     if P.ndim != 2:
         raise doc.error("reference_points", f"must be a list of [x, y, z] points, got shape {P.shape}")
     if len(P) < MIN_POINTS:
         raise doc.error("reference_points", f"need >= {MIN_POINTS} points (P3P per mirror pose), got {len(P)}")
     sigma = doc.float("sigma_px", kind="pixel", default=None, positive=True) if "sigma_px" in doc else None
-    obs = _markerless_poses(doc, cam, src, P)
+    obs = _markerless_poses(doc, cam, src, P, target=target, base_dir=base_dir)
     unit = doc.data.get("reference_points") if isinstance(doc.data, dict) else None
     declared = {"reference_points": str(unit["unit"]) if isinstance(unit, dict) and "unit" in unit
                 else doc.units.get("length")}
-    return MarkerlessInput(cam, P, obs, sigma, src, camera_file, declared, _truth(doc))
+    if target is not None:
+        declared = {"reference_points": _unit_of(doc, "reference_target")}
+    images = {o.name: o.image for o in obs if getattr(o, "image", None)}
+    return MarkerlessInput(cam, P, obs, sigma, src, camera_file, declared, _truth(doc), images)
 
 
-def _markerless_poses(doc: Document, cam: CameraModel, src: str, P, field: str = "reference_points") -> list:
-    """The ``mirror_poses`` entries (``uv``, optional ``ids`` into ``P``) as MarkerlessObservation's."""
+def _unit_of(doc: Document, key: str):
+    sub = doc.sub(key)
+    c = sub.data.get("chessboard") if isinstance(sub.data, dict) else None
+    sq = c.get("square") if isinstance(c, dict) else None
+    return str(sq["unit"]) if isinstance(sq, dict) and "unit" in sq else doc.units.get("length")
+
+
+def _markerless_poses(doc: Document, cam: CameraModel, src: str, P, field: str = "reference_points", *,
+                      target=None, base_dir=None) -> list:
+    """The ``mirror_poses`` entries (``uv``, optional ``ids`` into ``P``; or ``image`` with a
+    ``reference_target``, detected in mirrored order) as MarkerlessObservation's.
+
+    With a reference target, points given as ``uv`` are checked for the mirrored order
+    (:func:`~robocal.rigs.mirror.mirrored_target.check_mirrored_order`): a direct view's order is refused
+    with the fix.
+    """
     from robocal.rigs.mirror.markerless import MarkerlessObservation
+    from robocal.rigs.mirror.mirrored_target import check_mirrored_order, detect_mirrored_target
     from robocal.rigs.mirror.observation import check_in_image
 
     obs = []
     for i, e in enumerate(doc.items_list("mirror_poses")):
         name = e.str("name", default=f"mirror pose {i}")
+        if "image" in e:
+            if target is None:
+                raise e.error("image", "an image entry needs reference_target (the chessboard on the robot)")
+            p = Path(e.raw("image"))
+            p = p if p.is_absolute() or base_dir is None else Path(base_dir) / p
+            if not p.exists():
+                raise e.error("image", f"file {p} does not exist")
+            try:
+                img = read_image(p)
+            except FileFormatError as exc:
+                raise e.error("image", exc.message if str(p) in exc.message else f"{p}: {exc.message}") from None
+            if img.shape[:2] != (cam.height, cam.width):
+                raise e.error("image", f"{p} is {img.shape[1]} x {img.shape[0]} px, the camera {cam.width} x "
+                                       f"{cam.height}")
+            det = detect_mirrored_target(img, target, name=str(p))
+            if det is None:
+                raise e.error("image", f"no {target.describe()} found in {p} (searched in the flipped image: "
+                                       f"a target seen in a mirror is its mirror image)")
+            o = MarkerlessObservation(det.image_points, det.ids, name)
+            o.image = str(p)  # for the result's input hashes
+            obs.append(o)
+            continue
         uv = _uv(e, "uv")
         if "ids" in e:
             raw = e.raw("ids")
@@ -347,6 +415,8 @@ def _markerless_poses(doc: Document, cam: CameraModel, src: str, P, field: str =
             ids = np.arange(len(P))
         try:
             check_in_image(cam, uv, f"{e.prefix}.uv")
+            if target is not None and len(ids) >= 4:
+                check_mirrored_order(cam, target.object_points(ids), uv, what=f"{e.prefix}.uv", cols=target.cols)
             obs.append(MarkerlessObservation(uv, ids, name))
         except RobocalError as exc:
             raise (exc if exc.source else exc.with_source(src)) from None

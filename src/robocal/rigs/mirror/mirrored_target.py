@@ -33,6 +33,7 @@ from robocal.camera import CameraModel, detect_target
 from robocal.errors import DegenerateGeometryError, InconsistentDataError
 
 __all__ = ["MirroredDetection", "detect_mirrored_target", "target_orientation", "check_mirrored_order",
+           "render_mirrored_target",
            "ORDER_MIRRORED"]
 
 #: How :func:`detect_mirrored_target` ordered the points (kept with the detection, said in reports).
@@ -115,3 +116,36 @@ def check_mirrored_order(camera: CameraModel, object_points, image_points, *, wh
             f"view, and every pose from it would be the mirror image of the truth with residuals as low as the "
             f"right answer's. Fix: detect on the flipped image (robocal.rigs.mirror.mirrored_target."
             f"detect_mirrored_target){remap}")
+
+
+def render_mirrored_target(camera: CameraModel, target, T_c_t, n, d, rng: np.random.Generator | None = None, *,
+                           blur_sigma: float = 0.0, noise_sigma: float = 0.0) -> np.ndarray:
+    """Image (uint8, H x W) of ``target`` at ``T_c_t`` (target -> camera [m]) seen in the mirror ``n . x = d``.
+
+    The mirror view is the view of the reflected camera made right-handed
+    (``F = diag(-1, 1, 1)``: target pose ``F H T_c_t`` with the reflection
+    ``H``) flipped left-right, drawn by :func:`robocal.camera.render_target_view`
+    with the tangential ``p2`` negated (the only distortion term that is odd
+    in x). Exact when the principal point is the image centre, ``cx = (W -
+    1) / 2``; other cameras are refused.
+    """
+    import dataclasses
+
+    from robocal.camera import render_target_view
+    from robocal.errors import InputError
+    from robocal.geometry import transform_from
+
+    if abs(camera.cx - (camera.width - 1) / 2) > 1e-9:
+        raise InputError(f"render_mirrored_target: needs cx = (width - 1) / 2 = {(camera.width - 1) / 2:g}, got "
+                         f"{camera.cx:g} (the mirror view is rendered as a left-right flipped view)")
+    n = np.asarray(n, dtype=float)
+    T = np.asarray(T_c_t, dtype=float)
+    Hm = np.eye(3) - 2.0 * np.outer(n, n)
+    F = np.diag([-1.0, 1.0, 1.0])
+    T_v = transform_from(F @ Hm @ T[:3, :3], F @ (Hm @ T[:3, 3] + 2.0 * float(d) * n))
+    dist = np.array(camera.dist, dtype=float)
+    if dist.size > 3:
+        dist[3] = -dist[3]
+    cam_f = dataclasses.replace(camera, dist=dist)
+    img = render_target_view(cam_f, target, T_v, rng, blur_sigma=blur_sigma, noise_sigma=noise_sigma)
+    return np.ascontiguousarray(img[:, ::-1])

@@ -86,8 +86,7 @@ def simulate_files(out_dir, rng: np.random.Generator | None = None, *, placement
         from robocal.rigs.mirror.markerless import MIN_POINTS, MIN_POSES, simulate_markerless
 
         if images:
-            raise InputError("--images and --markerless: rendered markerless images are not implemented; "
-                             "--markerless writes image points")
+            return _simulate_markerless_images(out_dir, rng, int(mirrors))
         if int(mirrors) < MIN_POSES or int(points) < MIN_POINTS:
             raise InputError(f"--mirrors and --points: need >= {MIN_POSES} mirror poses and >= {MIN_POINTS} points, "
                              f"got {mirrors} and {points}")
@@ -125,6 +124,50 @@ def simulate_files(out_dir, rng: np.random.Generator | None = None, *, placement
                            comment=f"robocal mirror simulate: {placements} placement(s), {sigma_px} px noise")
     with open(path, "a", encoding="utf-8") as fh:  # ground truth, for the report only
         fh.write(yaml.safe_dump({"truth": _truth_block(scene.T_r_c)}, default_flow_style=None))
+    written.append(path)
+    return written
+
+
+#: The reference target of ``simulate --markerless --images``: a 5 x 7 chessboard (inner corners, 40 mm squares)
+#: on the body's front face (x_r = 0.46 m), upright, facing forward (target z = -x_r, x = y_r, y = -z_r).
+SIM_TARGET = {"rows": 5, "cols": 7, "square_mm": 40.0,
+              "R_r_t": [[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]], "t_r_t_mm": [460.0, -120.0, 270.0]}
+
+
+def _simulate_markerless_images(out_dir: Path, rng: np.random.Generator, mirrors: int) -> list[Path]:
+    """``simulate --markerless --images``: a chessboard on the body seen in ``mirrors`` mirror poses, rendered
+    (:func:`~robocal.rigs.mirror.mirrored_target.render_mirrored_target`, 0.6 px blur, grey noise 2)."""
+    import cv2
+
+    from robocal.camera import ChessboardTarget
+    from robocal.geometry import transform_from
+    from robocal.io import atomic_write_text
+    from robocal.rigs.mirror.mirrored_target import render_mirrored_target
+
+    cam, scene, _ = markerless_setup(int(mirrors), rng)
+    target = ChessboardTarget(SIM_TARGET["rows"], SIM_TARGET["cols"], SIM_TARGET["square_mm"] / 1e3)
+    T_r_t = transform_from(np.array(SIM_TARGET["R_r_t"]), np.array(SIM_TARGET["t_r_t_mm"]) / 1e3)
+    n, d = scene.planes()
+    written, poses = [], []
+    for j in range(len(n)):
+        img = render_mirrored_target(cam, target, scene.T_c_r @ T_r_t, n[j], d[j], rng, blur_sigma=0.6,
+                                     noise_sigma=2.0)
+        name = f"mirror_pose_{j}.png"
+        cv2.imwrite(str(out_dir / name), img)
+        written.append(out_dir / name)
+        poses.append({"name": f"mirror pose {j}", "image": name})
+    cam_d = cam.to_dict()
+    cam_d.pop("units", None)
+    cam_d.pop("model", None)
+    doc = {"units": {"length": "mm", "pixel": "px"}, "camera": cam_d,
+           "reference_target": {"chessboard": {"rows": target.rows, "cols": target.cols,
+                                               "square": SIM_TARGET["square_mm"]},
+                                "R_r_t": SIM_TARGET["R_r_t"], "t_r_t": SIM_TARGET["t_r_t_mm"]},
+           "mirror_poses": poses, "truth": _truth_block(scene.T_r_c)}
+    path = out_dir / INPUT_NAME
+    atomic_write_text(path, f"# robocal mirror simulate --markerless --images: a chessboard on the body seen in "
+                            f"{mirrors} mirror poses (no mirror markers)\n"
+                      + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None))
     written.append(path)
     return written
 
