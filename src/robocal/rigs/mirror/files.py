@@ -50,6 +50,12 @@ marker rectangle, the mirror stands in K >= 3 unknown poses::
         uv: [[u, v], ...]        # image points of the reflections [px]
         ids: [0, 1, 2]           # optional: reference_points row of each uv row (default: all, in order)
 
+Instead of ``reference_points``, ``reference_target: {chessboard: {rows,
+cols, square}, R_r_t, t_r_t}`` (its corners, id ``i * cols + j``), and
+then a pose may be ``{name, image: file}``: the board is detected in the
+flipped image (mirrored order, :mod:`robocal.rigs.mirror.mirrored_target`);
+``uv`` rows given with a reference target are checked for that order.
+
 A file with ``reference_points``, or ``mirror_poses`` without ``images``, is
 read in this form (``load_input`` returns a :class:`MarkerlessInput`). Mixed
 data: ``mirror_poses`` next to ``images`` (and ``body_points``,
