@@ -61,7 +61,7 @@ _EXPORTS = {
     "TRANS_ROT_RATIO_MAX": "plausibility", "closure_residuals": "plausibility", "judge_poses": "plausibility",
     "HandEyeResult": "refine", "calibrate_hand_eye": "refine", "invert_with_covariance": "refine",
     "HandEyeSimulation": "simulate", "simulate_eye_in_hand": "simulate", "simulate_eye_to_hand": "simulate",
-    "SETUPS": "refine",
+    "SETUPS": "refine", "ViewPoses": "images", "view_poses": "images",
 }
 
 __all__ = list(_EXPORTS)

@@ -15,6 +15,20 @@ _HE = "robocal.handeye.workflow"
 _PAIR = (Option("gripper_poses", type=Path, help="T_base_gripper list (CSV/YAML, scalar-last quaternions)"),
          Option("target_poses", type=Path, help="T_cam_target list (CSV/YAML)"))
 
+_SHARED = (
+    Option("--method", default="tsai", choices=["tsai", "park", "horaud", "andreff", "daniilidis"],
+           help="closed-form AX = XB solver (then refined unless --no-refine)"),
+    Option("--no-refine", action="store_true", help="closed form only (no covariance)"),
+    Option("--setup", default="eye-in-hand", choices=["eye-in-hand", "eye-to-hand"],
+           help="eye-in-hand (camera on the gripper, fixed target): X = T_gripper_cam, target pose "
+                "T_base_target; eye-to-hand (fixed camera, target on the gripper): X = T_base_cam, "
+                "target pose T_gripper_target"),
+    Option("--pairs", default="auto", choices=["auto", "consecutive", "all"],
+           help="pose pairs of the closed form's relative motions: all (every pair, n^2/2), consecutive "
+                "(i, i+1), auto (default: all up to 200 poses, else consecutive plus at most 20,000 longer "
+                "pairs turning 10-150 deg; memory linear in the number of poses)"),
+)
+
 HANDEYE = Workflow(
     name="handeye",
     help="AX = XB hand-eye solvers (Tsai, Park, Horaud, Andreff, Daniilidis) and robot-world AX = ZB, "
@@ -44,22 +58,32 @@ HANDEYE = Workflow(
     simulate_examples=("robocal handeye simulate --out handeye-sim --seed 1",),
     calibrate_help="X = T_gripper_cam (eye-in-hand) or T_base_cam (eye-to-hand) from two pose lists",
     input_arguments=_PAIR,
-    calibrate_options=(
-        Option("--method", default="tsai", choices=["tsai", "park", "horaud", "andreff", "daniilidis"],
-               help="closed-form AX = XB solver (then refined unless --no-refine)"),
-        Option("--no-refine", action="store_true", help="closed form only (no covariance)"),
-        Option("--setup", default="eye-in-hand", choices=["eye-in-hand", "eye-to-hand"],
-               help="eye-in-hand (camera on the gripper, fixed target): X = T_gripper_cam, target pose "
-                    "T_base_target; eye-to-hand (fixed camera, target on the gripper): X = T_base_cam, "
-                    "target pose T_gripper_target"),
-        Option("--pairs", default="auto", choices=["auto", "consecutive", "all"],
-               help="pose pairs of the closed form's relative motions: all (every pair, n^2/2), consecutive "
-                    "(i, i+1), auto (default: all up to 200 poses, else consecutive plus at most 20,000 longer "
-                    "pairs turning 10-150 deg; memory linear in the number of poses)"),
-    ),
+    calibrate_options=_SHARED,
     calibrate_examples=(f"robocal handeye calibrate {EXAMPLES}/gripper_poses.csv {EXAMPLES}/target_poses.csv "
                         "--method park --out he",),
     commands=(
+        Command("calibrate-images", help="X from images of a target and the robot poses: each view's pose with its "
+                                         "covariance, ambiguous / badly conditioned views named and down-weighted",
+                run=f"{_HE}:run_images",
+                options=(Option("--images", type=Path, required=True,
+                                help="folder of images (.png/.jpg/...), one per robot pose, in name order"),
+                         Option("--robot", type=Path, required=True, help="T_base_gripper list, one pose per image"),
+                         Option("--camera", type=Path, required=True,
+                                help="camera file (OpenCV YAML/XML, ROS camera_info, robocal JSON/YAML)"),
+                         Option("--target", type=Path, required=True,
+                                help="target file (chessboard, ChArUco, ArUco/AprilTag grid)"),
+                         *_SHARED, accept_implausible_option()),
+                examples=("robocal handeye simulate-images --out he-img",
+                          "robocal handeye calibrate-images --images he-img/images --robot he-img/robot_poses.csv "
+                          "--camera he-img/camera.yaml --target he-img/target.yaml --out he-img-cal")),
+        Command("simulate-images", help="render views of a chessboard with the robot poses, camera, target, truth",
+                run=f"{_HE}:run_simulate_images",
+                options=(Option("--poses", type=number_at_least(int, 3, why="AX = XB needs 3 poses"), default=8,
+                                help="number of views"),
+                         Option("--seed", type=int, default=0, help="random seed"),
+                         Option("--setup", default="eye-in-hand", choices=["eye-in-hand", "eye-to-hand"],
+                                help="eye-in-hand or eye-to-hand")),
+                examples=("robocal handeye simulate-images --out he-img",)),
         Command("robot-world", help="A X = Z B: T_gripper_cam and T_base_target together (Shah + refinement)",
                 run=f"{_HE}:run_robot_world",
                 options=(*_PAIR,

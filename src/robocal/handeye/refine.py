@@ -87,7 +87,7 @@ def _std_dict(res, prefix: str) -> dict:
 
 
 def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, refine: bool = True,
-                       pairs: str = "auto", times=None, setup: str = "eye-in-hand",
+                       pairs: str = "auto", times=None, setup: str = "eye-in-hand", pose_sigmas=None,
                        min_rotation: float = MIN_ROTATION,
                        min_axis_spread: float = MIN_AXIS_SPREAD, accept_implausible: bool = False,
                        names=("T_base_gripper", "T_cam_target")) -> HandEyeResult:
@@ -118,6 +118,12 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
         ``Y = T_base_target``. Eye-to-hand: the camera fixed, the target on the gripper; the same
         closure with the robot poses inverted, ``T_gripper_base[i] X T_cam_target[i] = Y``, gives
         ``X = T_base_cam`` and ``Y = T_gripper_target`` (:data:`SETUPS`).
+    pose_sigmas : array_like, shape (N, 2), optional
+        Per-pose std of ``T_cam_target``: rotation [rad] and translation [m] (e.g. from the images,
+        :func:`robocal.handeye.images.view_poses`). The refinement then weights pose i's closure by
+        ``1 / sigma_i`` relative to the others, with the translation std
+        ``sqrt(s_t^2 + (|t_cam_target| s_rot)^2)`` (a rotation error moves the target by its distance);
+        the overall scale still comes from the residuals.
     accept_implausible : bool
         Go on (with an ``implausible_input`` warning) when :func:`judge_poses` finds the lists
         implausible; by default that raises :class:`~robocal.errors.ImplausibleInputError`.
@@ -155,10 +161,21 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
         return out
     sr, st = _sigmas(r0)
 
+    w = np.ones((len(Tc), 6))
+    if pose_sigmas is not None:
+        ps = np.asarray(pose_sigmas, float)
+        if ps.shape != (len(Tc), 2) or not np.all(np.isfinite(ps) & (ps > 0)):
+            raise ShapeError(f"pose_sigmas must be (N, 2) = ({len(Tc)}, 2) positive finite stds, got shape {ps.shape}")
+        s_rot = ps[:, 0]
+        s_t = np.hypot(ps[:, 1], np.linalg.norm(Tc[:, :3, 3], axis=1) * ps[:, 0])
+        # relative weights (median 1): the overall noise scale is still estimated from the residuals
+        w[:, :3] = (np.median(s_rot) / s_rot)[:, None]
+        w[:, 3:] = (np.median(s_t) / s_t)[:, None]
+
     def fun(p):
         X = _perturbed(X0, np.r_[p["X"][:3], p["X"][3:]])
         Y = _perturbed(Y0, p["Y"])
-        return _pose_residual(Tg @ X @ Tc, Y[None])
+        return _pose_residual(Tg @ X @ Tc, Y[None]) * w
 
     prob = Problem()
     prob.add_block("X", np.r_[0, 0, 0, X0[:3, 3]], labels=[f"X.{k}" for k in _LABELS],

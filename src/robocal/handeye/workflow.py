@@ -19,7 +19,7 @@ from robocal.io import CalibrationResult, hash_inputs
 from robocal.progress import progress as _progress
 
 __all__ = ["SOLVER_FIELDS", "solver_record", "PosePair", "load_pose_pair", "calibrate", "to_result", "robot_world",
-           "robot_world_result", "build_report", "summary", "simulate_files", "run_robot_world"]
+           "robot_world_result", "build_report", "summary", "simulate_files", "run_robot_world", "run_images", "run_simulate_images"]
 
 _LABELS = ("rx", "ry", "rz", "tx", "ty", "tz")
 _GRIPPER_CAM = {"parent": "gripper", "child": "camera"}
@@ -103,7 +103,7 @@ def _gripper(pair: PosePair, setup: str) -> np.ndarray:
 
 
 def calibrate(pair: PosePair, *, method: str = "tsai", no_refine: bool = False, accept_implausible: bool = False,
-              pairs: str = "auto", setup: str = "eye-in-hand", progress: bool = True, **_):
+              pairs: str = "auto", setup: str = "eye-in-hand", pose_sigmas=None, progress: bool = True, **_):
     """``X = T_gripper_cam`` (:func:`~robocal.handeye.calibrate_hand_eye`) and the
     other closed forms on the same motions, for the report's comparison.
 
@@ -117,7 +117,8 @@ def calibrate(pair: PosePair, *, method: str = "tsai", no_refine: bool = False, 
     tick = _stages("handeye: solve", 1, enabled=progress)
     tick()
     res = calibrate_hand_eye(pair.T_base_gripper, pair.T_cam_target, method, refine=not no_refine, pairs=pairs,
-                             times=pair.t, setup=setup, accept_implausible=accept_implausible, names=pair.names)
+                             times=pair.t, setup=setup, pose_sigmas=pose_sigmas,
+                             accept_implausible=accept_implausible, names=pair.names)
     comparison = []
     Tg = _gripper(pair, setup)
     for m in AXXB_METHODS:
@@ -353,3 +354,63 @@ def simulate_files(out_dir: Path, rng: np.random.Generator, *, poses: int = 16, 
         f"setup: {setup}\n{xn}: {pose(sim.X)}\n{yn}: {pose(sim.Y)}\n"
         f"noise: {{rotation_rad: {sim.sigma_rotation}, translation_m: {sim.sigma_translation}}}\n")))
     return [Path(p) for p in paths]
+
+
+# ----------------------------------------------------------------------------- images in
+_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+
+
+def run_images(args) -> int:
+    """``robocal handeye calibrate-images --images DIR --robot POSES --camera CAM --target TARGET.yaml --out D``.
+
+    The target's pose in each image with its covariance (:func:`robocal.handeye.images.view_poses`), paired
+    with the robot pose of the same rank (images in name order, one robot pose per image; an image without
+    a usable pose drops its robot pose, named), then :func:`calibrate` with the per-view stds as weights.
+    """
+    from robocal.camera import load_camera, load_target
+    from robocal.errors import InputError, RobocalError, ShapeError
+    from robocal.handeye.images import view_poses
+    from robocal.io import load_poses, prepare_out_dir, write_run
+
+    images = sorted(p for p in Path(args.images).iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES) \
+        if Path(args.images).is_dir() else []
+    if not images:
+        raise InputError(f"no images (.png, .jpg, ...) in {args.images}")
+    robot = load_poses(args.robot)
+    if len(robot) != len(images):
+        raise ShapeError(f"{args.robot} has {len(robot)} poses but {args.images} has {len(images)} images: one "
+                         "robot pose per image, in the images' name order", source=str(args.robot))
+    camera, target = load_camera(args.camera), load_target(args.target)
+    try:
+        views = view_poses(images, camera, target)
+        pair = PosePair(robot.T[views.index], views.T_cam_target, Path(args.robot), Path(args.target),
+                        None if robot.t is None else robot.t[views.index],
+                        (robot.form, f"{len(views.names)} of {len(images)} images of a {target.kind}"))
+        res, comparison = calibrate(pair, method=args.method, no_refine=args.no_refine, pairs=args.pairs,
+                                    setup=args.setup, accept_implausible=args.accept_implausible,
+                                    pose_sigmas=views.sigmas)
+        res.warnings = list(views.warnings) + list(res.warnings)
+        result = to_result((res, comparison), pair)
+        result.inputs = hash_inputs([Path(args.robot), Path(args.camera), Path(args.target), *images])
+        result.diagnostics["views"] = [
+            {"image": n, "pose": int(i), "rms_px": float(r), "ambiguity": float(a), "rotation_std_rad": float(s[0]),
+             "translation_std_m": float(s[1])}
+            for n, i, r, a, s in zip(views.names, views.index, views.rms_px, views.ambiguity, views.sigmas)]
+        report = build_report(result)
+    except RobocalError as exc:
+        raise exc if exc.source is not None else exc.with_source(f"{args.images} + {args.robot}") from None
+    out = prepare_out_dir(args.out, "handeye-calibrate-images")
+    write_run(out, result, report)
+    print(summary(result))
+    return 0
+
+
+def run_simulate_images(args) -> int:
+    """``robocal handeye simulate-images --out DIR``: rendered views, robot poses, camera, target, truth."""
+    from robocal.handeye.images import simulate_image_files
+    from robocal.io import prepare_out_dir
+
+    out = prepare_out_dir(args.out, "handeye-simulate-images")
+    for p in simulate_image_files(out, np.random.default_rng(args.seed), poses=args.poses, setup=args.setup):
+        print(f"wrote {p}")
+    return 0

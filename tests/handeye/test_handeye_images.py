@@ -1,0 +1,68 @@
+"""Images in (issue 13): rendered views -> each view's pose with its covariance -> X, in both set-ups."""
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+
+from robocal.cli.main import main
+from robocal.geometry import PoseWithCovariance, matrix_from_rotvec
+from robocal.handeye import SETUPS, calibrate_hand_eye, simulate_eye_in_hand, transform_error
+from robocal.io import load_result
+
+
+def _truth(path, name):
+    d = yaml.safe_load(path.read_text())[name]
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = d["rotation"], d["translation"]
+    return T
+
+
+@pytest.mark.parametrize("setup", ["eye-in-hand", "eye-to-hand"])
+def test_rendered_views_calibrate_end_to_end(tmp_path, capsys, setup):
+    sim, cal = tmp_path / "sim", tmp_path / "cal"
+    assert main(["handeye", "simulate-images", "--setup", setup, "--poses", "8", "--seed", "1",
+                 "--out", str(sim)]) == 0
+    blank = sim / "images" / "view_05.png"                      # one image without the board
+    cv2.imwrite(str(blank), np.full((480, 640), 128, np.uint8))
+    assert main(["handeye", "calibrate-images", "--images", str(sim / "images"), "--robot",
+                 str(sim / "robot_poses.csv"), "--camera", str(sim / "camera.yaml"), "--target",
+                 str(sim / "target.yaml"), "--setup", setup, "--out", str(cal)]) == 0
+    cap = capsys.readouterr()
+    xname, yname = SETUPS[setup]["X"][0], SETUPS[setup]["Y"][0]
+    assert f"{xname} translation [mm]" in cap.out and "7 of 8 images of a chessboard" in cap.out
+    assert "view_05.png: target not found" in cap.err           # named, its robot pose dropped
+    res = load_result(cal / "result.json")
+    views = res.diagnostics["views"]
+    assert [v["pose"] for v in views] == [0, 1, 2, 3, 4, 6, 7]
+    assert yname in res.poses
+    for name in (xname,):          # the target pose is in the detector's corner numbering (images.py)
+        est = PoseWithCovariance.from_result(res, name)
+        err = est.error_to(_truth(sim / "truth.yaml", name))
+        # rendered views (1 grey level of noise, 0.02-0.03 px corner RMS, pixel sigma floored at 0.05 px):
+        # X to ~10-70 um / 0.1 mrad; each component within 5 of its own std (6 components)
+        assert np.all(np.abs(err.vector) < 5 * est.std), (name, err.vector / est.std)
+        assert err.translation < 5e-4 and err.rotation < 2e-3
+
+
+def test_per_view_stds_down_weight_a_bad_view():
+    sim = simulate_eye_in_hand(np.random.default_rng(12), 12, noise=False)
+    Tc = sim.T_cam_target.copy()
+    rng = np.random.default_rng(5)
+    Tc[:, :3, :3] = matrix_from_rotvec(rng.normal(size=(12, 3)) * 1e-4) @ Tc[:, :3, :3]
+    Tc[:, :3, 3] += rng.normal(size=(12, 3)) * 2e-5
+    Tc[4, :3, :3] = matrix_from_rotvec([0.02, -0.015, 0.01]) @ Tc[4, :3, :3]   # one view 200x worse
+    Tc[4, :3, 3] += [4e-3, -3e-3, 2e-3]
+    sig = np.tile([1e-4, 2e-5], (12, 1))
+    sig[4] = [2e-2, 4e-3]                                        # ... and said so by its covariance
+    plain = calibrate_hand_eye(sim.T_base_gripper, Tc)
+    weighted = calibrate_hand_eye(sim.T_base_gripper, Tc, pose_sigmas=sig)
+    e_plain = transform_error(plain.X, sim.X)
+    e_w = transform_error(weighted.X, sim.X)
+    # the bad view pulls the equal-weight fit by ~1/12 of its 25 mrad / 5 mm error; weighted 200x down it
+    # moves X by ~1/500 of it: the noise of the other views (~0.05 mrad / 10 um) is what remains
+    assert e_w[0] < e_plain[0] / 5 and e_w[1] < e_plain[1] / 5, (e_plain, e_w)
+    with pytest.raises(Exception, match="pose_sigmas must be"):
+        calibrate_hand_eye(sim.T_base_gripper, Tc, pose_sigmas=sig[:5])
