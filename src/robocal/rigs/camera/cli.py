@@ -97,6 +97,9 @@ RIG = Workflow(
                help="corners that may be removed as outliers (default 5 %% of all corners)"),
         Option("--min-corners", type=number_at_least(int, 4), default=None,
                help="views with fewer usable corners are skipped (default 6)"),
+        Option("--noise", choices=("per_view", "pooled"), default="per_view",
+               help="per_view: each view weighted by its own pixel noise when a test (Cochran's, 5 %%) finds the "
+                    "views' levels unequal (default); pooled: one level for all (cv2.calibrateCamera's objective)"),
         Option("--blur-limit", type=number_at_least(float, 0.0, strict=True), default=None, to="load_input",
                help="edge blur [px] above which a view is named blurred and skipped (default 2.5)"),
         Option("--duplicate-limit", type=number_at_least(float, 0.0), default=None, to="load_input",

@@ -42,12 +42,13 @@ def _maps(section, cal) -> None:
     cam = cal.camera
     step = max(cam.width, cam.height) / 40.0
     pu = projection_uncertainty(cal, grid_step_px=step)
+    fixed = projection_uncertainty(cal, grid_step_px=step, compensate_rotation=False)
     ue, ve, counts = coverage(cal, cell_px=max(cam.width, cam.height) / 16.0)
     fig, axes = new_figure(1, 2, size=(11.0, 4.2))
     ax = axes[0]
     cs = ax.contourf(pu.u, pu.v, pu.std, levels=12, cmap="viridis")
     fig.colorbar(cs, ax=ax, label="std of the projection [px]")
-    ax.set_title("projection uncertainty (ray at infinity)")
+    ax.set_title("projection uncertainty (up to a camera rotation)")
     ax2 = axes[1]
     m = ax2.pcolormesh(ue, ve, counts, cmap="magma")
     fig.colorbar(m, ax=ax2, label="corners per cell")
@@ -60,12 +61,15 @@ def _maps(section, cal) -> None:
         a.set_ylabel("v [px]")
     finite = pu.std[np.isfinite(pu.std)]
     cx, cy = cam.cx, cam.cy
-    centre = pu.std[np.argmin(np.abs(pu.v - cy)), np.argmin(np.abs(pu.u - cx))]
+    at = (np.argmin(np.abs(pu.v - cy)), np.argmin(np.abs(pu.u - cx)))
     empty = int(np.sum(counts == 0))
     section.figure(fig, caption=(
-        f"left: where a ray lands is known to {centre:.3g} px at the image centre and {finite.max():.3g} px at "
-        f"worst (mean {finite.mean():.3g} px), from the intrinsics' covariance; right: corners per cell, "
-        f"{empty} of {counts.size} cells empty (where the distortion is extrapolated, the left map grows)."))
+        f"left: where a ray lands is known to {pu.std[at]:.3g} px at the image centre and {finite.max():.3g} px "
+        f"at worst (mean {finite.mean():.3g} px), from the intrinsics' covariance, up to the small camera rotation "
+        f"every pose estimated with this camera absorbs (mrcal's compensating rotation); with the ray held fixed "
+        f"in the camera frame (the optical axis as a reference) it is {fixed.std[at]:.3g} px at the centre and "
+        f"{np.nanmax(fixed.std):.3g} px at worst. Right: corners per cell, {empty} of {counts.size} cells empty "
+        f"(where the distortion is extrapolated, the left map grows)."))
 
 
 def _residual_vectors(section, cal, base_dir) -> None:
@@ -106,11 +110,14 @@ def _views_table(section, cal, d) -> None:
         T = cal.poses[v.name]
         tilt = np.degrees(np.arccos(np.clip(abs(T[2, 2]), 0.0, 1.0)))  # board normal against the optical axis
         rows.append({"image": v.name, "corners": len(v), "RMS [px]": cal.view_rms[v.name],
+                     "noise [px]": cal.view_sigma.get(v.name),
                      "distance [m]": float(np.linalg.norm(T[:3, 3])), "tilt [deg]": float(tilt),
                      "blur [px]": d.get("blur_px", {}).get(v.name)})
-    section.table(rows, ["image", "corners", "RMS [px]", "distance [m]", "tilt [deg]", "blur [px]"], digits=4,
-                  caption="views used: distance of the board origin, angle between the board normal and the "
-                          "optical axis (tilted views determine the focal length), edge blur")
+    section.table(rows, ["image", "corners", "RMS [px]", "noise [px]", "distance [m]", "tilt [deg]", "blur [px]"],
+                  digits=4, caption="views used: the pixel noise each view is weighted by (one pooled level unless "
+                                    "the views' levels differ), distance of the board origin, angle between the "
+                                    "board normal and the optical axis (tilted views determine the focal length), "
+                                    "edge blur")
     rej = d.get("rejected") or {}
     if rej:
         section.table([{"image": n, "why not used": r} for n, r in rej.items()], ["image", "why not used"],

@@ -130,10 +130,10 @@ def _detection_warnings(inp) -> list[Diagnostic]:
 
 def calibrate_input(inp, *, out_dir=None, progress: bool = False, accept_implausible: bool = False,
                     model: str = "opencv5", fix=(), max_outliers: int | None = None, min_corners: int | None = None,
-                    **_) -> CameraRun:
+                    noise: str = "per_view", **_) -> CameraRun:
     """Calibrate the intrinsics from a loaded input (:func:`robocal.rigs.camera.files.load_input`).
 
-    ``model``/``fix``/``max_outliers``/``min_corners``: of
+    ``model``/``fix``/``max_outliers``/``min_corners``/``noise``: of
     :func:`robocal.camera.calibrate_intrinsics` (CLI ``--model``, ``--fix``,
     ...). The target's scale is judged first (:func:`check_target_scale`).
     """
@@ -146,7 +146,8 @@ def calibrate_input(inp, *, out_dir=None, progress: bool = False, accept_implaus
         warnings.append(diag)
     views = inp.detections.target_views()
     cal = calibrate_intrinsics(views, inp.image_size, model=model, fix=tuple(fix or ()), max_outliers=max_outliers,
-                               min_corners=MIN_CORNERS_PER_VIEW if min_corners is None else int(min_corners))
+                               min_corners=MIN_CORNERS_PER_VIEW if min_corners is None else int(min_corners),
+                               noise=noise)
     return CameraRun(cal, Path(out_dir) if out_dir is not None else Path.cwd(), warnings)
 
 
@@ -195,6 +196,7 @@ def to_result(run: CameraRun, inp) -> CalibrationResult:
         views[_rel(v.name, base)] = {
             "T_cam_board": np.round(cal.poses[v.name], 12).tolist(),
             "pose_std": np.asarray(cal.pose_std[v.name]).tolist(), "rms_px": cal.view_rms[v.name],
+            "sigma_px": float(cal.view_sigma.get(v.name, cal.sigma_px)),
             "ids": v.ids.tolist(), "image_points": np.round(v.image_points, 5).tolist(),
             "residuals": np.round(cal.residuals[v.name], 6).tolist(),
         }
@@ -241,7 +243,7 @@ def calibration_from_result(result: CalibrationResult):
 
     d = result.diagnostics
     target = target_from_document(Document(d["target"]["mapping"], "result.json: diagnostics.target.mapping"))
-    views, poses, pose_std, residuals, view_rms = [], {}, {}, {}, {}
+    views, poses, pose_std, residuals, view_rms, view_sigma = [], {}, {}, {}, {}, {}
     for name, v in d["views"].items():
         ids = np.asarray(v["ids"], dtype=int)
         views.append(TargetView(name, target.object_points(ids), np.asarray(v["image_points"], float), ids))
@@ -249,6 +251,7 @@ def calibration_from_result(result: CalibrationResult):
         pose_std[name] = np.asarray(v["pose_std"], float)
         residuals[name] = np.asarray(v["residuals"], float).reshape(-1, 2)
         view_rms[name] = float(v["rms_px"])
+        view_sigma[name] = float(v.get("sigma_px", d["sigma_px"]))
     labels = tuple(d["labels"])
     values = np.array([result.estimate[k] for k in labels], dtype=float)
     cov = np.array([[np.nan if c is None else c for c in row] for row in d["cov"]], dtype=float)
@@ -257,7 +260,7 @@ def calibration_from_result(result: CalibrationResult):
         std=dict(result.std), free=tuple(d["free"]), poses=poses, pose_std=pose_std, views=views,
         residuals=residuals, view_rms=view_rms, rms=float(result.residual_rms), sigma_px=float(d["sigma_px"]),
         opencv_rms=float(d["opencv_rms_px"]), outliers=[tuple(o) for o in d["outliers"]],
-        dropped=list(d["dropped"]), warnings=list(result.warnings), lsq=None)
+        dropped=list(d["dropped"]), warnings=list(result.warnings), lsq=None, view_sigma=view_sigma)
 
 
 def write_outputs(result: CalibrationResult, out_dir) -> list[Path]:
