@@ -1,7 +1,5 @@
 """Images in (issue 13): rendered views -> each view's pose with its covariance -> X, in both set-ups."""
 
-import json
-
 import cv2
 import numpy as np
 import pytest

@@ -19,7 +19,8 @@ from robocal.io import CalibrationResult, hash_inputs
 from robocal.progress import progress as _progress
 
 __all__ = ["SOLVER_FIELDS", "solver_record", "PosePair", "load_pose_pair", "calibrate", "to_result", "robot_world",
-           "robot_world_result", "build_report", "summary", "simulate_files", "run_robot_world", "run_images", "run_simulate_images"]
+           "robot_world_result", "build_report", "summary", "simulate_files", "run_robot_world", "run_images",
+           "run_simulate_images"]
 
 _LABELS = ("rx", "ry", "rz", "tx", "ty", "tz")
 _GRIPPER_CAM = {"parent": "gripper", "child": "camera"}
@@ -128,7 +129,8 @@ def calibrate(pair: PosePair, *, method: str = "tsai", no_refine: bool = False, 
             comparison.append({"method": m, "error": str(exc)})
             continue
         rot, trans = transform_error(Xm, res.X)
-        comparison.append({"method": m, "pairs": pairs, "n_motions": res.n_motions, "rotation_diff_rad": rot, "translation_diff_m": trans,
+        comparison.append({"method": m, "pairs": pairs, "n_motions": res.n_motions, "rotation_diff_rad": rot,
+                           "translation_diff_m": trans,
                            "rotation_rms_rad": rot_rms, "translation_rms_m": trans_rms})
     tick()
     return res, comparison
