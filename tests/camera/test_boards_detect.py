@@ -293,3 +293,20 @@ def test_grid_spacing_is_each_corners_nearest_seen_neighbour():
     # 6's neighbours are 3 (12 px) and 7 (10 px); row ends do not wrap (2 and 3 are not neighbours)
     np.testing.assert_allclose(_grid_spacing(ids, uv, 3), [10, 10, 10, 12, 11, 10, 10])
     assert np.isnan(_grid_spacing(np.array([0, 8]), np.array([[0.0, 0.0], [20.0, 24.0]]), 3)).all()  # none seen
+
+
+def test_blur_is_measured_on_small_squares_and_names_a_view_that_lost_corners_to_it():
+    from pathlib import Path
+
+    from robocal.camera import load_target, read_image
+
+    ex = Path(__file__).resolve().parents[2] / "examples" / "camera"
+    target = load_target(ex / "target.yaml")
+    # view_010 is view_000's pose rendered with a 4 px blur (robocal camera simulate --defects): on its ~20 px
+    # squares the blur estimate read 2.0 px before the contrast patch reached the squares' centres, and the view
+    # was refused only for the corner its refinement lost ("too_few_points: 53 < 54")
+    sharp = detect_target(read_image(ex / "images" / "view_000.jpg"), target)
+    blurred = detect_target(read_image(ex / "images" / "view_010.jpg"), target)
+    assert sharp.usable and sharp.blur_px == pytest.approx(1.03, abs=0.15)  # sqrt(0.7^2 + 0.8^2) = 1.06
+    assert blurred.issues and blurred.issues[0].startswith("blurred: ") and blurred.blur_px > 3.0
+    assert not any(i.startswith("too_few_points") for i in blurred.issues)  # 53 of 54 corners would serve

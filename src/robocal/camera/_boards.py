@@ -110,10 +110,12 @@ class ChessboardTarget:
     def n_points(self) -> int:
         return self.rows * self.cols
 
-    #: A chessboard is only detected whole.
     @property
     def min_points(self) -> int:
-        return self.n_points
+        """A chessboard is found only whole, but a corner whose sub-pixel refinement wandered is dropped
+        (and noted); the rest of the view serves as a partial ChArUco view does: at least 6, or all of a
+        smaller board."""
+        return min(6, self.n_points)
 
     def object_points(self, ids=None) -> np.ndarray:
         """Corners ``ids`` (default all, id = ``i * cols + j``) in the board frame, (N, 3) [m], z = 0."""
