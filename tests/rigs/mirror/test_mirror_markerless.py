@@ -120,7 +120,7 @@ def test_parallel_mirror_normals_are_named():
 
 def test_mixed_poses_with_and_without_markers_in_one_problem():
     from robocal.rigs.mirror.calibrate import calibrate
-    from robocal.rigs.mirror.markerless import calibrate_mixed
+    from robocal.rigs.mirror.mixed import calibrate_mixed
     from robocal.rigs.mirror.model import MirrorScene
     from robocal.rigs.mirror.simulate import simulate_observations
     from robocal.rigs.mirror.workflow import markerless_setup

@@ -91,12 +91,13 @@ from robocal.geometry import (
     so3_left_jacobian,
     transform_from,
 )
+from robocal.rigs.mirror.conditioning import conditioning
 from robocal.rigs.mirror.model import F_X, ri_from_r_points
 from robocal.validation import check_array
 
 __all__ = ["MarkerlessObservation", "MarkerlessCalibration", "calibrate_markerless", "closed_form",
            "virtual_pose_candidates", "markerless_residuals", "conditioning", "simulate_markerless",
-           "calibrate_mixed", "MixedCalibration", "MIN_POSES", "MIN_POINTS", "PARALLEL_NORMALS_DEG"]
+           "MIN_POSES", "MIN_POINTS", "PARALLEL_NORMALS_DEG"]
 
 #: The problem's minimum: 3 mirror poses (two give one rotation axis, no normal) and 3 points per pose (P3P).
 MIN_POSES = 3
@@ -379,63 +380,6 @@ def _problem(camera, P, observations, T_r_c0, n0, d0, sigma_px):
     return prob, answer, B
 
 
-# ------------------------------------------------------------------ conditioning
-_CAMERA_AXES = {"x_c (the camera's right)": [1, 0, 0], "y_c (the camera's down)": [0, 1, 0],
-                "z_c (the camera's optical axis)": [0, 0, 1]}
-_ROBOT_AXES = {"x_r (forward)": [1, 0, 0], "y_r (left)": [0, 1, 0], "z_r (up)": [0, 0, 1]}
-
-
-def _named(v, axes: dict, frame: str) -> str:
-    v = np.asarray(v, dtype=float) / np.linalg.norm(v)
-    best = max(axes, key=lambda a: abs(v @ axes[a]))
-    if abs(v @ axes[best]) >= np.cos(np.radians(25.0)):
-        return best
-    return f"[{v[0]:+.2f}, {v[1]:+.2f}, {v[2]:+.2f}] in {frame}"
-
-
-def conditioning(cov, T_r_c, lsq: LSQResult | None = None) -> dict:
-    """The pose's weakest directions in words, from its 6 x 6 covariance (rotvec left [rad], t [m]).
-
-    Returns ``{"condition_number", "rotation_text", "translation_text",
-    "weakest_parameters", "text"}``: e.g. "rotation about z_c (the camera's
-    optical axis) is determined to 6.1 deg (1 sigma)". The rotation's axis
-    is the covariance's principal direction, in the camera frame (a left,
-    robot-side rotation vector ``w`` is ``R_rc^T w`` there); the translation's
-    in the robot frame. With ``lsq``: its condition number (column-scaled
-    Jacobian) and the parameters that dominate the smallest singular
-    direction of the whole problem (planes included).
-    """
-    cov = np.asarray(cov, dtype=float)
-    R_rc = np.asarray(T_r_c, dtype=float)[:3, :3]
-    out: dict = {}
-    if np.all(np.isfinite(cov)):
-        w, V = np.linalg.eigh(cov[:3, :3])
-        axis_c = R_rc.T @ V[:, -1]
-        out["rotation_text"] = (f"rotation about {_named(axis_c, _CAMERA_AXES, 'the camera frame')} is determined "
-                                f"to {np.degrees(np.sqrt(max(w[-1], 0))):.2g} deg (1 sigma; best axis "
-                                f"{np.degrees(np.sqrt(max(w[0], 0))):.2g} deg)")
-        w, V = np.linalg.eigh(cov[3:, 3:])
-        out["translation_text"] = (f"position along {_named(V[:, -1], _ROBOT_AXES, 'the robot frame')} is "
-                                   f"determined to {np.sqrt(max(w[-1], 0)) * 1e3:.3g} mm (best direction "
-                                   f"{np.sqrt(max(w[0], 0)) * 1e3:.3g} mm)")
-    else:
-        out["rotation_text"] = out["translation_text"] = "not determined (singular covariance)"
-    text = f"{out['rotation_text']}; {out['translation_text']}"
-    if lsq is not None:
-        out["condition_number"] = float(lsq.condition_number)
-        J = lsq.jac.toarray() if hasattr(lsq.jac, "toarray") else np.asarray(lsq.jac) if lsq.jac is not None else None
-        if J is not None and J.size:
-            Js = J / np.where(np.linalg.norm(J, axis=0) > 0, np.linalg.norm(J, axis=0), 1.0)
-            v = np.linalg.svd(Js)[2][-1]
-            top = np.argsort(-np.abs(v))[:3]
-            out["weakest_parameters"] = [[lsq.free_labels[i], float(v[i])] for i in top]
-            names = ", ".join(f"{lsq.free_labels[i]} ({v[i]:+.2f})" for i in top if abs(v[i]) > 0.2)
-            text += (f"; condition number {lsq.condition_number:.3g} (column-scaled Jacobian), weakest "
-                     f"combination mostly {names}")
-    out["text"] = text
-    return out
-
-
 # ------------------------------------------------------------------ the API
 def _check_inputs(P, observations):
     if P.ndim != 2 or P.shape[1] != 3:
@@ -667,110 +611,3 @@ def simulate_markerless(camera: CameraModel, T_c_r, points_r, normals, distances
         out.append(MarkerlessObservation(uv[ids] + rng.normal(scale=sigma_px, size=(ids.size, 2)), ids,
                                          f"mirror pose {j}"))
     return out
-
-
-# ------------------------------------------------------------------ mixed data
-@dataclass
-class MixedCalibration:
-    """Result of :func:`calibrate_mixed`: ``T_r_c`` (4, 4) [m] and its ``cov`` (6, 6) (rotvec left [rad], t [m]),
-    the marker poses ``T_c_m`` (K_m, 4, 4), the markerless planes ``normals`` (K_n, 3) / ``distances`` (K_n,),
-    the solver's ``lsq``, ``conditioning`` (:func:`conditioning`) and ``warnings``."""
-
-    T_r_c: np.ndarray
-    cov: np.ndarray
-    T_c_m: np.ndarray
-    normals: np.ndarray
-    distances: np.ndarray
-    lsq: LSQResult
-    conditioning: dict
-    warnings: list
-    observations: list = field(default_factory=list)  # the markerless poses
-    marker_observations: list = field(default_factory=list)
-    points_r: np.ndarray | None = None
-    camera: CameraModel | None = None
-    #: the start: the marker path's estimate (or the markerless closed form without marker poses)
-    T_r_c_closed_form: np.ndarray | None = None
-    plane_std: np.ndarray | None = None
-    minima: list = field(default_factory=list)
-    n_combinations: int = 1
-    dropped: list = field(default_factory=list)
-
-    @property
-    def std_rotation(self) -> np.ndarray:
-        return np.sqrt(np.diag(self.cov)[:3])
-
-    @property
-    def std_translation(self) -> np.ndarray:
-        return np.sqrt(np.diag(self.cov)[3:])
-
-    def residuals(self) -> list:
-        """Reprojection residuals [px] of the markerless poses' reflections, projected - observed."""
-        return markerless_residuals(self.camera, self.points_r, self.observations, self.T_r_c, self.normals,
-                                    self.distances)
-
-
-def _plane_given_pose(T_c_ri_candidates, T_r_c) -> tuple[np.ndarray, float]:
-    """The plane ``(n, d)`` that makes one of a pose's virtual poses consistent with ``T_r_c`` (the candidate
-    whose ``R_cri F R_cr^T`` is closest to a reflection)."""
-    R_cr = T_r_c[:3, :3].T
-    t_cr = -R_cr @ T_r_c[:3, 3]
-    T = min(T_c_ri_candidates, key=lambda c: _reflection_defect(c[:3, :3], R_cr))
-    M = T[:3, :3] @ F_X @ R_cr.T
-    w, V = np.linalg.eigh(0.5 * (M + M.T))
-    n = V[:, 0]  # H = I - 2 n n^T: eigenvalue -1 along n
-    d = 0.5 * float(n @ (T[:3, 3] - (np.eye(3) - 2.0 * np.outer(n, n)) @ t_cr))
-    return (n, d) if d > 0 else (-n, -d)
-
-
-def calibrate_mixed(camera: CameraModel, rectangle, points_r, marker_observations, markerless_observations, *,
-                    sigma_px: float | None = None, accept_implausible: bool = False) -> MixedCalibration:
-    """Mirror poses with markers (the patent's, :mod:`.joint`) and without (this module) in one joint problem.
-
-    ``points_r`` (N, 3) [m] are both the marker path's body points and the
-    markerless reference points (``MirrorObservation.body_ids`` and
-    ``MarkerlessObservation.ids`` index them). Unknowns: ``T_r_c``, each
-    marker pose ``T_c_m`` (6 parameters, :func:`~robocal.rigs.mirror.joint.residual_model`'s
-    residuals on markers and reflections) and each markerless plane (3
-    parameters, this module's residuals); the blocks ``rot_rc``, ``t_rc`` are
-    shared. Start: the marker path's estimate (:func:`~robocal.rigs.mirror.calibrate.calibrate`)
-    when there are marker poses, each markerless plane then from its
-    virtual pose given that ``T_r_c``; else :func:`calibrate_markerless`.
-    """
-    from robocal.rigs.mirror.calibrate import calibrate
-    from robocal.rigs.mirror.joint import _labels, _layout, residual_model
-
-    P = check_array(points_r, "body_points")
-    mk, ml = list(marker_observations), list(markerless_observations)
-    if not mk:
-        c = calibrate_markerless(camera, P, ml, sigma_px=sigma_px, accept_implausible=accept_implausible)
-        T0, n0, d0, T_c_m0, warnings = c.T_r_c, c.normals, c.distances, np.zeros((0, 4, 4)), list(c.warnings)
-    else:
-        c = calibrate(camera, rectangle, P, mk, sigma_px=sigma_px, accept_implausible=accept_implausible)
-        T0, T_c_m0, warnings = c.T_r_c, c.T_c_m, list(c.warnings)
-        planes = []
-        for o in ml:
-            if len(o.ids) < MIN_POINTS:
-                raise NotEnoughDataError(f"{o.name}: needs >= {MIN_POINTS} points, got {len(o.ids)}")
-            planes.append(_plane_given_pose(virtual_pose_candidates(camera, P, o), T0))
-        n0 = np.array([p[0] for p in planes]).reshape(-1, 3)
-        d0 = np.array([p[1] for p in planes])
-    if not ml:
-        raise NotEnoughDataError("markerless_observations: none given; use robocal.rigs.mirror.calibrate")
-    prob, answer, _ = _problem(camera, P, ml, T0, n0, d0, sigma_px)
-    sig = None if sigma_px is None else float(sigma_px)
-    if mk:
-        layout = _layout(mk, P, rectangle)
-        markers, body, mjac, bjac, poses = residual_model(camera, rectangle, layout, T0[:3, :3], T_c_m0[:, :3, :3])
-        lab = _labels(layout.K)
-        prob.add_block("rot_cm", np.zeros((layout.K, 3)), labels=lab["rot_cm"], unit="rad", scale=1e-3)
-        prob.add_block("t_cm", T_c_m0[:, :3, 3], labels=lab["t_cm"], unit="m", scale=1e-3)
-        # the joint model's rot_rc / t_rc are this problem's (same left perturbation of the same R_rc0)
-        prob.add_residuals(markers, name="markers", jacobian=mjac, residual_dim=2, sigma=sig)
-        prob.add_residuals(body, name="body", jacobian=bjac, residual_dim=2, sigma=sig)
-    res = solve(prob, method="lm", absolute_sigma=sigma_px is not None)
-    T, n, d = answer(res.params)
-    n, d = n * np.sign(d)[:, None], np.abs(d)
-    T_c_m = poses(res.params)[1] if mk else np.zeros((0, 4, 4))
-    cov = res.cov[:6, :6]
-    warnings.extend(res.warnings)
-    return MixedCalibration(T, cov, T_c_m, n, d, res, conditioning(cov, T, res), warnings, ml, mk, P, camera, T0)

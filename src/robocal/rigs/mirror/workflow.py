@@ -201,7 +201,7 @@ def calibrate_input(inp: MirrorInput, *, out_dir=None, progress: bool = False, a
                                    declared=inp.declared, progress=progress)
         return MirrorRun(cal, Path(out_dir) if out_dir is not None else Path.cwd())
     if inp.markerless_poses:  # mixed data: poses with markers and without, one joint problem
-        from robocal.rigs.mirror.markerless import calibrate_mixed
+        from robocal.rigs.mirror.mixed import calibrate_mixed
 
         cal = calibrate_mixed(inp.camera, inp.rectangle, inp.body_points_r, inp.observations, inp.markerless_poses,
                               sigma_px=inp.sigma_px, accept_implausible=accept_implausible)
