@@ -246,3 +246,35 @@ def test_apriltag_grid_session_uses_every_view(tmp_path, capsys):
     assert "6 of 6 image(s) used" in out, out
     # (no truth check: marker corners are ~5x noisier than saddle points and correlated within a marker, so the
     # std is optimistic on grids; docs/rigs/camera.md, "Limits")
+
+
+@pytest.mark.parametrize("fmt", ["rosbag1", "rosbag2", "mcap"])
+def test_calibrates_from_a_recording_of_each_format(fmt, tmp_path, capsys):
+    from robocal.bags import simulate_recording
+
+    bag = tmp_path / ("run.bag" if fmt == "rosbag1" else "run")
+    truth = simulate_recording(bag, format=fmt, duration=2.0, image_rate=5.0, image_size=(320, 240),
+                               encodings=("mono8", "png"), rng=np.random.default_rng(3))
+    target = tmp_path / "board.yaml"
+    target.write_text("type: chessboard\nrows: 5\ncols: 7\nsquare: {value: 30, unit: mm}\n")
+    out = tmp_path / "cal"
+    code, stdout, err = _run(["camera", "calibrate", "--bag", bag, "--topic", "/camera/image_raw/compressed",
+                              "--target", target, "--out", out], capsys)
+    assert code == 0, err
+    res = load_result(out / "result.json")
+    names = list(res.diagnostics["views"])
+    assert names and all(n.startswith("/camera/image_raw/compressed@") for n in names)
+    # the simulated camera: within 5 std of the truth (rendered views, 10 frames of a 7x5 board)
+    for k in ("fx", "fy", "cx", "cy"):
+        assert abs(res.estimate[k] - getattr(truth.camera, k)) < 5 * res.std[k], (k, res.estimate[k], res.std[k])
+    if bag.is_file():  # a ROS 1 bag is one file: its hash is recorded (a ROS 2 bag is a folder)
+        assert str(bag) in res.inputs
+    # --every: half the frames; a typo in the topic: one line with the closest names
+    code, stdout, err = _run(["camera", "calibrate", "--bag", bag, "--topic", "/camera/image_raw", "--every", "2",
+                              "--target", target, "--out", tmp_path / "cal2"], capsys)
+    assert code == 0, err
+    assert len(load_result(tmp_path / "cal2" / "result.json").diagnostics["views"]) <= (len(names) + 1) // 2 + 1
+    code, _, err = _run(["camera", "calibrate", "--bag", bag, "--topic", "/camera/imag_raw", "--target", target,
+                         "--out", tmp_path / "cal3"], capsys)
+    err = _one_line_error(code, err)
+    assert "/camera/image_raw" in err

@@ -82,12 +82,23 @@ RIG = Workflow(
     calibrate_examples=("robocal camera calibrate cam-sim/camera_input.yaml --out cam-cal",
                         f"robocal camera calibrate {EXAMPLES}/images --target {EXAMPLES}/target.yaml --out cam-cal",
                         "robocal camera calibrate shots/ --target board.yaml --model opencv8 --fix k6 --out cam-cal",
-                        "robocal camera calibrate 'fish/*.png' --target board.yaml --model fisheye --out cam-cal"),
-    input_arguments=(Option("images", nargs="+", type=Path,
-                            help="image files, folders or glob patterns (quoted), or one session file (YAML)"),),
+                        "robocal camera calibrate 'fish/*.png' --target board.yaml --model fisheye --out cam-cal",
+                        "robocal camera calibrate --bag run.bag --topic /camera/image_raw --every 10 "
+                        "--target board.yaml --out cam-cal"),
+    input_arguments=(Option("images", nargs="*", type=Path,
+                            help="image files, folders or glob patterns (quoted), or one session file (YAML); "
+                                 "none with --bag"),),
     calibrate_options=(
         Option("--target", type=Path, default=None, to="load_input",
                help="the target file (YAML/JSON); a session file names its own"),
+        Option("--bag", type=Path, default=None, to="load_input",
+               help="a ROS 1 .bag, ROS 2 bag folder / .db3 or .mcap recording to take the images from "
+                    "(with --topic; no ROS install needed)"),
+        Option("--topic", default=None, to="load_input",
+               help="the recording's image topic (sensor_msgs/Image or CompressedImage); "
+                    "'robocal bag inspect FILE' lists them"),
+        Option("--every", type=number_at_least(int, 1), default=1, to="load_input",
+               help="take every N-th frame of the topic (video frames a few ms apart are near-duplicates)"),
         Option("--model", choices=MODELS, default="opencv5",
                help="opencv5: k1 k2 p1 p2 k3 (default); opencv4: k3 = 0; opencv8: + rational k4 k5 k6; "
                     "opencv12: + thin prism s1..s4; fisheye: equidistant k1..k4 (cv2.fisheye)"),

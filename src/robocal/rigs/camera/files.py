@@ -5,6 +5,7 @@ Two ways in, one :class:`CameraInput`::
     robocal camera calibrate shots/ --target board.yaml          # a folder of images
     robocal camera calibrate 'shots/*.png' --target board.yaml    # a glob (quoted: robocal expands it)
     robocal camera calibrate camera_input.yaml                    # a session file
+    robocal camera calibrate --bag run.bag --topic /cam/image_raw --target board.yaml   # a recording
 
 Session file (YAML/JSON, schema ``robocal.camera_input/1``; paths relative to
 the file)::
@@ -51,7 +52,7 @@ class CameraInput:
     detections : DetectionSet
         The target found in the images (usable and rejected views, notes).
     source : Path or None
-        The session file, when one was given.
+        The session file or the recording (``--bag``), when one was given.
     target_file : Path or None
         The target file, when the target came from one.
     truth : CameraModel or None
@@ -152,24 +153,59 @@ def _session(path: Path):
     return images, target, target_file, target_source, truth, truth_file
 
 
+def _bag_frames(bag, topic, every: int, progress: bool) -> list:
+    """``(name, image)`` of every ``every``-th frame of ``topic`` in the recording ``bag`` (names ``topic@stamp``)."""
+    from robocal.bags import images
+
+    if topic is None:
+        raise InputError("give the image topic with --topic (robocal bag inspect FILE lists the recording's "
+                         "topics)", source="--topic")
+    # frames are decoded one at a time; the ones skipped cost their decoding only (a raw image is a reshape)
+    frames = [f for k, f in enumerate(images(bag, topic, show_progress=progress)) if k % every == 0]
+    if not frames:
+        raise InputError(f"topic {topic} holds no images", source=str(bag))
+    return frames
+
+
 def load_input(*paths, target=None, blur_limit: float | None = None, duplicate_limit: float | None = None,
-               progress: bool = True, **_) -> CameraInput:
-    """Read the images (or a session file) and detect the target in each.
+               bag=None, topic: str | None = None, every: int = 1, progress: bool = True, **_) -> CameraInput:
+    """Read the images (or a session file, or a recording's image topic) and detect the target in each.
 
     Parameters
     ----------
     *paths : path or str
         Image files, folders, glob patterns; or one session file (module docstring).
     target : path, optional
-        The target file (required with images; a session file names its own).
+        The target file (required with images and recordings; a session file names its own).
     blur_limit, duplicate_limit : float, optional
         Thresholds of :func:`robocal.camera.detect_targets` [px] (default its own).
+    bag, topic, every : optional
+        A ROS 1 / ROS 2 / MCAP recording (:mod:`robocal.bags`), its image topic
+        (``sensor_msgs/Image`` or ``CompressedImage``) and the frame step (every
+        ``every``-th frame: consecutive video frames are near-duplicates). Views
+        are named ``topic@stamp``.
     """
-    from robocal.camera import BLUR_LIMIT_PX, DUPLICATE_LIMIT_PX, detect_targets, load_target
+    from robocal.camera import load_target
 
-    if not paths:
-        raise InputError("no images given")
     source = truth = truth_file = None
+    if bag is not None:
+        if paths:
+            raise InputError(f"give images or --bag, not both ({len(paths)} image argument(s) with --bag)",
+                             source="--bag")
+        if int(every) < 1:
+            raise InputError(f"must be >= 1, got {every}", source="--every")
+        if target is None:
+            raise InputError("give the target file with --target TARGET.yaml (see docs/rigs/camera.md)",
+                             source="--target")
+        source = Path(bag)
+        tgt, target_file = load_target(target), Path(target)
+        frames = _bag_frames(source, topic, int(every), progress)
+        images = [name for name, _ in frames]
+        return _detected(images, frames, tgt, str(target_file), target_file, source, None, None, blur_limit,
+                         duplicate_limit, progress)
+    if not paths:
+        raise InputError("no images given: give image files, folders or globs with --target, a session file, or "
+                         "--bag FILE --topic TOPIC --target TARGET.yaml")
     first = Path(paths[0])
     if len(paths) == 1 and first.suffix.lower() in _SESSION_SUFFIXES and first.is_file():
         source = first
@@ -186,8 +222,17 @@ def load_input(*paths, target=None, blur_limit: float | None = None, duplicate_l
         if not target_file.is_file():
             raise InputError(f"target file {target_file} does not exist", source="--target")
         tgt, target_source = load_target(target_file), str(target_file)
+    return _detected(images, images, tgt, target_source, target_file, source, truth, truth_file, blur_limit,
+                     duplicate_limit, progress)
+
+
+def _detected(images, frames, tgt, target_source, target_file, source, truth, truth_file, blur_limit,
+              duplicate_limit, progress) -> CameraInput:
+    """The :class:`CameraInput` of ``frames`` (paths or ``(name, array)`` pairs) with the target detected."""
+    from robocal.camera import BLUR_LIMIT_PX, DUPLICATE_LIMIT_PX, detect_targets
+
     try:
-        dets = detect_targets(images, tgt, progress_desc="detect" if progress else None,
+        dets = detect_targets(frames, tgt, progress_desc="detect" if progress else None,
                               blur_limit=BLUR_LIMIT_PX if blur_limit is None else float(blur_limit),
                               duplicate_limit=DUPLICATE_LIMIT_PX if duplicate_limit is None else float(duplicate_limit))
     except RobocalError as exc:

@@ -152,6 +152,9 @@ def calibrate_input(inp, *, out_dir=None, progress: bool = False, accept_implaus
 
 
 def _rel(path, base: Path) -> str:
+    """An image file's path relative to ``base``; a name that is no file (a recording's ``topic@stamp``) as is."""
+    if not Path(path).is_file():
+        return str(path)
     try:
         return Path(os.path.relpath(Path(path).resolve(), Path(base).resolve())).as_posix()
     except ValueError:  # another drive (Windows)
@@ -216,7 +219,8 @@ def to_result(run: CameraRun, inp) -> CalibrationResult:
     }
     if inp.truth is not None:
         diag.update(_truth_record(cal, inp.truth))
-    inputs = hash_inputs([p for p in (inp.source, inp.target_file, inp.truth_file) if p is not None] + list(inp.images))
+    inputs = hash_inputs([p for p in (inp.source, inp.target_file, inp.truth_file) if p is not None]
+                         + [p for p in inp.images if Path(p).is_file()])
     return CalibrationResult(
         rig="camera", method=f"joint least squares over intrinsics ({cal.model}) and view poses, started from "
                              "cv2.calibrateCamera",
