@@ -145,6 +145,20 @@ def _detect_charuco(img, target: CharucoTarget):
             fine = cv2.cornerSubPix(smooth, start, (int(h), int(h)), (-1, -1), crit).reshape(-1, 2).astype(float)
             moved = np.linalg.norm(fine - uv[sel], axis=1) < 0.5 * gap[sel]
             uv[sel] = np.where(moved[:, None], fine, uv[sel])
+    # Where the gap is narrow, OpenCV's own corner is kept, but OpenCV < 4.11 refined it with a fixed window
+    # that reaches the markers (a steep view: 0.69 px RMS on 4.10, 0.19 on 4.14): a window inside the gap,
+    # on the unsmoothed image, gives 4.10 what 4.11+ does.
+    narrow = ~todo & np.isfinite(gap) & (gap >= 1.5)
+    if narrow.any() and tuple(int(v) for v in cv2.__version__.split(".")[:2]) < (4, 11):
+        grey = img.astype(np.float32)
+        crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 50, 1e-4)
+        half = np.maximum(np.floor(0.8 * np.where(narrow, gap, 0.0)), 1).astype(int)
+        for h in np.unique(half[narrow]):
+            sel = narrow & (half == h)
+            start = uv[sel].astype(np.float32).reshape(-1, 1, 2)
+            fine = cv2.cornerSubPix(grey, start, (int(h), int(h)), (-1, -1), crit).reshape(-1, 2).astype(float)
+            moved = np.linalg.norm(fine - uv[sel], axis=1) < 0.5 * gap[sel]
+            uv[sel] = np.where(moved[:, None], fine, uv[sel])
     return ids, uv, "charuco", []
 
 
