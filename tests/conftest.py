@@ -16,9 +16,22 @@ from a seed of its own per test, so the examples are the same in any order.
 """
 
 import os
+from pathlib import Path
 
+import pytest
 from hypothesis import settings
 
 settings.register_profile("repeatable", derandomize=True, print_blob=True)
 settings.register_profile("explore", derandomize=False, print_blob=True)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "repeatable"))
+
+
+#: node ids marked `slow` from tests/heavy_tests.txt (see its header)
+_HEAVY = {line.strip() for line in (Path(__file__).parent / "heavy_tests.txt").read_text(encoding="utf-8").splitlines()
+          if line.strip() and not line.startswith("#")}
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.nodeid in _HEAVY:
+            item.add_marker(pytest.mark.slow)
