@@ -1,7 +1,6 @@
 """The ``robocal handeye`` commands on the example pose lists, their errors, simulate -> calibrate."""
 
 import json
-import re
 from pathlib import Path
 
 import numpy as np
@@ -11,30 +10,9 @@ from robocal.estimation import truth_check
 from robocal.geometry import PoseWithCovariance
 from robocal.handeye.cli import HANDEYE
 from robocal.io import load_result
+from report_pages import bare_matrices, rebuilt_equal
 
 EX = Path(__file__).resolve().parents[2] / "examples" / "lineprofiler"
-
-
-def _page(path: Path) -> str:
-    # the one line that differs between two builds of a report: when it was made
-    return re.sub(r"<p class='meta'>.*?</p>", "", path.read_text())
-
-
-def _rebuilt_equal(cal: Path, out: Path, rig: str, capsys) -> str:
-    """``robocal <rig> report`` and ``robocal report`` rebuild the page ``calibrate`` wrote; returns it."""
-    first = _page(cal / "report.html")
-    assert main([rig, "report", str(cal / "result.json"), "--out", str(out / "rig")]) == 0
-    assert main(["report", str(cal / "result.json"), "--out", str(out / "any")]) == 0
-    capsys.readouterr()
-    assert _page(out / "rig" / "report.html") == first
-    assert _page(out / "any" / "report.html") == first
-    return first
-
-
-def _bare_matrices(result) -> list[str]:
-    """Estimate keys holding a 3x3 / 4x4 matrix that is not a pose's rotation (the vocabulary forbids them)."""
-    return [k for k, v in result.estimate.items() if np.shape(v) in ((3, 3), (4, 4))
-            and not (k.endswith(".rotation") and k[: -len(".rotation")] in result.poses)]
 
 
 def test_declared_by_the_core():
@@ -49,11 +27,11 @@ def test_handeye_example(tmp_path, capsys):
     res = json.loads((cal / "result.json").read_text())
     assert np.allclose(res["estimate"]["T_gripper_cam.translation"], [0.035, 0.06, 0.12], atol=2e-3)
     result = load_result(cal / "result.json")
-    assert list(result.poses) == ["T_gripper_cam", "T_base_target"] and _bare_matrices(result) == []
+    assert list(result.poses) == ["T_gripper_cam", "T_base_target"] and bare_matrices(result) == []
     # the fixed target is estimated with X by the refinement: it has a std too
     assert all(0 < v < 1e-2 for v in res["std"]["T_base_target.translation"])
     assert len(res["diagnostics"]["closure_residuals"]["rotation_rad"]) == 16
-    page = _rebuilt_equal(cal, tmp_path / "rep", "handeye", capsys)
+    page = rebuilt_equal(cal, tmp_path / "rep", "handeye", capsys)
     assert "Closed-form solvers compared" in page and all(m in page for m in ("tsai", "horaud", "daniilidis"))
 
 
@@ -75,9 +53,9 @@ def test_handeye_robot_world_example(tmp_path, capsys):
     assert res["method"] == "robot-world shah+refine"
     result = load_result(rw / "result.json")
     assert set(result.poses) == {"T_target_base", "T_cam_gripper", "T_base_target", "T_gripper_cam"}
-    assert _bare_matrices(result) == []
+    assert bare_matrices(result) == []
     # 'robocal report' rebuilds a robot-world result through the handeye workflow as well
-    _rebuilt_equal(rw, tmp_path / "rep", "handeye", capsys)
+    rebuilt_equal(rw, tmp_path / "rep", "handeye", capsys)
     T = result.pose("T_gripper_cam").T
     assert np.allclose(T[:3, 3], [0.035, 0.06, 0.12], atol=2e-3)  # 0.2 mm / 1 mrad pose noise, 16 poses
     assert all(v is not None and 0 < v < 3e-3 for v in res["std"]["T_cam_gripper.translation"])

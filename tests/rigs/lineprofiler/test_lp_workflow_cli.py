@@ -1,7 +1,6 @@
 """The lineprofiler commands on the example files, their errors, the demo."""
 
 import json
-import re
 from pathlib import Path
 
 import numpy as np
@@ -13,30 +12,9 @@ from robocal.io import load_result
 from robocal.rigs.lineprofiler.calibrate import calibrate_file
 from robocal.rigs.lineprofiler.cli import RIG
 from robocal.workflow import DemoContext
+from report_pages import bare_matrices, rebuilt_equal
 
 EX = Path(__file__).resolve().parents[3] / "examples" / "lineprofiler"
-
-
-def _page(path: Path) -> str:
-    # the one line that differs between two builds of a report: when it was made
-    return re.sub(r"<p class='meta'>.*?</p>", "", path.read_text())
-
-
-def _rebuilt_equal(cal: Path, out: Path, rig: str, capsys) -> str:
-    """``robocal <rig> report`` and ``robocal report`` rebuild the page ``calibrate`` wrote; returns it."""
-    first = _page(cal / "report.html")
-    assert main([rig, "report", str(cal / "result.json"), "--out", str(out / "rig")]) == 0
-    assert main(["report", str(cal / "result.json"), "--out", str(out / "any")]) == 0
-    capsys.readouterr()
-    assert _page(out / "rig" / "report.html") == first
-    assert _page(out / "any" / "report.html") == first
-    return first
-
-
-def _bare_matrices(result) -> list[str]:
-    """Estimate keys holding a 3x3 / 4x4 matrix that is not a pose's rotation (the vocabulary forbids them)."""
-    return [k for k, v in result.estimate.items() if np.shape(v) in ((3, 3), (4, 4))
-            and not (k.endswith(".rotation") and k[: -len(".rotation")] in result.poses)]
 
 
 def test_calibrate_example_names_undetermined_component(tmp_path, capsys):
@@ -51,10 +29,10 @@ def test_calibrate_example_names_undetermined_component(tmp_path, capsys):
     assert any(w["code"] == "rank_deficient" for w in res["warnings"])
     assert abs(res["estimate"]["T_E_L.translation"][0] - 0.035) < 2e-4
     result = load_result(cal / "result.json")
-    assert list(result.poses) == ["T_E_L", "fpdp.T_E_L"] and _bare_matrices(result) == []
+    assert list(result.poses) == ["T_E_L", "fpdp.T_E_L"] and bare_matrices(result) == []
     assert result.poses["T_E_L"] == {"rotation_std": "left", "parent": "end effector E", "child": "laser L"}
     # the rebuilt report keeps the sections drawn from the fit (they were lost on 'report' before)
-    page = _rebuilt_equal(cal, tmp_path / "rep", "lineprofiler", capsys)
+    page = rebuilt_equal(cal, tmp_path / "rep", "lineprofiler", capsys)
     for title in ("Residuals", "FPDP circle cuts (seed Table 1)", "Solver (geometric refinement)",
                   "T_E_L rotation vector x"):
         assert title in page, title
@@ -100,11 +78,11 @@ def test_calibrate_mct_example(tmp_path, capsys):
     assert set(d["covariance"]["std_by_source"]) == {"tracker", "heights", "block scan", "P3 encoder"}
     result = load_result(tmp_path / "result.json")
     # the intermediate frames are poses too, derived: no std of their own
-    assert list(result.poses) == ["T_E_L", "T_T_L", "T_T_E", "T_T_B", "T_L_B"] and _bare_matrices(result) == []
+    assert list(result.poses) == ["T_E_L", "T_T_L", "T_T_E", "T_T_B", "T_L_B"] and bare_matrices(result) == []
     assert result.pose("T_T_L").std_rotation is None
     np.testing.assert_allclose(result.pose("T_T_E").T @ result.pose("T_E_L").T, result.pose("T_T_L").T,
                                atol=1e-12)  # eq. 5, X = T_T_E^-1 T_T_L: rounding only
-    page = _rebuilt_equal(tmp_path, tmp_path / "rep", "lineprofiler", capsys)
+    page = rebuilt_equal(tmp_path, tmp_path / "rep", "lineprofiler", capsys)
     assert "P3 encoder sigma per scan profile 5.0 um" in page and "block-scan fit residuals" in page
 
 
