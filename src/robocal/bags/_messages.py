@@ -25,23 +25,11 @@ JOINT_TYPES = ("sensor_msgs/msg/JointState",)
 CAMERA_INFO_TYPES = ("sensor_msgs/msg/CameraInfo",)
 
 
-@dataclass(frozen=True)
-class JointStates:
-    """Joint states of one topic: ``position`` (N, J) [rad or m], ``velocity``, ``effort`` (N, J) (NaN where absent).
+class _Stamped:
+    """Seconds views of a stream's ``stamps_ns`` (header) and ``receive_ns`` (log) [int ns], and its clock offset."""
 
-    ``stamps_ns`` / ``receive_ns`` (N,) int64: header stamps and receive times [ns].
-
-    ``names`` (J,) is the union of every message's names, in first-seen
-    order; a joint missing from a message is NaN there.
-    """
-
-    topic: str
-    names: tuple
     stamps_ns: np.ndarray
     receive_ns: np.ndarray
-    position: np.ndarray
-    velocity: np.ndarray
-    effort: np.ndarray
 
     @property
     def stamps(self) -> np.ndarray:
@@ -58,6 +46,25 @@ class JointStates:
         """Median receive time minus header stamp [s]: milliseconds on one clock; see ``inspect_recording``'s flags."""
         return float(np.median(self.receive_ns - self.stamps_ns)) / 1e9 if len(self.stamps_ns) else float("nan")
 
+
+@dataclass(frozen=True)
+class JointStates(_Stamped):
+    """Joint states of one topic: ``position`` (N, J) [rad or m], ``velocity``, ``effort`` (N, J) (NaN where absent).
+
+    ``stamps_ns`` / ``receive_ns`` (N,) int64: header stamps and receive times [ns].
+
+    ``names`` (J,) is the union of every message's names, in first-seen
+    order; a joint missing from a message is NaN there.
+    """
+
+    topic: str
+    names: tuple
+    stamps_ns: np.ndarray
+    receive_ns: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    effort: np.ndarray
+
     def __getitem__(self, name: str) -> np.ndarray:
         """Positions (N,) of joint ``name``."""
         if name not in self.names:
@@ -69,7 +76,7 @@ class JointStates:
 
 
 @dataclass(frozen=True)
-class TopicArrays:
+class TopicArrays(_Stamped):
     """One topic's messages as arrays: ``fields`` maps a name (``position``, ``T``, ``vector``, ...) to (N, ...)."""
 
     topic: str
@@ -78,21 +85,6 @@ class TopicArrays:
     stamps_ns: np.ndarray
     receive_ns: np.ndarray
     fields: dict = field(default_factory=dict)
-
-    @property
-    def stamps(self) -> np.ndarray:
-        """Header stamps [s] (``stamps_ns`` exact)."""
-        return seconds_from_ns(self.stamps_ns)
-
-    @property
-    def receive_stamps(self) -> np.ndarray:
-        """Receive (log) times [s]."""
-        return seconds_from_ns(self.receive_ns)
-
-    @property
-    def clock_offset(self) -> float:
-        """Median receive time minus header stamp [s]: milliseconds on one clock; see ``inspect_recording``'s flags."""
-        return float(np.median(self.receive_ns - self.stamps_ns)) / 1e9 if len(self.stamps_ns) else float("nan")
 
     def __getitem__(self, name: str) -> np.ndarray:
         if name not in self.fields:

@@ -135,8 +135,26 @@ class MarkerlessObservation:
         return {"name": self.name, "uv": self.uv.tolist(), "ids": self.ids.tolist()}
 
 
+class _MarkerlessAnswer:
+    """What :class:`MarkerlessCalibration` and :class:`~robocal.rigs.mirror.mixed.MixedCalibration` derive from
+    their ``cov`` (6, 6) (rotvec left [rad], t [m]) and their markerless poses."""
+
+    @property
+    def std_rotation(self) -> np.ndarray:
+        return np.sqrt(np.diag(self.cov)[:3])
+
+    @property
+    def std_translation(self) -> np.ndarray:
+        return np.sqrt(np.diag(self.cov)[3:])
+
+    def residuals(self) -> list:
+        """Reprojection residuals [px] of the markerless poses' reflections, projected - observed."""
+        return markerless_residuals(self.camera, self.points_r, self.observations, self.T_r_c, self.normals,
+                                    self.distances)
+
+
 @dataclass
-class MarkerlessCalibration:
+class MarkerlessCalibration(_MarkerlessAnswer):
     """Result of :func:`calibrate_markerless`.
 
     ``T_r_c`` (4, 4) [m] the answer (camera in the robot frame); ``cov`` (6, 6)
@@ -170,19 +188,6 @@ class MarkerlessCalibration:
     camera: CameraModel
     dropped: list = field(default_factory=list)
     n_combinations: int = 1
-
-    @property
-    def std_rotation(self) -> np.ndarray:
-        return np.sqrt(np.diag(self.cov)[:3])
-
-    @property
-    def std_translation(self) -> np.ndarray:
-        return np.sqrt(np.diag(self.cov)[3:])
-
-    def residuals(self) -> list:
-        """Reprojection residuals [px] per pose, projected - observed."""
-        return markerless_residuals(self.camera, self.points_r, self.observations, self.T_r_c, self.normals,
-                                    self.distances)
 
 
 def _project_virtual(camera, P_r, T_r_c, n, d):

@@ -14,8 +14,8 @@ import numpy as np
 from robocal.camera import CameraModel
 from robocal.errors import NotEnoughDataError
 from robocal.estimation import LSQResult, solve
-from robocal.rigs.mirror.markerless import (MIN_POINTS, _problem, _reflection_defect, calibrate_markerless,
-                                            conditioning, markerless_residuals, virtual_pose_candidates)
+from robocal.rigs.mirror.markerless import (MIN_POINTS, _MarkerlessAnswer, _problem, _reflection_defect,
+                                            calibrate_markerless, conditioning, virtual_pose_candidates)
 from robocal.rigs.mirror.model import F_X
 from robocal.validation import check_array
 
@@ -23,7 +23,7 @@ __all__ = ["MixedCalibration", "calibrate_mixed"]
 
 
 @dataclass
-class MixedCalibration:
+class MixedCalibration(_MarkerlessAnswer):
     """Result of :func:`calibrate_mixed`: ``T_r_c`` (4, 4) [m] and its ``cov`` (6, 6) (rotvec left [rad], t [m]),
     the marker poses ``T_c_m`` (K_m, 4, 4), the markerless planes ``normals`` (K_n, 3) / ``distances`` (K_n,),
     the solver's ``lsq``, ``conditioning`` (:func:`conditioning`) and ``warnings``."""
@@ -46,19 +46,6 @@ class MixedCalibration:
     minima: list = field(default_factory=list)
     n_combinations: int = 1
     dropped: list = field(default_factory=list)
-
-    @property
-    def std_rotation(self) -> np.ndarray:
-        return np.sqrt(np.diag(self.cov)[:3])
-
-    @property
-    def std_translation(self) -> np.ndarray:
-        return np.sqrt(np.diag(self.cov)[3:])
-
-    def residuals(self) -> list:
-        """Reprojection residuals [px] of the markerless poses' reflections, projected - observed."""
-        return markerless_residuals(self.camera, self.points_r, self.observations, self.T_r_c, self.normals,
-                                    self.distances)
 
 
 def _plane_given_pose(T_c_ri_candidates, T_r_c) -> tuple[np.ndarray, float]:
