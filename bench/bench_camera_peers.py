@@ -342,10 +342,41 @@ def summary(rob, same, recipe, mr, mr0, diff_std):
           f"; robocal's detection / the OpenCV recipe's {np.median(rob.t_det) / np.median(recipe.t_det):.2f}x\n")
 
 
+def robocal_and_same_corners(cam, target, poses, imgs, size, grid, rob, same, diff_std):
+    """(a) robocal's detection + calibration and (b) cv2.calibrateCamera on its corners, recorded into ``rob``,
+    ``same`` and ``diff_std``; returns the views, robocal's calibration and cv2's ``(K, dist, rvecs, tvecs)``."""
+    import cv2
+
+    from robocal.camera import calibrate_intrinsics, detect_targets, projection_uncertainty
+
+    t0 = time.process_time()
+    ds = detect_targets(imgs, target)
+    t1 = time.process_time()
+    views = ds.target_views()
+    cal = calibrate_intrinsics(views, size)
+    t2 = time.process_time()
+    rob.t_det.append(t1 - t0)
+    rob.views.append(len(views))
+    rob.corner.append(np.concatenate([corner_errors(cam, target, poses[int(d.name.split()[-1])], d.ids,
+                                                    d.image_points) for d in ds.views]))
+    pu = projection_uncertainty(cal, grid_step_px=Grid.STEP, compensate_rotation=False)
+    pa = projection_uncertainty(cal, grid_step_px=Grid.STEP)
+    rob.add(grid, cal.camera, cal.rms * np.sqrt(2), t2 - t1, pred_cov=pu.cov[np.isfinite(pu.std)],
+            pred_cov_aligned=pa.cov[np.isfinite(pa.std)])
+    obj = [v.object_points.astype(np.float32) for v in views]
+    img = [v.image_points.astype(np.float32) for v in views]
+    t0 = time.process_time()
+    r_cv, K, dist, rv, tv = cv2.calibrateCamera(obj, img, size, None, None)
+    same.add(grid, cam_from(K, dist, size), r_cv, time.process_time() - t0)
+    diff_std.append(np.abs(cal.values - np.r_[K[0, 0], K[1, 1], K[0, 2], K[1, 2], np.ravel(dist)[:5]])
+                    / cal.std_array)
+    return views, cal, (K, dist, rv, tv)
+
+
 def chessboard_datasets(args, size):
     import cv2
 
-    from robocal.camera import (ChessboardTarget, calibrate_intrinsics, detect_targets, projection_uncertainty)
+    from robocal.camera import ChessboardTarget
 
     cam = camera(size)
     target = ChessboardTarget(6, 9, 0.025)
@@ -362,30 +393,10 @@ def chessboard_datasets(args, size):
         t0 = time.perf_counter()
         imgs = render(cam, target, poses, rng)
         t_render += time.perf_counter() - t0
-        # (a)
-        t0 = time.process_time()
-        ds = detect_targets(imgs, target)
-        t1 = time.process_time()
-        views = ds.target_views()
-        cal = calibrate_intrinsics(views, size)
+        # (a) and (b)
+        views, cal, (K, dist, rv, tv) = robocal_and_same_corners(cam, target, poses, imgs, size, grid, rob, same,
+                                                                 diff_std)
         n_out += len(cal.outliers)
-        t2 = time.process_time()
-        rob.t_det.append(t1 - t0)
-        rob.views.append(len(views))
-        rob.corner.append(np.concatenate([corner_errors(cam, target, poses[int(d.name.split()[-1])], d.ids,
-                                                        d.image_points) for d in ds.views]))
-        pu = projection_uncertainty(cal, grid_step_px=Grid.STEP, compensate_rotation=False)
-        pa = projection_uncertainty(cal, grid_step_px=Grid.STEP)
-        rob.add(grid, cal.camera, cal.rms * np.sqrt(2), t2 - t1, pred_cov=pu.cov[np.isfinite(pu.std)],
-                pred_cov_aligned=pa.cov[np.isfinite(pa.std)])
-        # (b)
-        obj = [v.object_points.astype(np.float32) for v in views]
-        img = [v.image_points.astype(np.float32) for v in views]
-        t0 = time.process_time()
-        r_cv, K, dist, rv, tv = cv2.calibrateCamera(obj, img, size, None, None)
-        same.add(grid, cam_from(K, dist, size), r_cv, time.process_time() - t0)
-        diff_std.append(np.abs(cal.values - np.r_[K[0, 0], K[1, 1], K[0, 2], K[1, 2], np.ravel(dist)[:5]])
-                        / cal.std_array)
         # (d)'s input: robocal's corners on mrcal's grid, seeded from (b)
         obs = np.zeros((len(views), 6, 9, 3))
         obs[..., 2] = -1.0
@@ -422,7 +433,7 @@ def chessboard_datasets(args, size):
 def charuco_datasets(args, size):
     import cv2
 
-    from robocal.camera import CharucoTarget, calibrate_intrinsics, detect_targets, projection_uncertainty
+    from robocal.camera import CharucoTarget
 
     if args.charuco_datasets <= 0:
         return
@@ -439,28 +450,9 @@ def charuco_datasets(args, size):
         t0 = time.perf_counter()
         imgs = render(cam, target, poses, rng)
         t_render += time.perf_counter() - t0
-        t0 = time.process_time()
-        ds = detect_targets(imgs, target)
-        t1 = time.process_time()
-        views = ds.target_views()
-        cal = calibrate_intrinsics(views, size)
+        views, cal, (K, dist, rv, tv) = robocal_and_same_corners(cam, target, poses, imgs, size, grid, rob, same,
+                                                                 diff_std)
         n_out += len(cal.outliers)
-        t2 = time.process_time()
-        rob.t_det.append(t1 - t0)
-        rob.views.append(len(views))
-        rob.corner.append(np.concatenate([corner_errors(cam, target, poses[int(d.name.split()[-1])], d.ids,
-                                                        d.image_points) for d in ds.views]))
-        pu = projection_uncertainty(cal, grid_step_px=Grid.STEP, compensate_rotation=False)
-        pa = projection_uncertainty(cal, grid_step_px=Grid.STEP)
-        rob.add(grid, cal.camera, cal.rms * np.sqrt(2), t2 - t1, pred_cov=pu.cov[np.isfinite(pu.std)],
-                pred_cov_aligned=pa.cov[np.isfinite(pa.std)])
-        obj = [v.object_points.astype(np.float32) for v in views]
-        img = [v.image_points.astype(np.float32) for v in views]
-        t0 = time.process_time()
-        r_cv, K, dist, rv, tv = cv2.calibrateCamera(obj, img, size, None, None)
-        same.add(grid, cam_from(K, dist, size), r_cv, time.process_time() - t0)
-        diff_std.append(np.abs(cal.values - np.r_[K[0, 0], K[1, 1], K[0, 2], K[1, 2], np.ravel(dist)[:5]])
-                        / cal.std_array)
         obs = np.zeros((len(views), nr, nc, 3))
         obs[..., 2] = -1.0
         frames = []
