@@ -156,6 +156,19 @@ def load_camera(doc: Document, *, base_dir=None) -> CameraModel:
     return camera_from_section(doc, base_dir=base_dir)  # the one core loader of every camera rig
 
 
+def _entry_image(e, base_dir) -> tuple[Path, np.ndarray]:
+    """The image file an entry's ``image`` names (relative to ``base_dir`` when given) and its pixels; a missing or
+    damaged file is an error naming the entry's field."""
+    p = Path(e.raw("image"))
+    p = p if p.is_absolute() or base_dir is None else Path(base_dir) / p
+    if not p.exists():
+        raise e.error("image", f"file {p} does not exist")
+    try:
+        return p, read_image(p)
+    except FileFormatError as exc:
+        raise e.error("image", exc.message if str(p) in exc.message else f"{p}: {exc.message}") from None
+
+
 def load_input(path) -> MirrorInput:
     """Read and validate an input file (see the module docstring)."""
     path = Path(path)
@@ -244,14 +257,7 @@ def load_input(path) -> MirrorInput:
         if "image" in e:
             if tags is None:
                 raise e.error("image", "an image entry needs body_tags (the ArUco tags on the body)")
-            p = Path(e.raw("image"))
-            p = p if p.is_absolute() else path.parent / p
-            if not p.exists():
-                raise e.error("image", f"file {p} does not exist")
-            try:
-                img = read_image(p)
-            except FileFormatError as exc:
-                raise e.error("image", exc.message if str(p) in exc.message else f"{p}: {exc.message}") from None
+            p, img = _entry_image(e, path.parent)
             try:
                 obs.append(detect_mirror_image(img, cam, tags, name=name, mirror_tags=mirror_tags, rectangle=rect))
             except RobocalError as exc:
@@ -384,14 +390,7 @@ def _markerless_poses(doc: Document, cam: CameraModel, src: str, P, field: str =
         if "image" in e:
             if target is None:
                 raise e.error("image", "an image entry needs reference_target (the chessboard on the robot)")
-            p = Path(e.raw("image"))
-            p = p if p.is_absolute() or base_dir is None else Path(base_dir) / p
-            if not p.exists():
-                raise e.error("image", f"file {p} does not exist")
-            try:
-                img = read_image(p)
-            except FileFormatError as exc:
-                raise e.error("image", exc.message if str(p) in exc.message else f"{p}: {exc.message}") from None
+            p, img = _entry_image(e, base_dir)
             if img.shape[:2] != (cam.height, cam.width):
                 raise e.error("image", f"{p} is {img.shape[1]} x {img.shape[0]} px, the camera {cam.width} x "
                                        f"{cam.height}")
