@@ -118,6 +118,17 @@ def _aruco_params():
     return p
 
 
+def _refine_in_gaps(image, uv, which, half, gap, crit) -> None:
+    """``cornerSubPix`` of the corners ``which`` of ``uv`` (in place), each with its own half-window ``half``
+    [px]; a corner that moves by half its ``gap`` or more has left its saddle and keeps its start."""
+    for h in np.unique(half[which]):
+        sel = which & (half == h)
+        start = uv[sel].astype(np.float32).reshape(-1, 1, 2)
+        fine = cv2.cornerSubPix(image, start, (int(h), int(h)), (-1, -1), crit).reshape(-1, 2).astype(float)
+        moved = np.linalg.norm(fine - uv[sel], axis=1) < 0.5 * gap[sel]
+        uv[sel] = np.where(moved[:, None], fine, uv[sel])
+
+
 def _detect_charuco(img, target: CharucoTarget):
     cd = cv2.aruco.CharucoDetector(target.cv_board)
     cd.setDetectorParameters(_aruco_params())
@@ -138,27 +149,15 @@ def _detect_charuco(img, target: CharucoTarget):
     if todo.any():
         half = np.minimum(np.floor(0.8 * np.where(todo, gap, 0.0)), REFINE_MAX_HALF_WINDOW).astype(int)
         smooth = cv2.GaussianBlur(img.astype(np.float32), (0, 0), REFINE_SMOOTHING_PX)
-        crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 100, 1e-5)
-        for h in np.unique(half[todo]):
-            sel = todo & (half == h)
-            start = uv[sel].astype(np.float32).reshape(-1, 1, 2)
-            fine = cv2.cornerSubPix(smooth, start, (int(h), int(h)), (-1, -1), crit).reshape(-1, 2).astype(float)
-            moved = np.linalg.norm(fine - uv[sel], axis=1) < 0.5 * gap[sel]
-            uv[sel] = np.where(moved[:, None], fine, uv[sel])
+        _refine_in_gaps(smooth, uv, todo, half, gap, (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 100, 1e-5))
     # Where the gap is narrow, OpenCV's own corner is kept, but OpenCV < 4.11 refined it with a fixed window
     # that reaches the markers (a steep view: 0.69 px RMS on 4.10, 0.19 on 4.14): a window inside the gap,
     # on the unsmoothed image, gives 4.10 what 4.11+ does.
     narrow = ~todo & np.isfinite(gap) & (gap >= 1.5)
     if narrow.any() and tuple(int(v) for v in cv2.__version__.split(".")[:2]) < (4, 11):
-        grey = img.astype(np.float32)
-        crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 50, 1e-4)
         half = np.maximum(np.floor(0.8 * np.where(narrow, gap, 0.0)), 1).astype(int)
-        for h in np.unique(half[narrow]):
-            sel = narrow & (half == h)
-            start = uv[sel].astype(np.float32).reshape(-1, 1, 2)
-            fine = cv2.cornerSubPix(grey, start, (int(h), int(h)), (-1, -1), crit).reshape(-1, 2).astype(float)
-            moved = np.linalg.norm(fine - uv[sel], axis=1) < 0.5 * gap[sel]
-            uv[sel] = np.where(moved[:, None], fine, uv[sel])
+        _refine_in_gaps(img.astype(np.float32), uv, narrow, half, gap,
+                        (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 50, 1e-4))
     return ids, uv, "charuco", []
 
 
