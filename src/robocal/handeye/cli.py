@@ -15,18 +15,20 @@ _HE = "robocal.handeye.workflow"
 _PAIR = (Option("gripper_poses", type=Path, help="T_base_gripper list (CSV/YAML, scalar-last quaternions)"),
          Option("target_poses", type=Path, help="T_cam_target list (CSV/YAML)"))
 
+_SETUP = Option("--setup", default="eye-in-hand", choices=["eye-in-hand", "eye-to-hand"],
+                help="eye-in-hand (camera on the gripper, fixed target): X = T_gripper_cam, target pose "
+                     "T_base_target; eye-to-hand (fixed camera, target on the gripper): X = T_base_cam, "
+                     "target pose T_gripper_target")
+_PAIRS_HELP = ("pose pairs of the closed form's relative motions: all (every pair, n^2/2), consecutive "
+               "(i, i+1), auto (default: all up to 200 poses, else consecutive plus at most 20,000 longer "
+               "pairs turning 10-150 deg; memory linear in the number of poses)")
+
 _SHARED = (
     Option("--method", default="tsai", choices=["tsai", "park", "horaud", "andreff", "daniilidis"],
            help="closed-form AX = XB solver (then refined unless --no-refine)"),
     Option("--no-refine", action="store_true", help="closed form only (no covariance)"),
-    Option("--setup", default="eye-in-hand", choices=["eye-in-hand", "eye-to-hand"],
-           help="eye-in-hand (camera on the gripper, fixed target): X = T_gripper_cam, target pose "
-                "T_base_target; eye-to-hand (fixed camera, target on the gripper): X = T_base_cam, "
-                "target pose T_gripper_target"),
-    Option("--pairs", default="auto", choices=["auto", "consecutive", "all"],
-           help="pose pairs of the closed form's relative motions: all (every pair, n^2/2), consecutive "
-                "(i, i+1), auto (default: all up to 200 poses, else consecutive plus at most 20,000 longer "
-                "pairs turning 10-150 deg; memory linear in the number of poses)"),
+    _SETUP,
+    Option("--pairs", default="auto", choices=["auto", "consecutive", "all"], help=_PAIRS_HELP),
 )
 
 HANDEYE = Workflow(
@@ -88,6 +90,14 @@ HANDEYE = Workflow(
                 run=f"{_HE}:run_robot_world",
                 options=(*_PAIR,
                          Option("--no-refine", action="store_true", help="Shah's closed form only (no covariance)"),
+                         Option("--setup", default="eye-in-hand", choices=["eye-in-hand", "eye-to-hand"],
+                                help="eye-in-hand: X = T_target_base, Z = T_cam_gripper (and their inverses "
+                                     "T_base_target, T_gripper_cam); eye-to-hand (fixed camera, target on the "
+                                     "gripper): X = T_target_gripper, Z = T_cam_base (T_gripper_target, "
+                                     "T_base_cam)"),
+                         Option("--pairs", default="auto", choices=["auto", "consecutive", "all"],
+                                help="pose pairs of the excitation check's gripper motions (Shah's closed form "
+                                     "and the refinement use every pose): " + _PAIRS_HELP.split(": ", 1)[1]),
                          accept_implausible_option()),
                 examples=(f"robocal handeye robot-world {EXAMPLES}/gripper_poses.csv {EXAMPLES}/target_poses.csv "
                           "--out rw",)),

@@ -23,8 +23,6 @@ __all__ = ["SOLVER_FIELDS", "solver_record", "PosePair", "load_pose_pair", "cali
            "run_simulate_images"]
 
 _LABELS = ("rx", "ry", "rz", "tx", "ty", "tz")
-_GRIPPER_CAM = {"parent": "gripper", "child": "camera"}
-_BASE_TARGET = {"parent": "robot base", "child": "target"}
 
 
 @dataclass
@@ -194,49 +192,88 @@ def to_result(calibration, pair: PosePair) -> CalibrationResult:
 
 
 # ----------------------------------------------------------------------------- AX = ZB
-def robot_world(pair: PosePair, *, no_refine: bool = False, accept_implausible: bool = False):
-    """``A X = Z B`` with ``A = T_cam_target``, ``B = T_gripper_base``: X = T_target_base, Z = T_cam_gripper
-    (:func:`~robocal.handeye.calibrate_robot_world`)."""
+#: robot-world per set-up: (X, Z, their inverses) as (name, parent, child). eye-in-hand: ``A X = Z B`` with
+#: ``A = T_cam_target``, ``B = T_gripper_base``; eye-to-hand: ``B = T_base_gripper`` (the robot poses as given).
+RW_SETUPS = {
+    "eye-in-hand": {"X": ("T_target_base", "target", "robot base"), "Z": ("T_cam_gripper", "camera", "gripper"),
+                    "Xinv": ("T_base_target", "robot base", "target"), "Zinv": ("T_gripper_cam", "gripper", "camera"),
+                    "B": "T_gripper_base (inverse of the robot's T_base_gripper)"},
+    "eye-to-hand": {"X": ("T_target_gripper", "target", "gripper"), "Z": ("T_cam_base", "camera", "robot base"),
+                    "Xinv": ("T_gripper_target", "gripper", "target"), "Zinv": ("T_base_cam", "robot base", "camera"),
+                    "B": "T_base_gripper (the robot's poses as given)"},
+}
+
+
+def robot_world(pair: PosePair, *, no_refine: bool = False, accept_implausible: bool = False,
+                setup: str = "eye-in-hand", pairs: str = "auto"):
+    """``A X = Z B`` (:func:`~robocal.handeye.calibrate_robot_world`), ``A = T_cam_target``.
+
+    eye-in-hand: ``B = T_gripper_base``, X = T_target_base, Z = T_cam_gripper; eye-to-hand (fixed camera, target
+    on the gripper): ``B = T_base_gripper``, X = T_target_gripper, Z = T_cam_base (:data:`RW_SETUPS`).
+    ``pairs``: the motions of the excitation check (:func:`~robocal.handeye.pair_indices`).
+    """
+    from robocal.errors import InputError
     from robocal.geometry import invert_transform
     from robocal.handeye import calibrate_robot_world
 
+    if setup not in RW_SETUPS:
+        raise InputError(f"setup must be one of {', '.join(RW_SETUPS)}, got {setup!r}")
     tick = _stages("handeye robot-world: solve", 1)
     tick()
-    res = calibrate_robot_world(pair.T_cam_target, invert_transform(pair.T_base_gripper), refine=not no_refine,
+    B = invert_transform(pair.T_base_gripper) if setup == "eye-in-hand" else pair.T_base_gripper
+    res = calibrate_robot_world(pair.T_cam_target, B, refine=not no_refine, pairs=pairs,
                                 times=pair.t, accept_implausible=accept_implausible, names=pair.names)
     tick()
     return res
 
 
-def robot_world_result(res, pair: PosePair) -> CalibrationResult:
-    """The result of :func:`robot_world`: X, Z and their inverses ``T_base_target``, ``T_gripper_cam``,
-    each with its std after refinement (the inverses' by first-order propagation,
-    :meth:`~robocal.geometry.PoseWithCovariance.inverse`)."""
+def robot_world_result(res, pair: PosePair, *, setup: str = "eye-in-hand", pairs: str | None = None
+                       ) -> CalibrationResult:
+    """The result of :func:`robot_world`: X, Z and their inverses (eye-in-hand ``T_base_target``,
+    ``T_gripper_cam``; eye-to-hand ``T_gripper_target``, ``T_base_cam``), each with its std after refinement
+    (the inverses' by first-order propagation, :meth:`~robocal.geometry.PoseWithCovariance.inverse`)."""
     from robocal.geometry import PoseWithCovariance, invert_transform
 
+    names = RW_SETUPS[setup]
     result = CalibrationResult(
         rig="handeye", method=f"robot-world {res.method}", estimate={}, std={}, units={},
         residual_rms=res.trans_rms, residual_unit="m", warnings=res.warnings, inputs=hash_inputs(pair.files))
     xr, xt = _std_of(res.lsq, "X")
     zr, zt = _std_of(res.lsq, "Z")
-    result.add_pose("T_target_base", res.X, std_rotation=xr, std_translation=xt,
-                    parent="target", child="robot base")
-    result.add_pose("T_cam_gripper", res.Z, std_rotation=zr, std_translation=zt, parent="camera", child="gripper")
-    for name, T, sl, frames in (("T_base_target", res.X, slice(0, 6), _BASE_TARGET),
-                                ("T_gripper_cam", res.Z, slice(6, 12), _GRIPPER_CAM)):
+    for key, T, sr, st in (("X", res.X, xr, xt), ("Z", res.Z, zr, zt)):
+        name, parent, child = names[key]
+        result.add_pose(name, T, std_rotation=sr, std_translation=st, parent=parent, child=child)
+    for key, T, sl in (("Xinv", res.X, slice(0, 6)), ("Zinv", res.Z, slice(6, 12))):
+        name, parent, child = names[key]
         sr = st = None
         if res.cov is not None and res.std and all(v is not None for v in res.std.values()):
             inv = PoseWithCovariance(T, np.asarray(res.cov)[sl, sl]).inverse()
             sr, st = inv.std_rotation.tolist(), inv.std_translation.tolist()
-        result.add_pose(name, invert_transform(T), std_rotation=sr, std_translation=st, **frames)
+        result.add_pose(name, invert_transform(T), std_rotation=sr, std_translation=st, parent=parent,
+                        child=child)
+    B = names["B"]
     result.diagnostics = {
         "rotation_rms_rad": res.rot_rms, "n_poses": len(pair.T_cam_target), "pose_files": _forms(pair),
-        "convention": "A X = Z B, A = T_cam_target, B = T_gripper_base (inverse of the robot's T_base_gripper), "
-                      "X = T_target_base, Z = T_cam_gripper; std as rotation vector of R_perturbed R^T (rad) and "
+        "setup": setup, "pairs": pairs,
+        "convention": f"{setup}: A X = Z B, A = T_cam_target, B = {B}, X = {names['X'][0]}, "
+                      f"Z = {names['Z'][0]}; std as rotation vector of R_perturbed R^T (rad) and "
                       "translation (m), of the inverses by first-order propagation; quaternions scalar-last",
+        "closure": f"T_cam_target[i] {names['X'][0]} = {names['Z'][0]} {B.split(' ')[0]}[i]",
+        "closure_residuals": _rw_closure(res, pair, setup),
         "solver": solver_record(res.lsq),
     }
     return result
+
+
+def _rw_closure(res, pair: PosePair, setup: str) -> dict:
+    """Per-pose residuals of ``A[i] X = Z B[i]``: rotation angle (rad), translation distance (m)."""
+    from robocal.geometry import invert_transform
+    from robocal.handeye.motions import _pose_residual
+
+    B = invert_transform(pair.T_base_gripper) if setup == "eye-in-hand" else pair.T_base_gripper
+    r = _pose_residual(pair.T_cam_target @ res.X, res.Z @ B)
+    return {"rotation_rad": np.linalg.norm(r[:, :3], axis=1).tolist(),
+            "translation_m": np.linalg.norm(r[:, 3:], axis=1).tolist()}
 
 
 def run_robot_world(args) -> int:
@@ -246,8 +283,9 @@ def run_robot_world(args) -> int:
 
     pair = load_pose_pair(args.gripper_poses, args.target_poses)
     try:
-        res = robot_world(pair, no_refine=args.no_refine, accept_implausible=args.accept_implausible)
-        result = robot_world_result(res, pair)
+        res = robot_world(pair, no_refine=args.no_refine, accept_implausible=args.accept_implausible,
+                          setup=args.setup, pairs=args.pairs)
+        result = robot_world_result(res, pair, setup=args.setup, pairs=args.pairs)
         report = build_report(result)
     except RobocalError as exc:
         raise exc if exc.source is not None else exc.with_source(f"{pair.gripper_path} + {pair.target_path}") \
@@ -255,9 +293,10 @@ def run_robot_world(args) -> int:
     out = prepare_out_dir(args.out, "handeye-robot-world")
     write_run(out, result, report)
     print(summary(result))
-    sr = result.std.get("T_gripper_cam.rotvec")
+    zname = RW_SETUPS[args.setup]["Zinv"][0]
+    sr = result.std.get(f"{zname}.rotvec")
     if sr is not None and all(v is not None for v in sr):
-        print("T_gripper_cam rotation std [mrad] (rotation vector of R_perturbed R^T): "
+        print(f"{zname} rotation std [mrad] (rotation vector of R_perturbed R^T): "
               + ", ".join(f"{1e3 * v:.3f}" for v in sr))
     return 0
 
