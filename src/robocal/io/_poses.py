@@ -60,7 +60,8 @@ class PoseList:
     T : (N, 4, 4) ndarray
         ``T_parent_child`` per entry, metres.
     t : (N,) ndarray or None
-        Timestamps [s], strictly increasing; None when the file has none.
+        Timestamps [s], strictly increasing (unless read with ``strict_times=False``); None when the file
+        has none.
     planar : bool
         Whether the file held planar ``x, y, theta`` poses (then ``z = 0``
         and the rotation is about z).
@@ -173,7 +174,7 @@ def _from_matrices(M, src: str, where) -> tuple[np.ndarray, np.ndarray]:
     return R, M[:, :3, 3]
 
 
-def _load_headerless(kept, src: str) -> PoseList:
+def _load_headerless(kept, src: str, strict_times: bool = True) -> PoseList:
     rows, lines, ncol = [], [], None
     for n, ln in kept:
         toks = _SEP.split(ln.strip())
@@ -211,13 +212,13 @@ def _load_headerless(kept, src: str) -> PoseList:
         p, R = v[:, :3], matrix_from_rotvec(v[:, 3:6])
     else:
         R, p = _from_matrices(v.reshape(len(v), -1, 4), src, where)
-    if t is not None:
+    if t is not None and strict_times:
         _check_times(t, src, where)
     return PoseList(_transforms(R, p), t, False, src,
                     form=f"CSV without a header, {ncol} values a row: {desc} (m, rad)")
 
 
-def _load_table(path: Path, src: str) -> PoseList:
+def _load_table(path: Path, src: str, strict_times: bool = True) -> PoseList:
     text = _read_text(path, src)
     lines = text.splitlines()
     kept = [(n, ln) for n, ln in enumerate(lines, 1) if ln.strip() and not ln.lstrip().startswith(("#", "%"))]
@@ -227,7 +228,7 @@ def _load_table(path: Path, src: str) -> PoseList:
     cells = [c for c in (head.split(",") if "," in head else _HEADER_SEP.split(head.strip())) if c.strip()]
     # a header names every column: a first row with any number in it is data (and its junk an error)
     if any(_is_number(c.strip()) for c in cells):
-        return _load_headerless(kept, src)
+        return _load_headerless(kept, src, strict_times)
     # a header without units (the TUM order "t x y z qx qy qz qw" as a header row) is read in SI units, and
     # said so; spaces / tabs as separators are rewritten as commas, line for line, so that the table's
     # errors keep the file's line numbers
@@ -264,7 +265,8 @@ def _load_table(path: Path, src: str) -> PoseList:
                               "(x [m]); or no header at all (TUM: t x y z qx qy qz qw)", source=src)
     t = tab.column("t", kind="time") if "t" in tab else None
     if t is not None:
-        _check_times(t, src, tab.where)
+        if strict_times:
+            _check_times(t, src, tab.where)
         what = "t " + what
     units = f"; no units in the header for {', '.join(assumed)}: SI assumed" if assumed else ""
     return PoseList(_transforms(R, p), t, planar, src, heading,
@@ -320,8 +322,12 @@ def _load_filestorage(path: Path, src: str) -> PoseList:
                     form=f"OpenCV FileStorage: {len(keys)} {M.shape[1]}x4 matrices ({span}, m)")
 
 
-def load_poses(path) -> PoseList:
-    """Read a pose list (module docstring for the formats); SI units out; :attr:`PoseList.form` says which form."""
+def load_poses(path, *, strict_times: bool = True) -> PoseList:
+    """Read a pose list (module docstring for the formats); SI units out; :attr:`PoseList.form` says which form.
+
+    ``strict_times=False`` keeps timestamps that do not increase (a recorded stream's repeats and jumps back)
+    for the caller to drop and count (``robocal.handeye.clock.clean_stamps``); by default they are an error.
+    """
     from robocal.io._load import Document
     from robocal.validation import check_rotation_matrix
 
@@ -329,7 +335,7 @@ def load_poses(path) -> PoseList:
     src = str(path)
     suffix = path.suffix.lower()
     if suffix in (".csv", ".txt", ".tum"):
-        return _load_table(path, src)
+        return _load_table(path, src, strict_times)
     if suffix == ".xml":
         return _load_filestorage(path, src)
     if suffix not in (".yaml", ".yml", ".json"):
@@ -395,7 +401,7 @@ def load_poses(path) -> PoseList:
     if ts and len(ts) != len(ps):
         raise FileFormatError("either every pose has a timestamp 't' or none", source=src)
     t = np.array(ts) if ts else None
-    if t is not None:
+    if t is not None and strict_times:
         _check_times(t, src, lambda k: f"poses[{k}].t")
     return PoseList(_transforms(np.array(Rs), np.array(ps)), t, False, src,
                     form=f"{form}, {len(ps)} entries ({', '.join(sorted(kinds))}){', timed' if t is not None else ''}")
