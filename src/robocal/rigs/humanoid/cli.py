@@ -55,9 +55,23 @@ RIG = Workflow(
     calibrate_examples=(f"robocal humanoid calibrate {EXAMPLES}/run.yaml --out humanoid-cal",
                         "robocal humanoid calibrate humanoid-sim/run.yaml --tie --out humanoid-cal   "
                         "# data from one HipYawPitch motor",
-                        f"robocal humanoid calibrate {EXAMPLES}/run.yaml --params seed+camera_xy --out cal"),
-    input_arguments=(Option("input", type=Path, help="data-set file (YAML/JSON)"),),
+                        f"robocal humanoid calibrate {EXAMPLES}/run.yaml --params seed+camera_xy --out cal",
+                        "robocal humanoid calibrate --bag nao.bag --images /nao/camera/bottom/image_raw --out cal"),
+    # optional (none with --bag: the default [] hands load_input no path); not named `input`, which the
+    # CLI's error line would print as the file of a run without one
+    input_arguments=(Option("dataset", type=Path, nargs="?", default=[], metavar="INPUT",
+                            help="data-set file (YAML/JSON); none with --bag"),),
     calibrate_options=(
+        Option("--bag", type=Path, default=None, to="load_input",
+               help="a ROS 1 .bag, ROS 2 bag folder / .db3 or .mcap recording to take the views from "
+                    "(with --images)"),
+        Option("--joints", default="/joint_states", to="load_input", help="the recording's JointState topic"),
+        Option("--images", default=None, to="load_input", help="the recording's lower-camera image topic"),
+        Option("--camera-info", default=None, to="load_input",
+               help="CameraInfo topic of the camera (default: camera_info beside --images)"),
+        Option("--camera", type=Path, default=None, to="load_input", help="camera file instead of --camera-info"),
+        Option("--joint-map", nargs="+", default=None, metavar="MODEL=RECORDED", to="load_input",
+               help="recorded names of model joints that differ from NAOqi's (e.g. LKneePitch=l_knee)"),
         Option("--params", default="seed", help="parameters to estimate"),
         Option("--tie", action="store_true",
                help="one offset for both HipYawPitch joints (one motor); wrong for data whose two "
