@@ -18,7 +18,7 @@ from robocal.bags._reader import open_recording, seconds_from_ns, stamp_ns
 from robocal.errors import FileFormatError, InputError
 
 __all__ = ["JointStates", "TopicArrays", "read_joint_states", "read_camera_info", "read_arrays", "iter_images",
-           "image_from_message", "IMAGE_TYPES", "ARRAY_TYPES"]
+           "image_from_message", "IMAGE_TYPES", "ARRAY_TYPES", "PointClouds", "read_point_clouds", "points_from_cloud"]
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 JOINT_TYPES = ("sensor_msgs/msg/JointState",)
@@ -292,3 +292,68 @@ def read_arrays(path, topic: str, *, show_progress: bool = True) -> TopicArrays:
         T[:, :3, 3], T[:, 3, 3] = fields["position"], 1.0
         fields["T"] = T
     return TopicArrays(topic, msgtype, frame.lstrip("/"), np.asarray(stamps, np.int64), np.asarray(recv, np.int64), fields)
+
+
+# -- point clouds (sensor_msgs/PointCloud2: depth cameras, lidars, line-laser profilers) ---------------------
+
+POINT_CLOUD_TYPES = ("sensor_msgs/msg/PointCloud2",)
+#: PointField datatypes (sensor_msgs/PointField's constants) -> NumPy kinds.
+_POINT_FIELD_TYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
+
+
+@dataclass(frozen=True)
+class PointClouds(_Stamped):
+    """One ``PointCloud2`` topic: ``points`` a list of (M_i, len(fields)) float64 arrays, one per message.
+
+    Points come in the message's order (row by row); invalid points (NaN, as drivers mark dropouts in
+    an organised cloud) are kept: the caller chooses. ``frame_id``: the clouds' frame (the first
+    message's; a leading ``/`` dropped).
+    """
+
+    topic: str
+    frame_id: str
+    fields: tuple
+    stamps_ns: np.ndarray
+    receive_ns: np.ndarray
+    points: list = field(default_factory=list)
+
+
+def points_from_cloud(msg, fields=("x", "y", "z"), *, source: str = "<cloud>") -> np.ndarray:
+    """(height * width, len(fields)) float64 of one ``sensor_msgs/PointCloud2`` (any field layout and byte order)."""
+    have = {f.name: f for f in msg.fields}
+    missing = [n for n in fields if n not in have]
+    if missing:
+        raise InputError(f"{source}: a PointCloud2 without field(s) {', '.join(missing)}; fields: "
+                         f"{', '.join(have) or 'none'}")
+    bad = [n for n in fields if have[n].datatype not in _POINT_FIELD_TYPES]
+    if bad:
+        raise FileFormatError(f"{source}: PointCloud2 field '{bad[0]}' has unknown datatype {have[bad[0]].datatype}")
+    order = ">" if msg.is_bigendian else "<"
+    step, w, h, row = int(msg.point_step), int(msg.width), int(msg.height), int(msg.row_step)
+    dtype = np.dtype({"names": list(fields), "formats": [order + _POINT_FIELD_TYPES[have[n].datatype] for n in fields],
+                      "offsets": [int(have[n].offset) for n in fields], "itemsize": step})
+    data = np.asarray(msg.data, np.uint8)
+    if step <= 0 or row < w * step or data.size < h * row or any(
+            int(have[n].offset) + dtype[n].itemsize > step for n in fields):
+        raise FileFormatError(f"{source}: a {w}x{h} PointCloud2 of {step}-byte points needs {h} rows of >= "
+                              f"{w * step} bytes, got row_step {row} and {data.size} bytes")
+    # rows may be padded to row_step bytes: view the rows, drop the padding, read the fields in place
+    rows = np.ascontiguousarray(data[:h * row].reshape(h, row)[:, :w * step]).reshape(-1)
+    pts = rows.view(dtype)
+    return np.column_stack([pts[n].astype(np.float64) for n in fields]) if len(pts) else np.zeros((0, len(fields)))
+
+
+def read_point_clouds(path, topic: str, fields=("x", "y", "z"), *, show_progress: bool = True) -> PointClouds:
+    """Every ``sensor_msgs/PointCloud2`` of ``topic`` as arrays of ``fields`` (:class:`PointClouds`) [m]."""
+    stamps, recv, clouds, frame = [], [], [], ""
+    with open_recording(path) as rec:
+        topic = rec.topic(topic, POINT_CLOUD_TYPES).name
+        where = f"{rec.path}: topic {topic}"
+        for _, r, data in rec.raw(topic, show_progress=show_progress):
+            m = rec.deserialize(topic, data)
+            clouds.append(points_from_cloud(m, tuple(fields), source=where))
+            stamps.append(stamp_ns(m.header.stamp))
+            recv.append(r)
+            frame = frame or m.header.frame_id
+    return PointClouds(topic, frame.lstrip("/"), tuple(fields), np.asarray(stamps, np.int64),
+                       np.asarray(recv, np.int64), clouds)
