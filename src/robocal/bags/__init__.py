@@ -12,7 +12,9 @@ from robocal.bags._tf import *  # noqa: F401,F403
 from robocal.bags._messages import *  # noqa: F401,F403
 from robocal.bags._inspect import *  # noqa: F401,F403
 from robocal.bags._simulate import *  # noqa: F401,F403
+from robocal.bags._simulate_handeye import *  # noqa: F401,F403
 from robocal.bags._api import *  # noqa: F401,F403
-from robocal.bags import _api, _inspect, _messages, _reader, _simulate, _tf
+from robocal.bags import _api, _inspect, _messages, _reader, _simulate, _simulate_handeye, _tf
 
-__all__ = [*_reader.__all__, *_tf.__all__, *_messages.__all__, *_inspect.__all__, *_simulate.__all__, *_api.__all__]
+__all__ = [*_reader.__all__, *_tf.__all__, *_messages.__all__, *_inspect.__all__, *_simulate.__all__,
+           *_simulate_handeye.__all__, *_api.__all__]

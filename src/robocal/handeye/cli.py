@@ -23,6 +23,33 @@ _PAIRS_HELP = ("pose pairs of the closed form's relative motions: all (every pai
                "(i, i+1), auto (default: all up to 200 poses, else consecutive plus at most 20,000 longer "
                "pairs turning 10-150 deg; memory linear in the number of poses)")
 
+#: ``calibrate``'s inputs: the two lists, or none with ``--bag`` (an absent one is ``[]``: no input file).
+_PAIR_OR_BAG = (Option("gripper_poses", type=Path, nargs="?", default=[],
+                       help="T_base_gripper list (CSV/YAML, scalar-last quaternions); none with --bag"),
+                Option("target_poses", type=Path, nargs="?", default=[], help="T_cam_target list (CSV/YAML)"))
+
+#: A recording instead of the lists (robocal.handeye.bag_input); every default None: given or not.
+_BAG = (
+    Option("--bag", type=Path, default=None, to="load_input",
+           help="a ROS 1 .bag, ROS 2 bag folder / .db3 or .mcap recording (no ROS install needed): the robot "
+                "poses from its tf at the header stamps of --images or --target-poses"),
+    Option("--base", default=None, to="load_input", help="tf frame of the robot base (e.g. base_link)"),
+    Option("--gripper", default=None, to="load_input", help="tf frame of the gripper / flange (e.g. tool0)"),
+    Option("--images", default=None, to="load_input",
+           help="image topic (sensor_msgs/Image or CompressedImage) of the target; with --target"),
+    Option("--camera-info", default=None, to="load_input",
+           help="CameraInfo topic (default: the camera_info beside the image topic)"),
+    Option("--camera", type=Path, default=None, to="load_input",
+           help="camera file instead of --camera-info (OpenCV YAML/XML, ROS camera_info, robocal JSON/YAML)"),
+    Option("--target", type=Path, default=None, to="load_input",
+           help="target file (chessboard, ChArUco, ArUco/AprilTag grid) of --images"),
+    Option("--target-poses", dest="target_pose_topic", default=None, to="load_input",
+           help="instead of --images: a topic of the target's pose in the camera (PoseStamped, "
+                "PoseWithCovarianceStamped, TransformStamped)"),
+    Option("--every", type=number_at_least(int, 1), default=None, to="load_input",
+           help="take every N-th frame of the topic"),
+)
+
 _SHARED = (
     Option("--method", default="tsai", choices=["tsai", "park", "horaud", "andreff", "daniilidis"],
            help="closed-form AX = XB solver (then refined unless --no-refine)"),
@@ -30,6 +57,14 @@ _SHARED = (
     _SETUP,
     Option("--pairs", default="auto", choices=["auto", "consecutive", "all"], help=_PAIRS_HELP),
 )
+
+#: ``calibrate`` of two timed streams (read by ``load_pose_pair``).
+_CLOCK = Option("--clock-offset", default="none", metavar="auto|none|SECONDS", to="load_input",
+                help="two timed streams on two clocks: none (default: one clock), SECONDS (added to the camera's "
+                     "stamps to put them on the robot's clock), or auto (from the two rotation rates by "
+                     "cross-correlation, then refined with X: reported with its std). Timed streams: samples "
+                     "whose stamp does not advance are dropped and counted, the streams cropped to their "
+                     "overlap")
 
 HANDEYE = Workflow(
     name="handeye",
@@ -59,10 +94,13 @@ HANDEYE = Workflow(
     ),
     simulate_examples=("robocal handeye simulate --out handeye-sim --seed 1",),
     calibrate_help="X = T_gripper_cam (eye-in-hand) or T_base_cam (eye-to-hand) from two pose lists",
-    input_arguments=_PAIR,
-    calibrate_options=_SHARED,
+    input_arguments=_PAIR_OR_BAG,
+    calibrate_options=(*_SHARED, _CLOCK, *_BAG),
     calibrate_examples=(f"robocal handeye calibrate {EXAMPLES}/gripper_poses.csv {EXAMPLES}/target_poses.csv "
-                        "--method park --out he",),
+                        "--method park --out he",
+                        "robocal handeye calibrate --bag examples/bags/handeye.bag --base base_link --gripper tool0 "
+                        "--images /camera/image_raw/compressed --target examples/bags/handeye_target.yaml "
+                        "--out he-bag"),
     commands=(
         Command("calibrate-images", help="X from images of a target and the robot poses: each view's pose with its "
                                          "covariance, ambiguous / badly conditioned views named and down-weighted",

@@ -35,6 +35,9 @@ class PosePair:
     target_path: Path
     t: np.ndarray | None = None
     forms: tuple[str, str] = ("", "")
+    #: two timed streams as paired by :func:`load_pose_pair` (:class:`~robocal.handeye.clock.StreamPairing`:
+    #: the robot stream, the clock offset, the samples dropped and cropped); None for lists paired pose by pose
+    stream: object = None
 
     @property
     def names(self) -> tuple[str, str]:
@@ -65,27 +68,57 @@ def _stages(desc: str, n: int, enabled: bool = True):
     return lambda: next(it, None)
 
 
-def load_pose_pair(gripper_poses, target_poses) -> PosePair:
+def load_pose_pair(gripper_poses=None, target_poses=None, *, bag=None, clock_offset="none",
+                   **bag_options) -> PosePair:
     """``T_base_gripper`` and ``T_cam_target`` from two pose-list files (CSV/YAML, scalar-last quaternions).
 
-    When both lists have timestamps that differ, the robot stream is resampled at the sensor's
-    times (:func:`~robocal.io.interpolate_poses`, SLERP, no extrapolation);
-    without timestamps the counts must match. Errors name the file(s).
+    The one place where two streams are paired. When both lists have timestamps that differ (or
+    ``clock_offset`` is not ``"none"``), they are two streams (:func:`robocal.handeye.clock.pair_streams`):
+    samples whose stamp does not advance are dropped and counted, the robot stream is resampled (SLERP +
+    linear) at the sensor's times plus the clock offset (``"none"``: 0; seconds; ``"auto"``: from the
+    rotation rates, then refined with X by :func:`calibrate`), and the streams are cropped to their
+    overlap (counted). Without timestamps in both the counts must match (pose i with pose i) and the
+    stamps of a list that has them must increase. Errors name the file(s). A recording (``bag`` and the
+    ``--base/--gripper/--images/...`` options): :func:`robocal.handeye.bag_input.load_bag_pair`.
     """
-    from robocal.errors import RobocalError, ShapeError
-    from robocal.io import interpolate_poses, load_poses
+    from robocal.errors import FileFormatError, InputError, RobocalError, ShapeError
+    from robocal.handeye.clock import pair_streams, parse_clock_offset
+    from robocal.io import load_poses
+
+    if bag is not None or target_poses is None or any(v is not None for v in bag_options.values()):
+        from robocal.handeye.bag_input import load_bag_pair
+
+        return load_bag_pair(bag, gripper_poses, target_poses, **bag_options)
 
     gripper_poses, target_poses = Path(gripper_poses), Path(target_poses)
     tick = _stages("handeye: read poses", 1)
     tick()
-    g, c = load_poses(gripper_poses), load_poses(target_poses)
+    mode = parse_clock_offset(clock_offset)
+    # a recorded stream's stamps repeat and step back: read them as they are, drop and count below
+    g = load_poses(gripper_poses, strict_times=False)
+    c = load_poses(target_poses, strict_times=False)
     Tg, tg, Tc, tc = g.T, g.t, c.T, c.t
-    if tg is not None and tc is not None and (len(tg) != len(tc) or np.any(np.abs(tg - tc) > 1e-9)):
+    timed = tg is not None and tc is not None
+    if timed and not (mode == "none" and len(tg) == len(tc) and np.all(np.abs(tg - tc) <= 1e-9)
+                      and np.all(np.diff(tc) > 0)):
         try:
-            Tg = interpolate_poses(tg, Tg, tc)
+            s = pair_streams(tg, Tg, tc, Tc, mode, names=(gripper_poses.name, target_poses.name))
         except RobocalError as exc:
-            raise exc.with_source(f"{gripper_poses} resampled at the times of {target_poses}") from None
-    elif len(Tg) != len(Tc):
+            raise exc.with_source(f"{gripper_poses} paired by time with {target_poses}") from None
+        tick()
+        return PosePair(s.T_base_gripper, s.T_cam_target, gripper_poses, target_poses, s.t, (g.form, c.form), s)
+    if mode != "none":
+        raise InputError(f"--clock-offset {clock_offset} pairs two streams by time: both lists need timestamps ("
+                         + ", ".join(str(p) for p, pl in ((gripper_poses, g), (target_poses, c)) if pl.t is None)
+                         + " has none)")
+    for pl, path in ((g, gripper_poses), (c, target_poses)):
+        # paired pose by pose (or by equal stamps): no sample can be dropped, so a stamp slip stays an error
+        if pl.t is not None and np.any(~(np.diff(pl.t) > 0)):
+            k = int(np.flatnonzero(~(np.diff(pl.t) > 0))[0]) + 1
+            raise FileFormatError(f"pose {k}: timestamps must increase strictly, t = {pl.t[k]:.6f} s follows "
+                                  f"{pl.t[k - 1]:.6f} s (the lists pair pose by pose, so no pose can be dropped)",
+                                  source=str(path))
+    if len(Tg) != len(Tc):
         raise ShapeError(f"{gripper_poses} has {len(Tg)} poses but {target_poses} has {len(Tc)}: "
                          "without timestamps in both lists the counts must match (pose i with pose i)")
     tick()
@@ -101,12 +134,23 @@ def _gripper(pair: PosePair, setup: str) -> np.ndarray:
     return pair.T_base_gripper if setup == "eye-in-hand" else invert_transform(pair.T_base_gripper)
 
 
+class Calibration(tuple):
+    """What :func:`calibrate` returns: ``(HandEyeResult, comparison)`` as a pair (``res, comparison =
+    calibrate(...)``), with ``extra``: the refined clock, the jackknife and the pairs X was estimated on
+    (:func:`_clock_and_jackknife`), which :func:`to_result` writes."""
+
+    def __new__(cls, res, comparison, extra=None):
+        obj = super().__new__(cls, (res, comparison))
+        obj.extra = dict(extra or {})
+        return obj
+
+
 def calibrate(pair: PosePair, *, method: str = "tsai", no_refine: bool = False, accept_implausible: bool = False,
               pairs: str = "auto", setup: str = "eye-in-hand", pose_sigmas=None, progress: bool = True, **_):
     """``X = T_gripper_cam`` (:func:`~robocal.handeye.calibrate_hand_eye`) and the
     other closed forms on the same motions, for the report's comparison.
 
-    Returns ``(HandEyeResult, comparison)``; ``comparison`` lists per closed-form method the
+    Returns a :class:`Calibration` ``(HandEyeResult, comparison)``; ``comparison`` lists per closed-form method the
     rotation (rad) and translation (m) difference of its X from the estimate and its closure RMS
     (on the estimate's own pose pairs, ``pairs``: :func:`~robocal.handeye.pair_indices`).
     """
@@ -115,9 +159,13 @@ def calibrate(pair: PosePair, *, method: str = "tsai", no_refine: bool = False, 
 
     tick = _stages("handeye: solve", 1, enabled=progress)
     tick()
+    if pose_sigmas is None:  # a recording's image views carry their own stds (bag_input.BagPosePair)
+        pose_sigmas = getattr(pair, "pose_sigmas", None)
     res = calibrate_hand_eye(pair.T_base_gripper, pair.T_cam_target, method, refine=not no_refine, pairs=pairs,
                              times=pair.t, setup=setup, pose_sigmas=pose_sigmas,
                              accept_implausible=accept_implausible, names=pair.names)
+    res.warnings = list(getattr(pair, "warnings", ())) + list(res.warnings)
+    res, pair, extra = _clock_and_jackknife(res, pair, setup=setup, refined=not no_refine, pose_sigmas=pose_sigmas)
     comparison = []
     Tg = _gripper(pair, setup)
     for m in AXXB_METHODS:
@@ -131,7 +179,43 @@ def calibrate(pair: PosePair, *, method: str = "tsai", no_refine: bool = False, 
                            "translation_diff_m": trans,
                            "rotation_rms_rad": rot_rms, "translation_rms_m": trans_rms})
     tick()
-    return res, comparison
+    return Calibration(res, comparison, extra)
+
+
+def _clock_and_jackknife(res, pair: PosePair, *, setup: str, refined: bool, pose_sigmas=None):
+    """After :func:`~robocal.handeye.calibrate_hand_eye`: the streams' warnings; with ``--clock-offset auto``
+    X, Y and the offset refined together (:func:`robocal.handeye.clock.refine_with_clock`) and the pairs
+    re-paired at it; the jackknife std of X (:func:`robocal.handeye.jackknife.jackknife_hand_eye`).
+
+    Returns ``(res, pair, extra)``: the result (X's covariance then the joint one's, which counts the
+    offset's uncertainty), the pairs X was estimated on, ``{"clock": ClockRefinement | None,
+    "jackknife": Jackknife | None, "pair": pair}``.
+    """
+    from dataclasses import replace
+
+    from robocal.handeye import HandEyeResult
+    from robocal.handeye.jackknife import jackknife_hand_eye
+
+    stream, clock, jk = pair.stream, None, None
+    if stream is not None:
+        res.warnings = list(stream.warnings) + list(res.warnings)
+        if stream.mode == "auto" and refined:
+            from robocal.handeye.clock import refine_with_clock
+            from robocal.handeye.motions import _LABELS
+
+            clock = refine_with_clock(stream, res.X, res.Y, setup=setup)
+            res = HandEyeResult(
+                X=clock.X, method=f"{res.method}+clock", Y=clock.Y, cov=clock.cov[:6, :6],
+                std={k: clock.lsq.std.get(f"X.{k}") for k in _LABELS}, rot_rms=clock.rot_rms,
+                trans_rms=clock.trans_rms, n_motions=res.n_motions, setup=res.setup, lsq=clock.lsq,
+                # the outliers of the pairing at the coarse offset give way to those at the refined one
+                warnings=[w for w in res.warnings if w.code != "outliers"] + list(clock.warnings))
+            s = clock.pairing
+            pair = replace(pair, T_base_gripper=s.T_base_gripper, T_cam_target=s.T_cam_target, t=s.t, stream=s)
+            pose_sigmas = None
+    if refined and res.cov is not None:
+        jk = jackknife_hand_eye(_gripper(pair, setup), pair.T_cam_target, res.X, res.Y, pose_sigmas=pose_sigmas)
+    return res, pair, {"clock": clock, "jackknife": jk, "pair": pair}
 
 
 def _closure(Tg, Tc, X, Y) -> dict:
@@ -163,6 +247,8 @@ def to_result(calibration, pair: PosePair) -> CalibrationResult:
     from robocal.handeye import SETUPS
 
     res, comparison = calibration
+    extra = getattr(calibration, "extra", None) or {}
+    pair = extra.get("pair") or pair                # re-paired at a refined clock offset
     result = CalibrationResult(
         rig="handeye", method=res.method, estimate={}, std={}, units={}, residual_rms=res.trans_rms,
         residual_unit="m", warnings=res.warnings, inputs=hash_inputs(pair.files))
@@ -188,7 +274,31 @@ def to_result(calibration, pair: PosePair) -> CalibrationResult:
         "solver_comparison": comparison,
         "solver": solver_record(res.lsq),
     }
+    _streams_into(result, pair, extra.get("clock"), extra.get("jackknife"), xn)
+    result.diagnostics.update(getattr(pair, "diagnostics", None) or {})  # a recording's: frames, stamps, views
     return result
+
+
+def _streams_into(result, pair: PosePair, clock, jk, xn: str) -> None:
+    """The streams' counts and clock offset (``diagnostics.streams``; ``estimate.clock_offset`` with its std
+    when estimated) and the jackknife std of X (``diagnostics.jackknife``) into ``result``."""
+    s = pair.stream
+    if s is not None:
+        result.diagnostics["streams"] = s.to_dict()
+        if s.mode == "auto":
+            result.estimate["clock_offset"] = float(s.clock_offset)
+            result.std["clock_offset"] = None if clock is None else clock.clock_offset_std
+            result.units["clock_offset"] = "s"
+            result.diagnostics["streams"]["clock_offset_meaning"] = (
+                "added to the camera's stamps to put them on the robot's clock: T_base_gripper(t + "
+                "clock_offset) pairs with T_cam_target(t)")
+    if jk is not None:
+        first = [result.std.get(f"{xn}.rotvec") or [None] * 3, result.std.get(f"{xn}.translation") or [None] * 3]
+        result.diagnostics["jackknife"] = {
+            "pose": xn, **jk.to_dict(), "first_order_std": [*first[0], *first[1]],
+            "about": "std of X (rx, ry, rz [rad], tx, ty, tz [m]) from the spread of X re-estimated with each "
+                     "pose (delete-one, up to 100 poses) or each of 50 contiguous groups (delete-a-group) left "
+                     "out, beside the first-order std; the two should agree when the noise model holds"}
 
 
 # ----------------------------------------------------------------------------- AX = ZB
@@ -313,8 +423,31 @@ def summary(result) -> str:
                                          f" ({result.method})")
     forms = (result.diagnostics or {}).get("pose_files") or {}
     read = ("read " + "; ".join(f"{k}: {v}" for k, v in forms.items()) + "\n") if any(forms.values()) else ""
-    return read + f"{head}: " + ", ".join(f"{1e3 * v:.3f}" + ("" if s is None else f" +/- {1e3 * s:.3f}")
-                                          for v, s in zip(t, st))
+    streams = _streams_line(result)
+    line = f"{head}: " + ", ".join(f"{1e3 * v:.3f}" + ("" if s is None else f" +/- {1e3 * s:.3f}")
+                                   for v, s in zip(t, st))
+    jk = (result.diagnostics or {}).get("jackknife")
+    if jk:
+        line += (f"\n{name} translation std [mm], {jk['kind']} jackknife ({jk['replicates']} replicates): "
+                 + ", ".join(f"{1e3 * v:.3f}" for v in jk["std"][3:]))
+    return read + streams + line
+
+
+def _streams_line(result) -> str:
+    """``streams: ...`` (samples dropped and cropped, the clock offset) for two timed streams, else ''."""
+    s = (result.diagnostics or {}).get("streams")
+    if not s:
+        return ""
+    d, c = s["dropped_stamps"], s["cropped"]
+    sd = (result.std or {}).get("clock_offset") if s["mode"] == "auto" else None
+    off = f"clock offset {1e3 * s['clock_offset_s']:.3f}" + ("" if sd is None else f" +/- {1e3 * sd:.3f}") + " ms"
+    if s["mode"] == "auto":
+        off += f" (auto: rotation-rate correlation {s['correlation']:.2f}" + (", refined with X)" if sd else ")")
+    elif s["mode"] == "given":
+        off += " (given)"
+    return (f"streams: {s['n_pairs']} pairs; stamps not advancing dropped: robot {d.get('robot', 0)}, camera "
+            f"{d.get('camera', 0)}; outside the overlap: camera {c.get('camera', 0)} cropped, robot "
+            f"{c.get('robot', 0)} unused; {off}\n")
 
 
 def build_report(result, *, base_dir=None):
@@ -364,6 +497,27 @@ def build_report(result, *, base_dir=None):
         rep.section("Closed-form solvers compared").table(
             rows, digits=4, caption="each closed form against the estimate above, on " + which
             + ("" if nm is None else f" ({nm} motions)"))
+    st = d.get("streams")
+    if st:
+        rows = [{"stream": k, "stamps not advancing (dropped)": st["dropped_stamps"].get(k, 0),
+                 "outside the other's span": st["cropped"].get(k, 0)} for k in ("robot", "camera")]
+        rep.section("Streams and clocks").table(
+            rows, caption=f"{st['n_pairs']} pairs by time; camera samples outside the robot stream are cropped, robot "
+            f"samples before the first / after the last camera sample unused. Clock offset ({st['mode']}): "
+            f"{1e3 * st['clock_offset_s']:.3f} ms" + ("" if st.get("correlation") is None else
+                                                       f", rotation-rate correlation {st['correlation']:.3f}")
+            + (". " + st["clock_offset_meaning"] if st.get("clock_offset_meaning") else ""))
+    jk = d.get("jackknife")
+    if jk:
+        comp = ("rx [mrad]", "ry [mrad]", "rz [mrad]", "tx [mm]", "ty [mm]", "tz [mm]")
+        rows = [{"component": c, "first-order std": None if f is None else 1e3 * f, "jackknife std": 1e3 * j,
+                 "jackknife / first-order": None if not f else j / f}
+                for c, f, j in zip(comp, jk["first_order_std"], jk["std"])]
+        rep.section("Jackknife").table(
+            rows, digits=4, caption=f"{jk['pose']}: {jk['kind']} jackknife over {jk['replicates']} replicates "
+            f"({jk['poses_per_replicate']} pose(s) left out each) beside the refinement's first-order std; a ratio "
+            "far from 1 says the residuals are not the independent, alike noise the first-order std assumes "
+            "(a few poses carry the error or the information)")
     solver_section(rep.section("Solver (refinement)"), d.get("solver") or {})
     return rep
 
@@ -427,11 +581,11 @@ def run_images(args) -> int:
         pair = PosePair(robot.T[views.index], views.T_cam_target, Path(args.robot), Path(args.target),
                         None if robot.t is None else robot.t[views.index],
                         (robot.form, f"{len(views.names)} of {len(images)} images of a {target.kind}"))
-        res, comparison = calibrate(pair, method=args.method, no_refine=args.no_refine, pairs=args.pairs,
-                                    setup=args.setup, accept_implausible=args.accept_implausible,
-                                    pose_sigmas=views.sigmas)
+        cal = calibrate(pair, method=args.method, no_refine=args.no_refine, pairs=args.pairs, setup=args.setup,
+                        accept_implausible=args.accept_implausible, pose_sigmas=views.sigmas)
+        res = cal[0]
         res.warnings = list(views.warnings) + list(res.warnings)
-        result = to_result((res, comparison), pair)
+        result = to_result(cal, pair)
         result.inputs = hash_inputs([Path(args.robot), Path(args.camera), Path(args.target), *images])
         result.diagnostics["views"] = [
             {"image": n, "pose": int(i), "rms_px": float(r), "ambiguity": float(a), "rotation_std_rad": float(s[0]),
