@@ -15,7 +15,8 @@ from __future__ import annotations
 import numpy as np
 
 from robocal.errors import DegenerateGeometryError, InputError, NotEnoughDataError, ShapeError
-from robocal.geometry import matrix_from_quaternion, project_to_rotation, rotvec_from_matrix, skew, transform_from
+from robocal.geometry import matrix_from_quaternion, project_to_rotation, skew, transform_from
+from robocal.handeye._lie import log_so3
 from robocal.handeye.motions import (MIN_AXIS_SPREAD, MIN_ROTATION, MotionCheck, _check_poses,
                                                        check_motions)
 
@@ -40,8 +41,8 @@ def _aligned_rotvecs(RA, RB):
     ``alpha . R0 beta < 0`` beta is replaced by the same rotation written as
     ``(theta - 2 pi) k``.
     """
-    alpha = rotvec_from_matrix(RA)
-    beta = rotvec_from_matrix(RB)
+    alpha = log_so3(RA)                          # SciPy's log map costs more than the closed form here
+    beta = log_so3(RB)
     th = np.linalg.norm(beta, axis=-1)
     safe = th < 0.8 * np.pi
     use = safe if safe.sum() >= 2 else np.ones_like(safe)
@@ -205,6 +206,14 @@ def solve_ax_xb(A, B, method: str = "tsai", *, min_rotation: float = MIN_ROTATIO
         raise ShapeError(f"A has {len(A)} motions but B has {len(B)}: counts must match")
     if len(A) < 2:
         raise NotEnoughDataError(f"AX = XB needs at least 2 motions, got {len(A)}")
+    return _solve_checked(A, B, m, min_rotation=min_rotation, min_axis_spread=min_axis_spread, pairs=pairs,
+                          times=times)
+
+
+def _solve_checked(A, B, m: str, *, min_rotation: float = MIN_ROTATION, min_axis_spread: float = MIN_AXIS_SPREAD,
+                   pairs=None, times=None) -> tuple[np.ndarray, MotionCheck]:
+    """:func:`solve_ax_xb` on motions already known to be rigid (products of validated poses), ``m`` a
+    checked method name: the excitation check and the closed form, without validating A and B again."""
     chk = check_motions(A, B, min_rotation=min_rotation, min_axis_spread=min_axis_spread, pairs=pairs,
                         times=times)
     if m == "daniilidis":

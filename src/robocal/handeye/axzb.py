@@ -15,9 +15,10 @@ import numpy as np
 from robocal.errors import DegenerateGeometryError, NotEnoughDataError, ShapeError
 from robocal.estimation import Problem, solve
 from robocal.geometry import PoseWithCovariance, invert_transform, project_to_rotation, transform_from
-from robocal.handeye.motions import (_LABELS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses,
-                                                       pair_indices, _perturbed, _pose_residual, _sigmas, name_outliers,
-                                                       check_motions)
+from robocal.handeye._lie import left_jacobian, left_jacobian_inverse, log_so3, skew3
+from robocal.handeye.motions import (_LABELS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses, _sigmas, check_motions,
+                                     name_outliers, pair_indices)
+from robocal.handeye.refine import _perturb
 from robocal.handeye.plausibility import judge_poses
 
 __all__ = ["RobotWorldResult", "calibrate_robot_world"]
@@ -54,7 +55,10 @@ class RobotWorldResult:
 
 def _rw_rotation(RA, RB):
     """Shah: (R_A (x) I) vec R_X - (I (x) R_B^T) vec R_Z = 0, null vector of the 9N x 18 system."""
-    K = np.concatenate([np.hstack([np.kron(a, np.eye(3)), -np.kron(np.eye(3), b.T)]) for a, b in zip(RA, RB)])
+    I3 = np.eye(3)
+    # kron(R_A, I)[3i+k, 3j+l] = R_A[i, j] d_kl and kron(I, R_B^T)[3i+k, 3j+l] = d_ij R_B[l, k], for all poses at once
+    K = np.concatenate([np.einsum("nij,kl->nikjl", RA, I3).reshape(-1, 9, 9),
+                        -np.einsum("ij,nlk->nikjl", I3, RB).reshape(-1, 9, 9)], axis=2).reshape(-1, 18)
     _, s, Vt = np.linalg.svd(K, full_matrices=False)
     if s[-2] < 1e-6 * s[0]:
         raise DegenerateGeometryError(
@@ -66,6 +70,62 @@ def _rw_rotation(RA, RB):
     scale = np.sign(d) / abs(d) ** (1 / 3)
     return project_to_rotation(Rx * scale), project_to_rotation(Rz * scale)
 
+
+
+def _rw_residual(TA, TB, X, Z):
+    """(N, 6) residual of ``A X = Z B``: ``log(R_A R_X (R_Z R_B)^T)`` (rad) and ``t(A X) - t(Z B)`` (m)."""
+    AX, ZB = TA @ X, Z @ TB
+    return np.concatenate([log_so3(AX[:, :3, :3] @ np.swapaxes(ZB[:, :3, :3], 1, 2)),
+                           AX[:, :3, 3] - ZB[:, :3, 3]], axis=1)
+
+
+def _rw_jacobian(TA, TB, Z, e, wx, wz):
+    """d(residual)/d(X's and Z's parameters), two (N, 6, 6) blocks, columns (rx, ry, rz, tx, ty, tz).
+
+    With ``R_X = exp(w_X) R_X0``, ``R_Z = exp(w_Z) R_Z0`` (:func:`~.refine._perturb`) and ``E = R_A R_X R_B^T
+    R_Z^T``: ``de/dw_X = J_l(e)^-1 R_A J_l(w_X)``, ``de/dw_Z = -J_l(e)^-T J_l(w_Z)``; the translation
+    ``R_A t_X + t_A - R_Z t_B - t_Z`` gives ``R_A`` (t_X), ``[R_Z t_B]x J_l(w_Z)`` (w_Z) and ``-I`` (t_Z)
+    (the derivation of :func:`~.refine._closure_jacobian`).
+    """
+    RA = TA[:, :3, :3]
+    Jinv = left_jacobian_inverse(e)
+    JlZ = left_jacobian(wz)
+    JX = np.zeros((len(TA), 6, 6))
+    JZ = np.zeros((len(TA), 6, 6))
+    JX[:, :3, :3] = Jinv @ RA @ left_jacobian(wx)
+    JX[:, 3:, 3:] = RA
+    JZ[:, :3, :3] = -np.swapaxes(Jinv, 1, 2) @ JlZ
+    JZ[:, 3:, :3] = skew3(TB[:, :3, 3] @ Z[:3, :3].T) @ JlZ
+    JZ[:, 3:, 3:] = -np.eye(3)
+    return JX, JZ
+
+
+def _refine_robot_world(TA, TB, X0, Z0, sr: float, st: float, *, jac: str = "analytic"):
+    """Least squares on ``A X = Z B`` from Shah's ``(X0, Z0)`` (the warm start): ``(Problem, LSQResult)``.
+
+    Blocks ``X``, ``Z`` as in :func:`~.refine._refine_closure`; ``jac="2-point"`` is the finite-difference
+    path before the analytic Jacobian (kept for the tests).
+    """
+    cache = {}
+
+    def fun(p):
+        Z = _perturb(Z0, p["Z"])
+        r = _rw_residual(TA, TB, _perturb(X0, p["X"]), Z)
+        cache["key"], cache["Z"], cache["e"] = (p["X"].tobytes(), p["Z"].tobytes()), Z, r[:, :3]
+        return r
+
+    def jacobian(p):
+        if cache.get("key") != (p["X"].tobytes(), p["Z"].tobytes()):
+            fun(p)
+        JX, JZ = _rw_jacobian(TA, TB, cache["Z"], cache["e"], p["X"][:3], p["Z"][:3])
+        return {"X": JX, "Z": JZ}
+
+    prob = Problem()
+    prob.add_block("X", np.r_[0, 0, 0, X0[:3, 3]], labels=[f"X.{k}" for k in _LABELS])
+    prob.add_block("Z", np.r_[0, 0, 0, Z0[:3, 3]], labels=[f"Z.{k}" for k in _LABELS])
+    prob.add_residuals(fun, name="closure", residual_dim=6, sigma=[sr] * 3 + [st] * 3,
+                       jacobian=jacobian if jac == "analytic" else None)
+    return prob, solve(prob, method="lm", jac=jac)
 
 
 def calibrate_robot_world(T_cam_world, T_gripper_base, *, refine: bool = True, pairs: str = "auto", times=None,
@@ -105,11 +165,11 @@ def calibrate_robot_world(T_cam_world, T_gripper_base, *, refine: bool = True, p
                         min_axis_spread=min_axis_spread, what="X and Z")
     judged = judge_poses(invert_transform(TB), TA, names=names, accept=accept_implausible, times=times)
     Rx, Rz = _rw_rotation(TA[:, :3, :3], TB[:, :3, :3])
-    M = np.concatenate([np.hstack([a, -np.eye(3)]) for a in TA[:, :3, :3]])
+    M = np.concatenate([TA[:, :3, :3], np.broadcast_to(-np.eye(3), (len(TA), 3, 3))], axis=2).reshape(-1, 6)
     rhs = (np.einsum("ij,nj->ni", Rz, TB[:, :3, 3]) - TA[:, :3, 3]).reshape(-1)
     sol, *_ = np.linalg.lstsq(M, rhs, rcond=None)
     X0, Z0 = transform_from(Rx, sol[:3]), transform_from(Rz, sol[3:])
-    r0 = _pose_residual(TA @ X0, Z0 @ TB)
+    r0 = _rw_residual(TA, TB, X0, Z0)
     warnings = judged + list(chk.warnings)
     out = RobotWorldResult(X=X0, Z=Z0, method="shah", rot_rms=float(np.sqrt(np.mean(r0[:, :3] ** 2))),
                            trans_rms=float(np.sqrt(np.mean(r0[:, 3:] ** 2))), warnings=warnings)
@@ -117,16 +177,9 @@ def calibrate_robot_world(T_cam_world, T_gripper_base, *, refine: bool = True, p
         return out
     sr, st = _sigmas(r0)
 
-    def fun(p):
-        return _pose_residual(TA @ _perturbed(X0, p["X"]), _perturbed(Z0, p["Z"]) @ TB)
-
-    prob = Problem()
-    prob.add_block("X", np.r_[0, 0, 0, X0[:3, 3]], labels=[f"X.{k}" for k in _LABELS])
-    prob.add_block("Z", np.r_[0, 0, 0, Z0[:3, 3]], labels=[f"Z.{k}" for k in _LABELS])
-    prob.add_residuals(fun, name="closure", residual_dim=6, sigma=[sr] * 3 + [st] * 3)
-    res = solve(prob, method="lm")
-    X, Z = _perturbed(X0, res.params["X"]), _perturbed(Z0, res.params["Z"])
-    r = _pose_residual(TA @ X, Z @ TB)
+    _, res = _refine_robot_world(TA, TB, X0, Z0, sr, st)
+    X, Z = _perturb(X0, res.params["X"]), _perturb(Z0, res.params["Z"])
+    r = _rw_residual(TA, TB, X, Z)
     std = {f"X.{k}": res.std.get(f"X.{k}") for k in _LABELS} | {f"Z.{k}": res.std.get(f"Z.{k}") for k in _LABELS}
     return RobotWorldResult(X=X, Z=Z, method="shah+refine", cov=res.cov, std=std,
                             rot_rms=float(np.sqrt(np.mean(r[:, :3] ** 2))),

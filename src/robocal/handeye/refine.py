@@ -16,9 +16,9 @@ import numpy as np
 from robocal.errors import InputError, NotEnoughDataError, ShapeError
 from robocal.estimation import Problem, solve
 from robocal.geometry import PoseWithCovariance, invert_transform, project_to_rotation, transform_from
-from robocal.handeye.axxb import _check_method, solve_ax_xb
-from robocal.handeye.motions import (_LABELS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses,
-                                                       _motions, _perturbed, _pose_residual, _sigmas,
+from robocal.handeye._lie import exp_so3, left_jacobian, left_jacobian_inverse, log_so3, skew3
+from robocal.handeye.axxb import _check_method, _solve_checked
+from robocal.handeye.motions import (_LABELS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses, _motions, _sigmas,
                                      name_outliers, pair_indices)
 from robocal.handeye.plausibility import judge_poses
 from robocal.validation import check_array, check_transform
@@ -86,6 +86,78 @@ def _std_dict(res, prefix: str) -> dict:
     return {k: res.std.get(f"{prefix}.{k}") for k in _LABELS}
 
 
+def _perturb(T0, x):
+    """``[exp(x[:3]) R0 | x[3:]]``: the refinement's parametrisation (left rotation vector, rad; translation, m)."""
+    T = np.zeros((4, 4))
+    T[:3, :3] = exp_so3(x[:3]) @ T0[:3, :3]
+    T[:3, 3] = x[3:6]
+    T[3, 3] = 1.0
+    return T
+
+
+def _closure(Tg, Tc, X, Y):
+    """Per-pose closure of ``Tg X Tc = Y``: ``C = Tg X Tc`` (N, 4, 4) and its residual (N, 6) against Y:
+    ``e = log(R_C R_Y^T)`` (rad) and ``t_C - t_Y`` (m), :func:`~.motions._pose_residual`'s convention."""
+    C = Tg @ X @ Tc
+    E = C[:, :3, :3] @ Y[:3, :3].T
+    return C, np.concatenate([log_so3(E), C[:, :3, 3] - Y[:3, 3]], axis=1)
+
+
+def _closure_jacobian(Tg, Tc, X, e, wx, wy):
+    """d(closure residual)/d(X's and Y's parameters): two (N, 6, 6) blocks, columns (rx, ry, rz, tx, ty, tz).
+
+    With ``R_X = exp(w_X) R_X0`` and ``R_Y = exp(w_Y) R_Y0`` (:func:`_perturb`), ``E = R_g R_X R_c R_Y^T``
+    and ``e = log E``: ``exp(w + d) = exp(J_l(w) d) exp(w)`` moves ``E`` to ``exp(R_g J_l(w_X) d) E``
+    and to ``E exp(-J_l(w_Y) d)``, so ``de/dw_X = J_l(e)^-1 R_g J_l(w_X)`` and
+    ``de/dw_Y = -J_l(e)^-T J_l(w_Y)``; the translation ``t_C = R_g (R_X t_c + t_X) + t_g`` gives
+    ``dt/dw_X = -R_g [R_X t_c]x J_l(w_X)``, ``dt/dt_X = R_g``, ``dt/dt_Y = -I``.
+    """
+    Rg = Tg[:, :3, :3]
+    Jinv = left_jacobian_inverse(e)
+    JX = np.zeros((len(Tg), 6, 6))
+    JY = np.zeros((len(Tg), 6, 6))
+    JlX = left_jacobian(wx)
+    JX[:, :3, :3] = Jinv @ Rg @ JlX
+    JX[:, 3:, :3] = -Rg @ skew3(Tc[:, :3, 3] @ X[:3, :3].T) @ JlX
+    JX[:, 3:, 3:] = Rg
+    JY[:, :3, :3] = -np.swapaxes(Jinv, 1, 2) @ left_jacobian(wy)
+    JY[:, 3:, 3:] = -np.eye(3)
+    return JX, JY
+
+
+def _refine_closure(Tg, Tc, X0, Y0, w, sr: float, st: float, *, jac: str = "analytic"):
+    """Least squares on the closure ``Tg[i] X Tc[i] = Y`` from the closed form ``(X0, Y0)``: the LSQResult.
+
+    Blocks ``X`` and ``Y``: ``(w, t)``, the left rotation vector from ``X0`` / ``Y0`` (rad) and the translation
+    (m), so the start (the warm start: ``(0, t0)``) is the closed form itself. Residuals per pose times ``w``
+    (N, 6), weighted by ``sigma = (sr, sr, sr, st, st, st)``. ``jac="analytic"`` (:func:`_closure_jacobian`)
+    or ``"2-point"`` (finite differences, the path before the analytic Jacobian; kept for the tests).
+    """
+    cache = {}
+
+    def fun(p):
+        X, Y = _perturb(X0, p["X"]), _perturb(Y0, p["Y"])
+        _, r = _closure(Tg, Tc, X, Y)
+        cache["key"], cache["X"], cache["e"] = (p["X"].tobytes(), p["Y"].tobytes()), X, r[:, :3]
+        return r * w
+
+    def jacobian(p):
+        # the solver asks for the Jacobian right after the residuals at the same point: reuse X and e
+        if cache.get("key") != (p["X"].tobytes(), p["Y"].tobytes()):
+            fun(p)
+        JX, JY = _closure_jacobian(Tg, Tc, cache["X"], cache["e"], p["X"][:3], p["Y"][:3])
+        return {"X": JX * w[:, :, None], "Y": JY * w[:, :, None]}
+
+    prob = Problem()
+    prob.add_block("X", np.r_[0, 0, 0, X0[:3, 3]], labels=[f"X.{k}" for k in _LABELS],
+                   unit=["rad"] * 3 + ["m"] * 3)
+    prob.add_block("Y", np.r_[0, 0, 0, Y0[:3, 3]], labels=[f"Y.{k}" for k in _LABELS],
+                   unit=["rad"] * 3 + ["m"] * 3)
+    prob.add_residuals(fun, name="closure", residual_dim=6, sigma=[sr] * 3 + [st] * 3,
+                       jacobian=jacobian if jac == "analytic" else None)
+    return prob, solve(prob, method="lm", jac=jac)
+
+
 def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, refine: bool = True,
                        pairs: str = "auto", times=None, setup: str = "eye-in-hand", pose_sigmas=None,
                        min_rotation: float = MIN_ROTATION,
@@ -147,13 +219,13 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
     m = _check_method(method)
     ij = pair_indices(Tg, pairs)
     A, B = _motions(Tg, Tc, *ij)
-    X0, chk = solve_ax_xb(A, B, m, min_rotation=min_rotation, min_axis_spread=min_axis_spread, pairs=ij,
-                          times=times)
+    X0, chk = _solve_checked(A, B, m, min_rotation=min_rotation, min_axis_spread=min_axis_spread, pairs=ij,
+                             times=times)
     del A, B                                    # the refinement works on the poses
     warnings = judge_poses(Tg, Tc, names=names, accept=accept_implausible, times=times) + list(chk.warnings)
     Yall = Tg @ X0 @ Tc
     Y0 = transform_from(project_to_rotation(np.mean(Yall[:, :3, :3], axis=0)), Yall[:, :3, 3].mean(axis=0))
-    r0 = _pose_residual(Yall, Y0[None])
+    _, r0 = _closure(Tg, Tc, X0, Y0)
     out = HandEyeResult(X=X0, method=m, Y=Y0, rot_rms=float(np.sqrt(np.mean(r0[:, :3] ** 2))),
                         trans_rms=float(np.sqrt(np.mean(r0[:, 3:] ** 2))), n_motions=len(ij[0]), warnings=warnings,
                         setup=setup)
@@ -172,21 +244,9 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
         w[:, :3] = (np.median(s_rot) / s_rot)[:, None]
         w[:, 3:] = (np.median(s_t) / s_t)[:, None]
 
-    def fun(p):
-        X = _perturbed(X0, np.r_[p["X"][:3], p["X"][3:]])
-        Y = _perturbed(Y0, p["Y"])
-        return _pose_residual(Tg @ X @ Tc, Y[None]) * w
-
-    prob = Problem()
-    prob.add_block("X", np.r_[0, 0, 0, X0[:3, 3]], labels=[f"X.{k}" for k in _LABELS],
-                   unit=["rad"] * 3 + ["m"] * 3)
-    prob.add_block("Y", np.r_[0, 0, 0, Y0[:3, 3]], labels=[f"Y.{k}" for k in _LABELS],
-                   unit=["rad"] * 3 + ["m"] * 3)
-    prob.add_residuals(fun, name="closure", residual_dim=6, sigma=[sr] * 3 + [st] * 3)
-    res = solve(prob, method="lm")
-    X = _perturbed(X0, res.params["X"])
-    Y = _perturbed(Y0, res.params["Y"])
-    r = _pose_residual(Tg @ X @ Tc, Y[None])
+    _, res = _refine_closure(Tg, Tc, X0, Y0, w, sr, st)
+    X, Y = _perturb(X0, res.params["X"]), _perturb(Y0, res.params["Y"])
+    _, r = _closure(Tg, Tc, X, Y)
     idx = [res.free_labels.index(f"X.{k}") for k in _LABELS]
     return HandEyeResult(X=X, method=f"{m}+refine", Y=Y, cov=res.cov[np.ix_(idx, idx)], std=_std_dict(res, "X"),
                          rot_rms=float(np.sqrt(np.mean(r[:, :3] ** 2))),
