@@ -46,6 +46,14 @@ The steps, with the keywords the core passes (a rig's function may take
     The lines printed after ``calibrate`` (default: the residual RMS).
 ``demo(ctx: DemoContext) -> DemoOutcome``
     ``robocal demo``'s part for this rig.
+``fleet(out_dir, rng, *, kind, progress, **simulate_options) -> dict``, optional
+    One robot of a simulated fleet (``robocal <rig> simulate --fleet N``,
+    :func:`robocal.batch.simulate_fleet`): ``simulate``'s files with the true
+    parameters scattered as across real robots of the rig; ``kind`` None (a
+    healthy robot), ``"fault"`` (one parameter well outside the fleet's
+    spread) or ``"weak"`` (a weak recording: fewer views, more noise).
+    Returns what was planted (``{}`` for a healthy robot; else ``parameter``,
+    as the result names it, and ``text``).
 
 A step is a callable or a ``"module:attribute"`` string resolved on first use,
 so that declaring a workflow imports none of the rig's numerical code (``robocal
@@ -68,7 +76,8 @@ __all__ = ["Workflow", "Option", "Command", "DemoContext", "DemoOutcome", "STEPS
            "ACCEPT_IMPLAUSIBLE_HELP", "accept_implausible_option", "number_at_least"]
 
 #: The steps a workflow may declare, in the order the core runs them.
-STEPS = ("simulate", "load_input", "calibrate", "to_result", "build_report", "write_outputs", "summary", "demo")
+STEPS = ("simulate", "load_input", "calibrate", "to_result", "build_report", "write_outputs", "summary", "demo",
+         "fleet")
 
 
 def resolve(step: Callable | str | None) -> Callable | None:
@@ -244,7 +253,7 @@ class Workflow:
         ``robocal <name> ...``; also the ``rig`` field of its result files.
     help, description : str
         One line for ``robocal --help``; the text of ``robocal <name> --help``.
-    simulate, load_input, calibrate, to_result, build_report, write_outputs, summary, demo
+    simulate, load_input, calibrate, to_result, build_report, write_outputs, summary, demo, fleet
         The steps (callables or ``"module:attr"``); ``None`` where the rig has
         no such step (its command is then not built).
     simulate_options, calibrate_options : tuple of Option
@@ -279,6 +288,7 @@ class Workflow:
     write_outputs: Callable | str | None = None
     summary: Callable | str | None = None
     demo: Callable | str | None = None
+    fleet: Callable | str | None = None
     simulate_options: tuple = ()
     calibrate_options: tuple = ()
     input_arguments: tuple = ()
@@ -295,6 +305,8 @@ class Workflow:
     def __post_init__(self):
         if (self.calibrate is None) != (self.load_input is None) or (self.calibrate is None) != (self.to_result is None):
             raise ValueError(f"workflow {self.name!r}: calibrate, load_input and to_result come together")
+        if self.fleet is not None and (self.calibrate is None or not self.simulated_inputs):
+            raise ValueError(f"workflow {self.name!r}: a fleet step needs calibrate and simulated_inputs (its manifest)")
         names = [c.name for c in self.commands]
         taken = {"simulate": self.simulate, "calibrate": self.calibrate, "report": self.build_report}
         clash = [n for n in names if taken.get(n) is not None or names.count(n) > 1]

@@ -16,7 +16,7 @@ import numpy as np
 from robocal.cli._common import (RawHelp, add_out_argument, add_seed_argument,
                                  examples_epilog, prepare_out_dir, write_run)
 from robocal.errors import InputError, RobocalError
-from robocal.workflow import Command, Option, Workflow, accept_implausible_option
+from robocal.workflow import Command, Option, Workflow, accept_implausible_option, number_at_least
 
 __all__ = ["add_workflow_commands", "add_report_command", "run_simulate", "run_calibrate", "rebuild_report",
            "calibrate_files"]
@@ -48,6 +48,11 @@ def add_workflow_commands(parser: argparse.ArgumentParser, wf: Workflow) -> None
             o.add_to(p)
         if not any(o.dest == "seed" for o in opts):
             add_seed_argument(p)
+        if wf.fleet is not None:
+            p.add_argument("--fleet", type=number_at_least(int, 1), default=None, metavar="N",
+                           help="N robots instead of one (OUT/robot-000, ...), true parameters scattered as across "
+                                "a real fleet, a few with a planted fault; OUT/fleet.yaml is the manifest for "
+                                f"'robocal batch {wf.name}', OUT/fleet_truth.json names the planted robots")
         add_out_argument(p)
         p.set_defaults(func=lambda a, wf=wf, opts=opts: run_simulate(wf, a, opts))
     if wf.calibrate is not None:
@@ -93,6 +98,12 @@ def run_simulate(wf: Workflow, args, options=()) -> int:
     """``robocal <rig> simulate``: the rig's simulated input in a fresh folder."""
     out = prepare_out_dir(args.out, f"{wf.name}-simulate")
     rng = np.random.default_rng(args.seed)
+    if getattr(args, "fleet", None):
+        from robocal.batch import simulate_fleet
+
+        fleet = simulate_fleet(wf, out, args.fleet, rng, progress=True, **_options_for(options, args, "simulate"))
+        print(f"wrote {fleet.manifest}\nwrote {fleet.truth}\n{fleet.summary()}")
+        return 0
     paths = wf.step("simulate")(out, rng, progress=True, **_options_for(options, args, "simulate"))
     for p in paths or ():
         print(f"wrote {p}")
