@@ -79,7 +79,7 @@ def test_images_of_a_rosbag1_give_X_within_3_sigma(bags):
 
 @pytest.mark.parametrize("fmt", [f for f in RECORDING_FORMATS if f != "rosbag1"])
 def test_images_of_ros2_and_mcap_recordings(fmt, bags):
-    truth = bags(fmt, pose_topic=True)                      # the same scene (rosbag1: the test above)
+    truth = bags(fmt)                                       # the same scene (rosbag1: the test above)
     pair = load_bag_pair(truth.path, base="/base_link", gripper="tool0", images="camera/image_raw",
                          camera_info="/camera/camera_info", target=bags.target, progress=False)
     assert len(pair.T_base_gripper) == 11
@@ -88,7 +88,7 @@ def test_images_of_ros2_and_mcap_recordings(fmt, bags):
 
 
 def test_a_target_pose_topic_instead_of_images(bags):
-    truth = bags("rosbag2", pose_topic=True)
+    truth = bags("rosbag2", pose_topic=True, image_size=(160, 120))     # small images: only the poses are read
     pair = load_bag_pair(truth.path, base="base_link", gripper="tool0", target_pose_topic="/camera/target_pose",
                          progress=False)
     assert "PoseStamped (T_cam_target, camera frame 'camera_optical')" in str(pair.diagnostics["pose_files"])
@@ -150,3 +150,22 @@ def test_no_board_found_and_another_clock(bags, tmp_path):
     with pytest.raises(InputError, match=r"none of the 5 image header stamps .* another clock"):
         load_bag_pair(late.path, base="base_link", gripper="tool0", images="/camera/image_raw", target=bags.target,
                       progress=False)
+
+
+def test_tf_holes_clocks_and_frames_outside_the_tf_are_named(bags):
+    # frames at 0.5, 1.5, ..., 4.5 s (+3.7 ms); /tf stalls from 1.2 to 1.8 s: the 1.5037 s frame is 306 ms from
+    # the nearest tf sample (1.81 s; limit: 2 periods, 20 ms), dropped and named
+    holed = bags("rosbag1", stations=3, image_size=(160, 120), tf_hole=(1.2, 1.8))
+    pair = load_bag_pair(holed.path, base="base_link", gripper="tool0", images="/camera/image_raw",
+                         target=bags.target, progress=False)
+    (w,) = pair.warnings
+    assert w.code == "tf_gaps" and "/camera/image_raw@1700000001.503700000 (306 ms)" in w.message, w.message
+    assert len(pair.T_base_gripper) == 4
+    # a camera clock 2 s ahead: the last two frames fall after the tf's end, and the clocks are flagged
+    ahead = bags("rosbag1", stations=3, image_size=(160, 120), camera_clock_offset=2.0)
+    pair = load_bag_pair(ahead.path, base="base_link", gripper="tool0", images="/camera/image_raw",
+                         target=bags.target, progress=False)
+    codes = {w.code: w.message for w in pair.warnings}
+    assert "2 image(s) stamped outside the tf span" in codes["frames_outside_tf"], codes
+    assert "-1970 ms for the images, 2 ms for tf" in codes["clock_mismatch"], codes
+    assert len(pair.T_base_gripper) == 3

@@ -104,7 +104,7 @@ def simulate_handeye_recording(path, *, format: str = "rosbag1", setup: str = "e
                                move: float = 1.0, dwell: float = 1.0, tf_rate: float = 100.0,
                                image_rate: float = 1.0, image_size=(320, 240), compressed: bool = False,
                                noise_sigma: float = 1.0, pose_topic: bool = False, pose_noise=(1e-3, 0.2e-3),
-                               camera_clock_offset: float = 0.0,
+                               camera_clock_offset: float = 0.0, tf_hole=None,
                                rng: np.random.Generator | None = None) -> HandEyeRecordingTruth:
     """Write a simulated hand-eye recording to ``path`` and return its truth (module docstring).
 
@@ -135,6 +135,8 @@ def simulate_handeye_recording(path, *, format: str = "rosbag1", setup: str = "e
         ``pose_noise`` = (rotation [rad], translation [m]) Gaussian noise per axis.
     camera_clock_offset : float
         Seconds added to the camera topics' header stamps.
+    tf_hole : (float, float), optional
+        ``/tf`` is not written from ``tf_hole[0]`` to ``tf_hole[1]`` [s from the start] (a stalled publisher).
     rng : numpy.random.Generator, optional
         Stations and image noise (default: seed 0).
     """
@@ -200,7 +202,10 @@ def simulate_handeye_recording(path, *, format: str = "rosbag1", setup: str = "e
             w.transform(int(T0_NS), "world", "base_link", T_world_base),
             w.transform(int(T0_NS), "flange", "tool0", T_flange_tool)]))
         q_bs, q_sf = _quats(T_bs), _quats(T_sf)  # one batch: per-message conversions took seconds
-        for k, s in enumerate(tf_ns):
+        hole = np.zeros(len(tf_ns), bool) if tf_hole is None else \
+            (tf_ns >= T0_NS + tf_hole[0] * 1e9) & (tf_ns <= T0_NS + tf_hole[1] * 1e9)
+        for k in np.flatnonzero(~hole):
+            s = tf_ns[k]
             events.append((int(s) + LATENCY_NS["tf"], len(events), lambda s=int(s), k=k: w.write(
                 "/tf", "tf2_msgs/msg/TFMessage", s + LATENCY_NS["tf"],
                 w.tf([_transform(w, s, "base_link", "shoulder_link", T_bs[k, :3, 3], q_bs[k]),
