@@ -35,8 +35,8 @@ RIG = Workflow(
                             "robocal lineprofiler report lineprofiler-cal/result.json --out lineprofiler-report",
                             "robocal lineprofiler compare --out lineprofiler-compare"),
     simulate=f"{_LP}.workflow:simulate_files",
-    load_input=f"{_LP}.calibrate:load_input",
-    calibrate=f"{_LP}.calibrate:calibrate_input",
+    load_input=f"{_LP}.workflow:load_input",
+    calibrate=f"{_LP}.workflow:calibrate_input",
     to_result=f"{_LP}.calibrate:to_result",
     build_report=f"{_LP}.report:build_report",
     summary=f"{_LP}.workflow:summary",
@@ -52,11 +52,30 @@ RIG = Workflow(
     ),
     simulate_examples=("robocal lineprofiler simulate --out lineprofiler-sim --seed 1",),
     calibrate_help="FPDP + geometric refinement, or MCT, from an input YAML",
-    input_arguments=(Option("input", type=Path, help="input YAML: sphere radius, arm, profiles CSV (FPDP); or "
-                                                     "'method: mct' with tracker, heights, block and scan files "
-                                                     "(see docs/rigs/lineprofiler.md)"),),
+    # optional with --bag (the default [] hands load_input no path); not named `input`, which the CLI's error
+    # line would print as the file of a run without one
+    input_arguments=(Option("input_file", type=Path, nargs="?", default=[], metavar="INPUT",
+                            help="input YAML: sphere radius, arm, profiles CSV (FPDP); or 'method: mct' with "
+                                 "tracker, heights, block and scan files (see docs/rigs/lineprofiler.md); with "
+                                 "--bag optional (arm, sphere_radius, sign)"),),
+    calibrate_options=(
+        Option("--bag", type=Path, default=None, to="load_input",
+               help="a ROS 1 .bag, ROS 2 bag folder / .db3 or .mcap recording of an FPDP sphere scan"),
+        Option("--profiles", default=None, to="load_input",
+               help="the recording's profile topic (sensor_msgs/PointCloud2 in the profiler's frame)"),
+        Option("--joints", default=None, to="load_input", help="the arm's JointState topic"),
+        Option("--joint-names", nargs="+", default=None, metavar="NAME", to="load_input",
+               help="the arm's joints as named on --joints, in chain order (default: the chain's names)"),
+        Option("--base", default=None, to="load_input", help="tf frame of the arm's base (with --flange)"),
+        Option("--flange", default=None, to="load_input", help="tf frame of the flange E (with --base)"),
+        Option("--sphere-radius", dest="sphere_radius_mm", type=number_at_least(float, 0.0, strict=True, unit="mm"),
+               default=None, metavar="MM", to="load_input",
+               help="the sphere's radius in mm (default: INPUT's sphere_radius)"),
+    ),
     calibrate_examples=(f"robocal lineprofiler calibrate {EXAMPLES}/fpdp_input.yaml --out lineprofiler-cal",
-                        f"robocal lineprofiler calibrate {EXAMPLES}/mct_input.yaml --out lineprofiler-mct"),
+                        f"robocal lineprofiler calibrate {EXAMPLES}/mct_input.yaml --out lineprofiler-mct",
+                        "robocal lineprofiler calibrate --bag scan.bag --profiles /profiler/points --joints "
+                        "/joint_states --sphere-radius 25.4 --out lineprofiler-bag"),
     commands=(
         Command("compare", help="simulated re-run of the seed's FPDP vs MCT comparison",
                 run=f"{_LP}.workflow:run_compare",

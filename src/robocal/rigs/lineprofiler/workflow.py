@@ -14,7 +14,39 @@ import numpy as np
 from robocal.io import atomic_write_text
 from robocal.workflow import DemoContext, DemoOutcome
 
-__all__ = ["simulate_files", "write_hand_eye_poses", "summary", "demo", "run_compare"]
+__all__ = ["simulate_files", "write_hand_eye_poses", "summary", "demo", "run_compare", "load_input",
+           "calibrate_input"]
+
+
+def load_input(path=None, *, bag=None, sphere_radius_mm=None, **bag_options):
+    """The ``load_input`` step: an input file (:func:`.calibrate.load_input`), or with ``bag`` a recording's
+    profiles and arm poses (:func:`.bag.load_bag_input`; ``path`` then optional: arm, radius, sign).
+    ``sphere_radius_mm``: ``--sphere-radius`` [mm]."""
+    if bag is not None:
+        from robocal.rigs.lineprofiler.bag import load_bag_input
+
+        radius = None if sphere_radius_mm is None else 1e-3 * float(sphere_radius_mm)
+        return load_bag_input(bag, input_path=path, sphere_radius=radius, **bag_options)
+    if path is None:
+        from robocal.errors import InputError
+
+        raise InputError("give an input file (fpdp_input.yaml, mct_input.yaml) or a recording with --bag FILE "
+                         "--profiles TOPIC")
+    from robocal.rigs.lineprofiler.calibrate import load_input as load_file
+
+    return load_file(path)
+
+
+def calibrate_input(inp, **options):
+    """The ``calibrate`` step: :func:`.calibrate.calibrate_input`, with a recording's dropped profiles among
+    the result's warnings."""
+    from robocal.rigs.lineprofiler.calibrate import calibrate_input as calibrate
+
+    cal = calibrate(inp, **options)
+    notes = getattr(inp, "notes", None)
+    if notes:
+        cal.fpdp.warnings[0:0] = list(notes)
+    return cal
 
 
 def write_hand_eye_poses(out_dir: Path, rig, d, tr, rng: np.random.Generator, *, noise: bool = True) -> list[Path]:
