@@ -52,8 +52,10 @@ def _one_line_error(code, err):
 
 
 def _within_3_sigma(est: PoseWithCovariance, X):
-    # rendered views (1 grey level of noise) give X to ~10-30 um / ~0.1 mrad; every one of the 6 components
-    # within 3 of its own first-order std (the tf interpolation adds < 20 um on the moving frames, below it)
+    # rendered views (1 grey level of noise) give X to ~10-60 um / ~0.5 mrad; every one of the 6 components
+    # within 3 of its own first-order std (the tf interpolation adds < 25 um on the moving frames, measured).
+    # Not a wide margin in general: over seeds 2 and 4-7 of this scene (320 x 240, 11 views) the largest
+    # |error| / std was 3.4 (seed 4, also with the exact robot poses: from the views, not from the bag path)
     err = est.error_to(X)
     assert np.all(np.abs(err.vector) < 3 * est.std), err.vector / est.std
     return err
@@ -169,3 +171,20 @@ def test_tf_holes_clocks_and_frames_outside_the_tf_are_named(bags):
     assert "2 image(s) stamped outside the tf span" in codes["frames_outside_tf"], codes
     assert "-1970 ms for the images, 2 ms for tf" in codes["clock_mismatch"], codes
     assert len(pair.T_base_gripper) == 3
+
+
+def test_the_example_recording():
+    """``examples/bags/handeye.bag`` (docs/bags.md, docs/handeye.md): X within 3 std of the simulation's truth."""
+    from pathlib import Path
+
+    from robocal.handeye.simulate import default_hand_eye
+
+    ex = Path(__file__).resolve().parents[2] / "examples" / "bags"
+    pair = load_bag_pair(ex / "handeye.bag", base="base_link", gripper="tool0",
+                         images="/camera/image_raw/compressed", target=ex / "handeye_target.yaml", progress=False)
+    assert len(pair.T_base_gripper) == 11 and not pair.warnings
+    res, _ = calibrate(pair, progress=False)
+    _within_3_sigma(res.X_pose, default_hand_eye())
+    # the figures docs/bags.md shows [mm], to within 10 um (below the smallest std, 13 um: another OpenCV's
+    # corner refinement may move them by micrometres, the documented answer stays right)
+    assert np.allclose(1e3 * res.X[:3, 3], [34.958, 60.000, 120.027], atol=0.01), 1e3 * res.X[:3, 3]

@@ -104,7 +104,7 @@ def simulate_handeye_recording(path, *, format: str = "rosbag1", setup: str = "e
                                move: float = 1.0, dwell: float = 1.0, tf_rate: float = 100.0,
                                image_rate: float = 1.0, image_size=(320, 240), compressed: bool = False,
                                noise_sigma: float = 1.0, pose_topic: bool = False, pose_noise=(1e-3, 0.2e-3),
-                               camera_clock_offset: float = 0.0, tf_hole=None,
+                               camera_clock_offset: float = 0.0, tf_hole=None, compress: bool = False,
                                rng: np.random.Generator | None = None) -> HandEyeRecordingTruth:
     """Write a simulated hand-eye recording to ``path`` and return its truth (module docstring).
 
@@ -135,6 +135,8 @@ def simulate_handeye_recording(path, *, format: str = "rosbag1", setup: str = "e
         ``pose_noise`` = (rotation [rad], translation [m]) Gaussian noise per axis.
     camera_clock_offset : float
         Seconds added to the camera topics' header stamps.
+    compress : bool
+        ROS 1: LZ4 chunks; ROS 2 and MCAP: zstd per message (:func:`simulate_recording`'s).
     tf_hole : (float, float), optional
         ``/tf`` is not written from ``tf_hole[0]`` to ``tf_hole[1]`` [s from the start] (a stalled publisher).
     rng : numpy.random.Generator, optional
@@ -197,7 +199,7 @@ def simulate_handeye_recording(path, *, format: str = "rosbag1", setup: str = "e
     off = int(round(camera_clock_offset * 1e9))
     events = []  # (receive_ns, order, writer): written in receive order, like a recorder
 
-    with _Writer(path, format) as w:
+    with _Writer(path, format, compress) as w:
         w.write("/tf_static", "tf2_msgs/msg/TFMessage", int(T0_NS), w.tf([
             w.transform(int(T0_NS), "world", "base_link", T_world_base),
             w.transform(int(T0_NS), "flange", "tool0", T_flange_tool)]))
