@@ -7,8 +7,10 @@
 gives; FPDP, the geometric refinement and the radius check then run unchanged.
 
 **Profiles** are ``sensor_msgs/PointCloud2``, what the ROS drivers of line-laser
-profilers publish (LMI Gocator, Keyence LJ-V, Micro-Epsilon scanCONTROL, Wenglor
-weCat3D): one cloud per profile, in the profiler's measuring frame L, points
+profilers publish (ROS-Industrial's ``keyence_experimental`` for the Keyence
+LJ-V, Micro-Epsilon's scanCONTROL driver on ``/scancontrol_pointcloud``; a
+``LaserScan`` cannot carry a triangulating profiler's points, which are not
+rays from one origin): one cloud per profile, in the profiler's measuring frame L, points
 ``(x, 0, z)`` [m] in its ``x_L - z_L`` plane (seed 004 eq. 2). Invalid points
 (NaN: a driver's dropouts in an organised cloud) are left out; a point more than
 :data:`PLANE_TOLERANCE` off the plane is an error (the cloud is then in another
