@@ -70,9 +70,19 @@ def test_generic_block_path_matches_unrolled_8x8(gravel_pairs):
     b = np.empty((25, 81, 20), np.uint32)
     ka = np.empty((25, 20), np.int32)
     kb = np.empty((25, 20), np.int32)
-    K._sad8_batch(pt, ct, ys, xs, 4, a, ka)
-    K._sad_batch(pt, ct, ys, xs, 8, 4, b, kb)
+    K._sad8_batch(pt, ct, 0, ys, xs, 4, a, ka)
+    K._sad_batch(pt, ct, 0, ys, xs, 8, 4, b, kb)
     assert np.array_equal(a, b) and np.array_equal(ka, kb)
+    # a sequence's one array read at lanes k and k + 1 (coff) gives the pairs' SADs
+    seq = np.ascontiguousarray(np.concatenate([prev[:1], curr[:19]]).transpose(1, 2, 0))
+    a1 = np.empty((25, 81, 19), np.uint16)
+    k1 = np.empty((25, 19), np.int32)
+    K._sad8_batch(seq, seq, 1, ys, xs, 4, a1, k1)
+    pc = np.ascontiguousarray(seq[:, :, 1:])
+    a2 = np.empty_like(a1)
+    k2 = np.empty_like(k1)
+    K._sad8_batch(np.ascontiguousarray(seq[:, :, :19]), pc, 0, ys, xs, 4, a2, k2)
+    assert np.array_equal(a1, a2) and np.array_equal(k1, k2)
     # the packed argmin: best SAD and the first offset in scan order that reaches it
     assert np.array_equal(ka >> 10, a.min(axis=1)) and np.array_equal(ka & 1023, a.argmin(axis=1))
     # brute-force SAD (eq. 1) of one block at one offset

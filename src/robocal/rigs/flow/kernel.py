@@ -185,21 +185,21 @@ def _match_indexed(prev, curr, pidx, cidx, config: FlowConfig) -> BlockMatches:
         e = min(n, s + _BATCH)
         m = e - s
         # pixel-major layout, pairs innermost (OpenCV's transpose is the fastest byte transpose at hand);
-        # consecutive frames of one sequence are transposed once and read at lane k and k + 1
+        # consecutive frames of one sequence are transposed once and read at lanes k and k + 1
         if sequence:
-            both = cv2.transpose(prev[pidx[s]:pidx[s] + m + 1].reshape(m + 1, w * w)).reshape(w, w, m + 1)
-            pt = np.ascontiguousarray(both[:, :, :m])   # strided copies: much cheaper than a transpose
-            ct = np.ascontiguousarray(both[:, :, 1:])
+            pt = ct = cv2.transpose(prev[pidx[s]:pidx[s] + m + 1].reshape(m + 1, w * w)).reshape(w, w, m + 1)
+            coff = 1
         else:
             pt = cv2.transpose(prev[pidx[s]:pidx[s] + m].reshape(m, w * w)).reshape(w, w, m)
             ct = cv2.transpose(curr[cidx[s]:cidx[s] + m].reshape(m, w * w)).reshape(w, w, m)
+            coff = 0
         keys = np.empty((nb, m), np.int32)
         if config.block == 8:
             sads = np.empty((nb, side * side, m), np.uint16)
-            _sad8_batch(pt, ct, ys, xs, config.search, sads, keys)
+            _sad8_batch(pt, ct, coff, ys, xs, config.search, sads, keys)
         else:
             sads = np.empty((nb, side * side, m), np.uint32)
-            _sad_batch(pt, ct, ys, xs, config.block, config.search, sads, keys)
+            _sad_batch(pt, ct, coff, ys, xs, config.block, config.search, sads, keys)
         best = np.empty((nb, m), np.int32)
         bo = np.empty((nb, m), np.int32)
         second = np.empty((nb, m), np.int32)

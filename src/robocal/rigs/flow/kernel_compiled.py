@@ -20,10 +20,13 @@ __all__: list[str] = []
 
 
 @njit(cache=True, fastmath=True, nogil=True)
-def _sad8_batch(prev_t, curr_t, ys, xs, search, out, keys):  # pragma: no cover - compiled
+def _sad8_batch(prev_t, curr_t, coff, ys, xs, search, out, keys):  # pragma: no cover - compiled
     """SAD (eq. 1) of every 8x8 block at every integer offset, for N pairs at once.
 
-    prev_t, curr_t : uint8 (H, W, N) — pairs innermost (SIMD lanes).
+    prev_t, curr_t : uint8 (H, W, >= N) — pairs innermost (SIMD lanes); pair k is lane k of
+    ``prev_t`` and lane ``k + coff`` of ``curr_t`` (a sequence passes one array twice, coff 1).
+    The absolute difference of two bytes is taken in 8 bits (``max - min`` cannot wrap) and
+    widened once, not both operands: 2 of the 7 vector instructions of a difference.
     out : uint16 (n_blocks, (2 search + 1)^2, N). 8x8x255 = 16320 fits uint16.
     keys : int32 (n_blocks, N) — ``min over offsets of (SAD << 10 | offset)``: the
     best offset and its SAD in one vectorisable min (ties keep the first offset in
@@ -35,6 +38,9 @@ def _sad8_batch(prev_t, curr_t, ys, xs, search, out, keys):  # pragma: no cover 
     nb = ys.shape[0]
     side = 2 * search + 1
     n3 = side // 3
+    # tells LLVM that k + coff >= 0: without it every lane index carries numba's negative-index
+    # wrap-around test and the loop over the pairs is not vectorised (4x slower)
+    coff = max(coff, 0)
     a0 = np.empty(n, np.uint16)
     a1 = np.empty(n, np.uint16)
     a2 = np.empty(n, np.uint16)
@@ -60,12 +66,12 @@ def _sad8_batch(prev_t, curr_t, ys, xs, search, out, keys):  # pragma: no cover 
                         s2 = np.uint16(0)
                         for c in range(8):
                             p = pr[c, k]
-                            q0 = cr[c, k]
-                            q1 = cr[c + 1, k]
-                            q2 = cr[c + 2, k]
-                            s0 += np.uint16(max(p, q0) - min(p, q0))
-                            s1 += np.uint16(max(p, q1) - min(p, q1))
-                            s2 += np.uint16(max(p, q2) - min(p, q2))
+                            q0 = cr[c, k + coff]
+                            q1 = cr[c + 1, k + coff]
+                            q2 = cr[c + 2, k + coff]
+                            s0 += np.uint16(np.uint8(max(p, q0) - min(p, q0)))
+                            s1 += np.uint16(np.uint8(max(p, q1) - min(p, q1)))
+                            s2 += np.uint16(np.uint8(max(p, q2) - min(p, q2)))
                         a0[k] += s0
                         a1[k] += s1
                         a2[k] += s2
@@ -85,8 +91,8 @@ def _sad8_batch(prev_t, curr_t, ys, xs, search, out, keys):  # pragma: no cover 
                         s0 = np.uint16(0)
                         for c in range(8):
                             p = pr[c, k]
-                            q0 = cr[c, k]
-                            s0 += np.uint16(max(p, q0) - min(p, q0))
+                            q0 = cr[c, k + coff]
+                            s0 += np.uint16(np.uint8(max(p, q0) - min(p, q0)))
                         a0[k] += s0
                 o = orow + dx + search
                 for k in range(n):
@@ -95,10 +101,11 @@ def _sad8_batch(prev_t, curr_t, ys, xs, search, out, keys):  # pragma: no cover 
 
 
 @njit(cache=True, fastmath=True, nogil=True)
-def _sad_batch(prev_t, curr_t, ys, xs, block, search, out, keys):  # pragma: no cover - compiled
-    """Generic-block-size version of :func:`_sad8_batch` (uint32 sums)."""
+def _sad_batch(prev_t, curr_t, coff, ys, xs, block, search, out, keys):  # pragma: no cover - compiled
+    """Generic-block-size version of :func:`_sad8_batch` (uint32 sums; the same ``coff``)."""
     n = out.shape[2]
     nb = ys.shape[0]
+    coff = max(coff, 0)  # k + coff >= 0: vectorisable (see _sad8_batch)
     acc = np.empty(n, np.uint32)
     for b in range(nb):
         y0 = ys[b]
@@ -118,8 +125,8 @@ def _sad_batch(prev_t, curr_t, ys, xs, block, search, out, keys):  # pragma: no 
                         cc = cr[x0 + dx + c]
                         for k in range(n):
                             p = pc[k]
-                            q = cc[k]
-                            acc[k] += np.uint32(max(p, q) - min(p, q))
+                            q = cc[k + coff]
+                            acc[k] += np.uint32(np.uint8(max(p, q) - min(p, q)))
                 for k in range(n):
                     out[b, o, k] = acc[k]
                     kb[k] = min(kb[k], (np.int32(acc[k]) << 10) | o)

@@ -21,7 +21,8 @@ from robocal.io import CalibrationResult, atomic_write_text, hash_inputs
 from robocal.rigs.flow.calibrate import array_estimate, calibrate_array, interpolate_poses
 from robocal.rigs.flow.evaluate import evaluate_trajectory
 from robocal.rigs.flow.kernel import FlowConfig, compute_flow_sequence, speed_limit
-from robocal.rigs.flow.log import RunSpec, load_steps, read_poses_csv, write_flow_csv, write_poses_csv
+from robocal.rigs.flow.log import (RunSpec, load_steps, read_poses_csv, write_flow_csv, write_frames_npz,
+                                   write_poses_csv)
 from robocal.rigs.flow.model import SensorArray, seed_array
 from robocal.rigs.flow.odometry import Odometry, dead_reckon
 from robocal.rigs.flow.report import compare_text, display, plot_series, systematic_note  # noqa: F401 (re-exported)
@@ -100,9 +101,7 @@ def write_simulation(run: SimRun, out_dir, *, frames: bool = True, flow_config: 
             f"{cfg.camera.rate} Hz; height {cfg.height} m")
     paths = {"flow_log": write_flow_csv(out / "flow.csv", run.t, flow, run.gyro, run.height, quality, comment=note)}
     if frames:
-        buf = out / "frames.npz"
-        np.savez_compressed(buf, frames=run.frames, t=run.t, gyro=run.gyro, height=run.height)
-        paths["frames"] = buf
+        paths["frames"] = write_frames_npz(out / "frames.npz", run.frames, run.t, run.gyro, run.height)
     paths["reference"] = write_poses_csv(out / "truth.csv", run.t, run.poses, comment="true robot poses (simulation)")
     paths["wheel"] = write_poses_csv(out / "wheel.csv", run.t, run.wheel_poses, comment="wheel odometry with slip")
     cam = {"focal_px": round(cfg.camera.focal_px, 4), "window": cfg.camera.window, "rate": {"value": cfg.camera.rate, "unit": "Hz"},
