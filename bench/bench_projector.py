@@ -1,6 +1,20 @@
-"""Projector rig throughput: spot FK and IK vectorised vs per-point loops; calibration time.
+"""Projector rig throughput: the API against plain NumPy, vectorised vs per-point loops; calibration time.
 
-Measured in one run on the same data (seed 000's projector A, tilt up to 75 deg):
+First (issue 16), the library API against a plain NumPy implementation of the same seed equations, written
+here without validation, at 1, 100, 10^4 and 10^6 points, each pair timed alternately in the same run
+(median of the repeats; ratio = peer time / API time, so 1.0 is parity and the goal is >= 0.9 from
+100 points up):
+
+* ``FK eq. 6`` -- :meth:`ProjectorModel.spot` vs ``h tan(t2 + o2) (sin, cos)(t1 + o1)`` into an (N, 3) array;
+* ``IK eq. 8`` -- :meth:`ProjectorModel.ik` on (N, 3) floor points vs ``atan2(x, y) - o1`` wrapped to
+  ``[-pi, pi)`` with the usual ``mod(a + pi, 2 pi) - pi`` and ``atan(hypot(x, y) / h) - o2``;
+* ``FK D-H chain`` -- :meth:`ProjectorModel.spot_from_chain` vs the seed Table 1 chain in plain NumPy:
+  one (N, 4, 4) stack per joint link from the modified D-H link matrix, ``@`` products, the beam ``z_E``
+  met with the floor ``z_0 = -H``.
+
+The API validates (shapes, NaN/inf, floor height, reach, nadir and horizon) and the peer does not; both
+are checked to agree first. Then, measured in one run on the same data (seed 000's projector A, tilt up
+to 75 deg):
 
 * ``FK eq. 6 vectorised``  -- :meth:`ProjectorModel.spot` on N angle pairs in one call;
 * ``FK D-H chain vectorised`` -- :meth:`ProjectorModel.spot_from_chain` (DHChain.fk + beam/floor
@@ -16,7 +30,8 @@ give the same joint rates / the same assignment first. Calibration: median wall 
 of each solver on simulated data with N points (seed method, closed form, nonlinear
 pose only, nonlinear with h and tilt offset, the full ``calibrate`` driver).
 
-Run: ``python bench/bench_projector.py`` (``--quick`` for a shorter run).
+Run: ``python bench/bench_projector.py`` (``--quick`` for a shorter run, ``--ratios-only`` for the first
+table alone).
 """
 
 from __future__ import annotations
@@ -24,6 +39,7 @@ from __future__ import annotations
 import argparse
 import math
 import platform
+import sys
 import time
 
 import numpy as np
@@ -56,11 +72,103 @@ def pure_ik(pts, h):
     return [(math.atan2(x, y), math.atan(math.hypot(x, y) / h)) for x, y, _ in pts]
 
 
+def numpy_fk(th, h, H, o1, o2):
+    """Seed eq. (6) in plain NumPy (no checks): spot in {0}, (N, 3)."""
+    a1, a2 = th[:, 0] + o1, th[:, 1] + o2
+    r = h * np.tan(a2)
+    out = np.empty((len(th), 3))
+    out[:, 0] = r * np.sin(a1)
+    out[:, 1] = r * np.cos(a1)
+    out[:, 2] = -H
+    return out
+
+
+def numpy_ik(p, h, o1, o2):
+    """Seed eq. (8) in plain NumPy (no checks): joint commands (N, 2), pan wrapped to [-pi, pi)."""
+    x, y = p[:, 0], p[:, 1]
+    out = np.empty((len(p), 2))
+    out[:, 0] = np.mod(np.arctan2(x, y) - o1 + np.pi, 2 * np.pi) - np.pi
+    out[:, 1] = np.arctan(np.hypot(x, y) / h) - o2
+    return out
+
+
+def numpy_dh_link(alpha, a, theta, d):
+    """Modified (Craig) D-H link matrices ``Rx(alpha) Tx(a) Rz(theta) Tz(d)`` for an array of theta, (N, 4, 4)."""
+    ca, sa, ct, st = math.cos(alpha), math.sin(alpha), np.cos(theta), np.sin(theta)
+    A = np.zeros(np.shape(theta) + (4, 4))
+    A[..., 0, 0], A[..., 0, 1], A[..., 0, 3] = ct, -st, a
+    A[..., 1, 0], A[..., 1, 1], A[..., 1, 2], A[..., 1, 3] = st * ca, ct * ca, -sa, -sa * d
+    A[..., 2, 0], A[..., 2, 1], A[..., 2, 2], A[..., 2, 3] = st * sa, ct * sa, ca, ca * d
+    A[..., 3, 3] = 1.0
+    return A
+
+
+def numpy_chain_spot(th, d1, d2, H, o1, o2):
+    """Seed Table 1 chain in plain NumPy, then the beam z_E met with the floor z_0 = -H: spot (N, 3)."""
+    T = (numpy_dh_link(math.pi, 0.0, -math.pi / 2 + o1 + th[:, 0], d1) @ numpy_dh_link(-math.pi / 2, 0.0, o2 + th[:, 1], 0.0)
+         @ numpy_dh_link(math.pi / 2, 0.0, 0.0, d2))
+    p, z = T[:, :3, 3], T[:, :3, 2]
+    s = (-H - p[:, 2]) / z[:, 2]
+    return p + s[:, None] * z
+
+
+def api_vs_numpy(sizes, repeats: int) -> None:
+    """The ratio table of issue 16 (module docstring): API vs plain NumPy on the same equations, same run."""
+    m = default_truth().with_(offsets=(0.004, 0.005))  # both offsets in play: the peer adds and wraps them too
+    o1, o2 = m.offsets
+    rng = np.random.default_rng(16)
+    print(f"API vs plain NumPy on the same seed equations (projector {m.name}: h = {m.h:g} m, offsets {o1:g}, "
+          f"{o2:g} rad; tilt 0.01 rad to the limit); median of {repeats} alternating repeats; "
+          f"ratio = NumPy time / API time (goal >= 0.9 from 100 points)")
+    print(f"| {'N':>9s} | {'FK eq. 6 API':>12s} | {'NumPy':>10s} | {'ratio':>5s} | {'IK eq. 8 API':>12s} | "
+          f"{'NumPy':>10s} | {'ratio':>5s} | {'D-H chain API':>13s} | {'NumPy':>10s} | {'ratio':>5s} |")
+    print("|" + "|".join("-" * w for w in (11, 14, 12, 7, 14, 12, 7, 15, 12, 7)) + "|")
+    for n in sizes:
+        th = np.column_stack([rng.uniform(-math.pi, math.pi, n), rng.uniform(0.01, m.tilt_limit - o2, n)])
+        pts = m.spot(th)
+        # agreement first (the API's results, not only its speed): metres and radians, round-off of
+        # |spot| <= h tan(75 deg) ~ 10 m and of the angles
+        assert np.abs(numpy_fk(th, m.h, m.H, o1, o2) - pts).max() < 1e-12
+        assert np.abs(numpy_chain_spot(th, m.d1, m.d2, m.H, o1, o2) - m.spot_from_chain(th)).max() < 1e-12
+        dk = m.ik(pts) - numpy_ik(pts, m.h, o1, o2)
+        assert np.abs(np.mod(dk + math.pi, 2 * math.pi) - math.pi).max() < 1e-12  # pi and -pi are one pan
+        cells = []
+        for api, peer in ((lambda: m.spot(th), lambda: numpy_fk(th, m.h, m.H, o1, o2)),
+                          (lambda: m.ik(pts), lambda: numpy_ik(pts, m.h, o1, o2)),
+                          (lambda: m.spot_from_chain(th), lambda: numpy_chain_spot(th, m.d1, m.d2, m.H, o1, o2))):
+            t_api, t_peer = paired_medians(api, peer, n, repeats)
+            cells += [f"{n / t_api:10.3g}/s", f"{n / t_peer:8.3g}/s", f"{t_peer / t_api:5.2f}"]
+        w = (12, 10, 5, 12, 10, 5, 13, 10, 5)
+        print(f"| {n:9,d} | " + " | ".join(f"{c:>{k}s}" for c, k in zip(cells, w)) + " |")
+
+
+def paired_medians(api, peer, n: int, repeats: int) -> tuple[float, float]:
+    """Median time per call [s] of ``api`` and ``peer``, timed alternately (load drifts hit both alike)."""
+    k = max(1, min(2_000, 200_000 // n))  # calls per sample: ~10-50 ms per sample at every N
+    ta, tp = [], []
+    for _ in range(repeats):
+        for fn, ts in ((api, ta), (peer, tp)):
+            t0 = time.perf_counter()
+            for _ in range(k):
+                fn()
+            ts.append((time.perf_counter() - t0) / k)
+    return float(np.median(ta)), float(np.median(tp))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("-n", type=int, default=100_000, help="points for the vectorised calls")
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--ratios-only", action="store_true", help="only the API vs plain NumPy table")
+    ap.add_argument("--repeats", type=int, default=None, help="repeats of the API vs NumPy table (default 9, quick 3)")
     args = ap.parse_args()
+    print(f"command: python bench/bench_projector.py {' '.join(sys.argv[1:])}".rstrip())
+    print(f"robocal {robocal.__version__}, numpy {np.__version__}, Python {platform.python_version()}, "
+          f"{platform.machine()}\n")
+    api_vs_numpy([1, 100, 10_000, 1_000_000], args.repeats or (3 if args.quick else 9))
+    if args.ratios_only:
+        return
+    print()
     n = 10_000 if args.quick else args.n
     n_loop = 2_000 if args.quick else 10_000
     rep = 3 if args.quick else 7

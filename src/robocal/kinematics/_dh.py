@@ -42,6 +42,20 @@ __all__ = ["DHLink", "DHChain"]
 _CONVENTIONS = ("modified", "standard")
 _EX = np.array([1.0, 0.0, 0.0])
 _EZ = np.array([0.0, 0.0, 1.0])
+_EYE34 = np.eye(4)[:3]
+
+
+def _times_constant(M: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """``M @ K`` for top rows ``M`` (..., 3, 4) and one constant transform ``K`` (4, 4).
+
+    One (3 n, 4) x (4, 4) product instead of n broadcast 4x4 products (``M`` is contiguous here).
+    """
+    return (M.reshape(-1, 4) @ K).reshape(M.shape)
+
+
+def _constant_or_none(K):
+    """``None`` for no constant (or the identity), else ``K`` (4, 4): an identity is not multiplied."""
+    return None if K is None or np.array_equal(K, np.eye(4)) else K
 
 
 @dataclass(frozen=True)
@@ -170,6 +184,7 @@ class DHChain:
         self._base_params = bool(base_params)
         self._tool_params = bool(tool_params)
         self._joint_links = tuple(i for i, lk in enumerate(links) if lk.joint != "fixed")
+        self._plan = None  # fk's folded constants, built on the first call (_fk_plan)
         names = self.joint_names
         if len(set(names)) != len(names):
             raise InputError(f"joint names must be unique, got {list(names)}")
@@ -383,12 +398,80 @@ class DHChain:
     def fk(self, q) -> np.ndarray:
         """Tool pose ``T_world_tool`` (..., 4, 4) for joint values ``q`` (..., dof)."""
         q = self.check_q(q)
-        T = None if self._T_base is None else self._T_base
-        for A in self._link_matrices(q):
-            T = A if T is None else T @ A
+        out = np.empty(q.shape[:-1] + (4, 4))
+        out[..., :3, :] = self._fk_top(q)
+        out[..., 3, :] = (0.0, 0.0, 0.0, 1.0)
+        return out
+
+    def _fk_plan(self):
+        """Per-chain constants of :meth:`_fk_top`, built once: the constant factors between joint motions.
+
+        Each joint link splits into a constant part and its motion ``Z(theta, d) = Rz(theta) Tz(d)``:
+        modified ``A = [Rx(alpha) Tx(a)] Z``, standard ``A = Z [Tx(a) Rx(alpha)]``. Constants between
+        two motions (base, fixed links, those parts, tool) are multiplied once here, so a call multiplies
+        the batch only by one 4x4 constant per joint and applies ``Z`` to two columns in closed form.
+        """
+        if self._plan is not None:
+            return self._plan
+        K = self._T_base
+        steps = []
+        for i, lk in enumerate(self._links):
+            if lk.joint == "fixed":
+                A = _dh_matrices(lk.alpha, lk.a, lk.theta, lk.d, self._convention)
+                K = A if K is None else K @ A
+                continue
+            C = _dh_matrices(lk.alpha, lk.a, 0.0, 0.0, self._convention)
+            if self._convention == "modified":
+                K = C if K is None else K @ C
+            steps.append((_constant_or_none(K), len(steps), i))
+            K = C if self._convention == "standard" else None
         if self._T_tool is not None:
-            T = T @ self._T_tool
-        return np.array(np.broadcast_to(T, q.shape[:-1] + (4, 4)))
+            K = self._T_tool if K is None else K @ self._T_tool
+        self._plan = (tuple(steps), _constant_or_none(K))
+        return self._plan
+
+    def _fk_top(self, q: np.ndarray) -> np.ndarray:
+        """Top three rows of :meth:`fk`, shape (..., 3, 4), for validated ``q`` (internal: no checks).
+
+        Same product as ``T_base @ A_1 @ ... @ A_n @ T_tool`` with the constants folded
+        (:meth:`_fk_plan`) and each motion applied in closed form, ``[c0, c1, c2, c3] @ Z(theta, d) =
+        [c c0 + s c1, c c1 - s c0, c2, c3 + d c2]``: a few elementwise terms per joint instead of a
+        (..., 4, 4) link stack and a batched 4x4 product (issue 16). Equal to that product to round-off.
+        """
+        steps, K_end = self._fk_plan()
+        batch = q.shape[:-1]
+        M = None
+        for K, j, i in steps:
+            lk = self._links[i]
+            if lk.joint == "revolute":
+                theta, d = q[..., j] + lk.theta, lk.d
+            else:
+                theta, d = lk.theta, q[..., j] + lk.d
+            c, s = np.cos(theta), np.sin(theta)
+            if M is None:  # first motion: the constant before it times Z, built column by column
+                B = _EYE34 if K is None else K[:3]
+                M = np.empty(batch + (3, 4))
+                M[..., :, 0] = np.multiply.outer(c, B[:, 0]) + np.multiply.outer(s, B[:, 1])
+                M[..., :, 1] = np.multiply.outer(c, B[:, 1]) - np.multiply.outer(s, B[:, 0])
+                M[..., :, 2] = B[:, 2]
+                M[..., :, 3] = B[:, 3] + np.multiply.outer(d, B[:, 2])
+                continue
+            if K is not None:
+                M = _times_constant(M, K)
+            c, s = np.expand_dims(c, -1), np.expand_dims(s, -1)
+            c0, c1 = M[..., :, 0], M[..., :, 1]
+            n0 = c * c0
+            n0 += s * c1
+            n1 = c * c1
+            n1 -= s * c0
+            c0[...] = n0
+            c1[...] = n1
+            if lk.joint != "revolute" or lk.d != 0.0:  # Tz(0) moves nothing
+                M[..., :, 3] += np.expand_dims(d, -1) * M[..., :, 2]
+        if M is None:  # no joint: a constant pose
+            K = _EYE34 if K_end is None else K_end[:3]
+            return np.array(np.broadcast_to(K, batch + (3, 4)))
+        return M if K_end is None else _times_constant(M, K_end)
 
     def _frames_and_tip(self, q):
         frames = self.fk_all(q)

@@ -31,6 +31,7 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -196,9 +197,13 @@ class ProjectorModel:
         """A copy with some fields replaced (``model.with_(H=3.0)``)."""
         return replace(self, **changes)
 
-    @property
+    @cached_property
     def chain(self) -> DHChain:
-        """The modified-D-H chain of seed Table 1 (joint offsets in the ``theta`` column)."""
+        """The modified-D-H chain of seed Table 1 (joint offsets in the ``theta`` column).
+
+        Built once per model (the model is frozen): building it validates the table, which cost more
+        than the forward kinematics of a few hundred angle pairs when it was rebuilt per call.
+        """
         o1, o2 = self.offsets
         rows = [[np.pi, 0.0, -np.pi / 2 + o1, self.d1], [-np.pi / 2, 0.0, o2, 0.0], [np.pi / 2, 0.0, 0.0, self.d2]]
         return DHChain.from_table(rows, convention="modified", joint_types="RRF", names=["pan", "tilt", "laser"])
@@ -222,7 +227,28 @@ class ProjectorModel:
 
     # ---------------------------------------------------------- validation
     def _theta(self, theta) -> np.ndarray:
+        if (type(theta) is np.ndarray and theta.dtype == np.float64 and theta.ndim and theta.shape[-1] == 2
+                and math.isfinite(np.add.reduce(theta, axis=None))):
+            # a float64 array: O(1) checks and one sum (NaN and +-inf survive a sum; a finite sum that
+            # overflows only sends theta to the full check), not a per-element isfinite mask (issue 16)
+            return theta
         return check_array(theta, "theta", shape=(2,))
+
+    def _tilt_ok(self, a2) -> bool:
+        """True when every actual tilt is within +-``tilt_limit`` (no warning, and the beam meets the floor).
+
+        Two reductions; the common case. False sends the caller to the per-element checks
+        (:meth:`_require_floor_hit`, :meth:`_warn_beyond_limit`) that name the configuration. ``a2`` is finite.
+        """
+        lim = self.tilt_limit + 1e-12
+        return (np.size(a2) > 0 and math.cos(lim) > HORIZON_TOL  # a limit within 1e-9 of pi/2: check c2 too
+                and a2.min() >= -lim and a2.max() <= lim)
+
+    def _check_tilt(self, a2, what: str) -> None:
+        """Raise at the horizon, warn beyond the tilt limit (see :meth:`_tilt_ok` for the fast case)."""
+        if not self._tilt_ok(a2):
+            self._require_floor_hit(np.cos(a2), what, a2)
+            self._warn_beyond_limit(a2, what)
 
     def _actual(self, theta: np.ndarray):
         return theta[..., 0] + self.offsets[0], theta[..., 1] + self.offsets[1]
@@ -259,7 +285,11 @@ class ProjectorModel:
     # ---------------------------------------------------------- kinematics
     def pose(self, theta) -> np.ndarray:
         """``^0T_E`` (..., 4, 4) from the D-H chain (seed eq. 5)."""
-        return self.chain.fk(self._theta(theta))
+        theta = self._theta(theta)
+        out = np.empty(theta.shape[:-1] + (4, 4))
+        out[..., :3, :] = self.chain._fk_top(theta)  # theta checked above: no second validation
+        out[..., 3, :] = (0.0, 0.0, 0.0, 1.0)
+        return out
 
     def spot(self, theta) -> np.ndarray:
         """Spot on the floor in ``{0}``, seed eq. (6): ``f(theta)``, shape (..., 3), m.
@@ -274,13 +304,14 @@ class ProjectorModel:
         """
         theta = self._theta(theta)
         a1, a2 = self._actual(theta)
-        c2 = np.cos(a2)
-        self._require_floor_hit(c2, "spot", a2)
-        self._warn_beyond_limit(a2, "spot")
-        rho = self.h * np.sin(a2) / c2
+        self._check_tilt(a2, "spot")
+        # h s2 / c2 as h tan(a2): one transcendental instead of two (equal to round-off); the products
+        # are written straight into the output columns (no temporaries to copy)
+        rho = np.tan(a2)
+        rho *= self.h
         out = np.empty(theta.shape[:-1] + (3,))
-        out[..., 0] = rho * np.sin(a1)
-        out[..., 1] = rho * np.cos(a1)
+        np.multiply(rho, np.sin(a1), out=out[..., 0])
+        np.multiply(rho, np.cos(a1), out=out[..., 1])
         out[..., 2] = -self.H
         return out
 
@@ -290,21 +321,26 @@ class ProjectorModel:
         Independent of eq. (6) (used to check it); same result and errors as :meth:`spot`.
         """
         theta = self._theta(theta)
-        T = self.pose(theta)
-        p, z = T[..., :3, 3], T[..., :3, 2]
-        self._require_floor_hit(-z[..., 2], "spot", self._actual(theta)[1])
-        self._warn_beyond_limit(self._actual(theta)[1], "spot")
-        s = (-self.H - p[..., 2]) / z[..., 2]
-        return p + s[..., None] * z
+        M = self.chain._fk_top(theta)  # top rows of ^0T_E; theta checked above
+        p, z = M[..., :, 3], M[..., :, 2]
+        a2 = theta[..., 1] + self.offsets[1]
+        if not self._tilt_ok(a2):
+            self._require_floor_hit(-z[..., 2], "spot", a2)  # the chain's own cos(theta2)
+            self._warn_beyond_limit(a2, "spot")
+        s = -self.H - p[..., 2]
+        s /= z[..., 2]
+        out = z * s[..., None]
+        out += p
+        return out
 
     def beam_range(self, theta) -> np.ndarray:
         """Distance (m) from the laser frame origin to the spot, seed eq. (7): ``h / c2 - d2``."""
         theta = self._theta(theta)
-        _, a2 = self._actual(theta)
-        c2 = np.cos(a2)
-        self._require_floor_hit(c2, "beam_range", a2)
-        self._warn_beyond_limit(a2, "beam_range")
-        return self.h / c2 - self.d2
+        a2 = theta[..., 1] + self.offsets[1]
+        self._check_tilt(a2, "beam_range")
+        out = self.h / np.cos(a2)
+        out -= self.d2
+        return out
 
     def ik(self, points, *, theta1_at_nadir: float = 0.0, on_nadir: str = "warn", check_reach: bool = True,
            floor_tol: float = 1e-6) -> np.ndarray:
@@ -333,6 +369,11 @@ class ProjectorModel:
         """
         if on_nadir not in ("warn", "raise", "ignore"):
             raise InputError(f"on_nadir must be 'warn', 'raise' or 'ignore', got {on_nadir!r}")
+        out = self._ik_fast(points, check_reach, floor_tol)
+        if out is not None:
+            return out
+        # something to name (non-finite, off the floor, nadir, out of reach) or not a float64 array:
+        # the per-element checks
         xy = self._floor_xy(points, "points", floor_tol)
         r = np.hypot(xy[..., 0], xy[..., 1])
         a2 = np.arctan2(r, self.h)
@@ -352,6 +393,49 @@ class ProjectorModel:
         out = np.empty(xy.shape[:-1] + (2,))
         out[..., 0] = wrap_angle(a1 - self.offsets[0])
         out[..., 1] = a2 - self.offsets[1]
+        return out
+
+    def _ik_fast(self, points, check_reach: bool, floor_tol: float) -> np.ndarray | None:
+        """:meth:`ik` for the common case, or None when a check could fail (the caller then names it).
+
+        The checks are reductions on arrays eq. (8) computes anyway: z within ``floor_tol`` of ``-H``
+        (min and max), no point at the nadir (min of ``r``), every tilt within the limit (max of the tilt;
+        with ``check_reach=False`` below pi/2, which an infinite coordinate reaches); a NaN fails every
+        comparison. The pan is wrapped to ``(-pi, pi]`` by one shift of 2 pi where the offset pushed it
+        out (atan2 is in ``[-pi, pi]``), not by a modulo over all points. Issue 16.
+        """
+        p = points
+        if not (type(p) is np.ndarray and p.dtype == np.float64 and p.ndim and p.size and p.shape[-1] in (2, 3)):
+            return None
+        if p.shape[-1] == 3:
+            z = p[..., 2]
+            # bounds rounded inwards: never looser than |z + H| <= floor_tol (exact near -H, Sterbenz)
+            lo = np.nextafter(-self.H - floor_tol, math.inf)
+            hi = np.nextafter(-self.H + floor_tol, -math.inf)
+            if not (z.min() >= lo and z.max() <= hi):
+                return None
+        x, y = p[..., 0], p[..., 1]
+        r = np.hypot(x, y)
+        if not r.min() > NADIR_TOL * self.h:
+            return None
+        a2 = np.arctan2(r, self.h)
+        top = a2.max()
+        if not (top <= self.tilt_limit + 1e-12 if check_reach else top < math.pi / 2):
+            return None
+        o1, o2 = self.offsets
+        out = np.empty(p.shape[:-1] + (2,))
+        a1 = out[..., 0]
+        np.arctan2(x, y, out=a1)
+        if abs(o1) >= math.pi:
+            a1[...] = wrap_angle(a1 - o1)
+        else:
+            if o1:
+                a1 -= o1
+            if o1 >= 0 and a1.min() <= -math.pi:  # o1 = 0 too: atan2(-0.0, y < 0) is -pi, wrapped to pi
+                np.add(a1, 2 * math.pi, out=a1, where=a1 <= -math.pi)
+            if o1 < 0 and a1.max() > math.pi:
+                np.subtract(a1, 2 * math.pi, out=a1, where=a1 > math.pi)
+        np.subtract(a2, o2, out=out[..., 1])
         return out
 
     def _floor_xy(self, points, name: str, floor_tol: float) -> np.ndarray:
@@ -389,9 +473,8 @@ class ProjectorModel:
         """
         theta = self._theta(theta)
         a1, a2 = self._actual(theta)
+        self._check_tilt(a2, "spot_jacobian")
         c2 = np.cos(a2)
-        self._require_floor_hit(c2, "spot_jacobian", a2)
-        self._warn_beyond_limit(a2, "spot_jacobian")
         s1, c1, s2 = np.sin(a1), np.cos(a1), np.sin(a2)
         k = self.h / c2
         J = np.zeros(theta.shape[:-1] + (3, 2))
@@ -491,11 +574,21 @@ class ProjectorModel:
 
     def spot_world(self, theta) -> np.ndarray:
         """Spot in ``{W}`` (..., 3) for joint angles ``theta``."""
-        return self.to_world(self.spot(theta))
+        p = self.spot(theta)  # finite, checked: no second validation
+        p -= self.t_0_W
+        return p @ self.R_0_W
 
     def ik_world(self, points_W, **kw) -> np.ndarray:
         """Joint angles (..., 2) for world floor points (seed eqs. 1 and 8)."""
-        p0 = self.to_projector(points_W)
+        p = points_W
+        if (type(p) is np.ndarray and p.dtype == np.float64 and p.ndim and p.shape[-1] in (2, 3)
+                and math.isfinite(np.add.reduce(p, axis=None))):
+            # checked here so a NaN is named as points_W (one sum, see _theta); ^0P = R ^WP + t,
+            # a floor point (z_W = 0) through the first two columns of R only
+            p0 = p @ self.R_0_W[:, :p.shape[-1]].T
+            p0 += self.t_0_W
+        else:
+            p0 = self.to_projector(points_W)
         return self.ik(p0, floor_tol=kw.pop("floor_tol", 1e-6 + 1e-6 * self.H), **kw)
 
     def joint_rates_world(self, theta, velocity_W, **kw) -> np.ndarray:
