@@ -15,9 +15,23 @@ estimation in robotics", arXiv:1812.01537, eqs. 143-146).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 __all__ = ["log_so3", "exp_so3", "left_jacobian", "left_jacobian_inverse", "skew3"]
+
+
+def _coefficients1(w) -> tuple[np.ndarray, float, float, float]:
+    """One rotation vector (3,): ``[w]x``, ``t``, ``sin t / t``, ``(1 - cos t) / t^2`` with Python floats (a
+    refinement step takes a handful of single-vector maps; NumPy's per-call overhead would dominate)."""
+    x, y, z = float(w[0]), float(w[1]), float(w[2])
+    t = math.sqrt(x * x + y * y + z * z)
+    if t < 1e-4:
+        a, b = 1.0 - t * t / 6.0, 0.5 - t * t / 24.0
+    else:
+        a, b = math.sin(t) / t, 2.0 * (math.sin(t / 2) / t) ** 2
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]]), t, a, b
 
 
 def skew3(v: np.ndarray) -> np.ndarray:
@@ -63,6 +77,9 @@ def log_so3(R: np.ndarray) -> np.ndarray:
 def exp_so3(w: np.ndarray) -> np.ndarray:
     """Rotation matrices (..., 3, 3) of rotation vectors (..., 3), rad (Rodrigues, series below 1e-4 rad)."""
     w = np.asarray(w, dtype=float)
+    if w.shape == (3,):
+        K, _, a, b = _coefficients1(w)
+        return np.eye(3) + a * K + b * (K @ K)
     th = np.linalg.norm(w, axis=-1)[..., None, None]
     K = skew3(w)
     small = th < 1e-4
@@ -75,6 +92,10 @@ def exp_so3(w: np.ndarray) -> np.ndarray:
 def left_jacobian(w: np.ndarray) -> np.ndarray:
     """``J_l(w)`` (..., 3, 3): ``I + (1 - cos t)/t^2 [w]x + (t - sin t)/t^3 [w]x^2`` (Sola et al. eq. 145)."""
     w = np.asarray(w, dtype=float)
+    if w.shape == (3,):
+        K, t, a, b = _coefficients1(w)      # (1 - cos t)/t^2 = b, (t - sin t)/t^3 = (1 - a)/t^2
+        c = 1.0 / 6.0 - t * t / 120.0 if t < 1e-4 else (1.0 - a) / (t * t)
+        return np.eye(3) + b * K + c * (K @ K)
     th = np.linalg.norm(w, axis=-1)[..., None, None]
     K = skew3(w)
     small = th < 1e-4

@@ -104,7 +104,7 @@ def _closure(Tg, Tc, X, Y):
 
 
 def _closure_jacobian(Tg, Tc, X, e, wx, wy):
-    """d(closure residual)/d(X's and Y's parameters): two (N, 6, 6) blocks, columns (rx, ry, rz, tx, ty, tz).
+    """d(closure residual)/d(X's and Y's parameters), (N, 6, 12): columns X's then Y's (rx, ry, rz, tx, ty, tz).
 
     With ``R_X = exp(w_X) R_X0`` and ``R_Y = exp(w_Y) R_Y0`` (:func:`_perturb`), ``E = R_g R_X R_c R_Y^T``
     and ``e = log E``: ``exp(w + d) = exp(J_l(w) d) exp(w)`` moves ``E`` to ``exp(R_g J_l(w_X) d) E``
@@ -114,15 +114,14 @@ def _closure_jacobian(Tg, Tc, X, e, wx, wy):
     """
     Rg = Tg[:, :3, :3]
     Jinv = left_jacobian_inverse(e)
-    JX = np.zeros((len(Tg), 6, 6))
-    JY = np.zeros((len(Tg), 6, 6))
+    J = np.zeros((len(Tg), 6, 12))
     JlX = left_jacobian(wx)
-    JX[:, :3, :3] = Jinv @ Rg @ JlX
-    JX[:, 3:, :3] = -Rg @ skew3(Tc[:, :3, 3] @ X[:3, :3].T) @ JlX
-    JX[:, 3:, 3:] = Rg
-    JY[:, :3, :3] = -np.swapaxes(Jinv, 1, 2) @ left_jacobian(wy)
-    JY[:, 3:, 3:] = -np.eye(3)
-    return JX, JY
+    J[:, :3, :3] = Jinv @ (Rg @ JlX)
+    J[:, 3:, :3] = -Rg @ (skew3(Tc[:, :3, 3] @ X[:3, :3].T) @ JlX)
+    J[:, 3:, 3:6] = Rg
+    J[:, :3, 6:9] = -np.swapaxes(Jinv, 1, 2) @ left_jacobian(wy)
+    J[:, 3:, 9:] = -np.eye(3)
+    return J
 
 
 def _refine_closure(Tg, Tc, X0, Y0, w, sr: float, st: float, *, jac: str = "analytic"):
@@ -134,6 +133,7 @@ def _refine_closure(Tg, Tc, X0, Y0, w, sr: float, st: float, *, jac: str = "anal
     or ``"2-point"`` (finite differences, the path before the analytic Jacobian; kept for the tests).
     """
     cache = {}
+    wj = w[:, :, None]
 
     def fun(p):
         X, Y = _perturb(X0, p["X"]), _perturb(Y0, p["Y"])
@@ -145,8 +145,7 @@ def _refine_closure(Tg, Tc, X0, Y0, w, sr: float, st: float, *, jac: str = "anal
         # the solver asks for the Jacobian right after the residuals at the same point: reuse X and e
         if cache.get("key") != (p["X"].tobytes(), p["Y"].tobytes()):
             fun(p)
-        JX, JY = _closure_jacobian(Tg, Tc, cache["X"], cache["e"], p["X"][:3], p["Y"][:3])
-        return {"X": JX * w[:, :, None], "Y": JY * w[:, :, None]}
+        return _closure_jacobian(Tg, Tc, cache["X"], cache["e"], p["X"][:3], p["Y"][:3]) * wj
 
     prob = Problem()
     prob.add_block("X", np.r_[0, 0, 0, X0[:3, 3]], labels=[f"X.{k}" for k in _LABELS],
