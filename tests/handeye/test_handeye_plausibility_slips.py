@@ -95,11 +95,12 @@ def test_handeye_errors_name_the_files(tmp_path, capsys, poses):
     code = main(["handeye", "robot-world", str(a), str(b), "--out", str(tmp_path / "b")])
     line = _one_line(capsys.readouterr().err)
     assert code == 2 and "g.csv has 16 poses but" in line and "c.csv has 10" in line
-    # target times outside the robot stream: the interpolation names both files
+    # target times outside the robot stream: no overlap to crop to, the pairing names both files and the spans
     late = write_poses_csv(tmp_path / "late.csv", Tc, t + 100.0)
     code = main(["handeye", "calibrate", str(EX / "gripper_poses.csv"), str(late), "--out", str(tmp_path / "c")])
     line = _one_line(capsys.readouterr().err)
-    assert code == 2 and "gripper_poses.csv resampled at the times of" in line and "late.csv" in line
+    assert code == 2 and "gripper_poses.csv paired by time with" in line and "late.csv" in line
+    assert "overlap in 0 camera sample(s)" in line and "--clock-offset" in line
     # rotations about one axis only: degenerate, named with the files
     from robocal.geometry import matrix_from_rotvec, transform_from
 
