@@ -9,7 +9,9 @@
   through its rig's workflow steps, written atomically into ``DIR/<id>/``,
   failures as one-line rows, ``resume``;
 * :mod:`._fleet` -- :func:`fleet_summary` and the fleet report
-  (``fleet.json``, ``fleet.html``).
+  (``fleet.json``, ``fleet.html``);
+* :mod:`._simulate_fleet` -- :func:`simulate_fleet`: a simulated fleet with
+  planted faults (``robocal <rig> simulate --fleet N``).
 
 Names are imported from their submodule on first use (PEP 562), so that
 ``robocal --help`` and the Monte Carlo helper's serial path import no Dask.
@@ -25,6 +27,7 @@ _EXPORTS = {
     **dict.fromkeys(("BatchEntry", "load_manifest"), "_manifest"),
     **dict.fromkeys(("BatchOutcome", "run_batch", "dataset_complete"), "_run"),
     **dict.fromkeys(("fleet_summary", "build_fleet_report", "write_fleet"), "_fleet"),
+    **dict.fromkeys(("simulate_fleet", "SimulatedFleet"), "_simulate_fleet"),
 }
 
 __all__ = list(_EXPORTS)

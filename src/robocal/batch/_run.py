@@ -126,7 +126,7 @@ def _one_line(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {exc}".splitlines()[0]
 
 
-def _calibrate_into(wf, entry, folder: Path, load_options, calibrate_options, accept_implausible):
+def _calibrate_into(wf, entry, folder: Path, load_options, calibrate_options, accept_implausible, reports=True):
     """The rig's steps, as ``robocal <rig> calibrate`` runs them (``robocal.cli._workflow.calibrate_files``)."""
     from robocal.io import hash_inputs, write_result
 
@@ -138,7 +138,7 @@ def _calibrate_into(wf, entry, folder: Path, load_options, calibrate_options, ac
         result = wf.step("to_result")(cal, inp)
         if not result.inputs:
             result.inputs = hash_inputs(paths)
-        report = wf.step("build_report")(result, base_dir=folder) if wf.build_report is not None else None
+        report = wf.step("build_report")(result, base_dir=folder) if wf.build_report is not None and reports else None
     except RobocalError as exc:
         if exc.source is None and paths:
             raise exc.with_source(" + ".join(map(str, paths))) from None
@@ -153,7 +153,7 @@ def _calibrate_into(wf, entry, folder: Path, load_options, calibrate_options, ac
 
 
 def calibrate_dataset(wf, entry, out_dir, *, load_options=None, calibrate_options=None,
-                      accept_implausible: bool = False, command: str = "robocal batch") -> dict:
+                      accept_implausible: bool = False, command: str = "robocal batch", reports: bool = True) -> dict:
     """Calibrate one data set into ``out_dir/<id>`` (atomically, see the module docstring); return its row.
 
     Runs on a worker. Never raises for the data set's own errors: they are
@@ -180,7 +180,8 @@ def calibrate_dataset(wf, entry, out_dir, *, load_options=None, calibrate_option
         (staging / INCOMPLETE).write_text(f"robocal: data set {entry.id} of a batch is being calibrated\n",
                                           encoding="utf-8")
         folder.write("running")
-        result = _calibrate_into(wf, entry, staging, load_options or {}, calibrate_options or {}, accept_implausible)
+        result = _calibrate_into(wf, entry, staging, load_options or {}, calibrate_options or {}, accept_implausible,
+                                 reports)
         row["residual_rms"] = result.residual_rms
         folder.close("complete")
     except Exception as exc:  # noqa: BLE001 - one data set's failure is its row, never the batch's end
@@ -237,7 +238,7 @@ def _completed(executor, futures):
 
 
 def run_batch(wf, entries, out_dir, *, executor=None, resume: bool = False, accept_implausible: bool = False,
-              progress: bool = False, fleet: bool = True, echo=None) -> BatchOutcome:
+              progress: bool = False, fleet: bool = True, reports: bool = True, echo=None) -> BatchOutcome:
     """Calibrate every data set of ``entries`` (:func:`~robocal.batch.load_manifest`) into ``out_dir/<id>``.
 
     Parameters
@@ -256,6 +257,10 @@ def run_batch(wf, entries, out_dir, *, executor=None, resume: bool = False, acce
         As ``--accept-implausible`` of ``robocal <rig> calibrate``.
     fleet : bool
         Write ``fleet.json`` / ``fleet.html`` over every complete data set.
+    reports : bool
+        Write each data set's ``report.html`` (its figures are most of a
+        cheap calibration's time; ``robocal report DIR/<id>/result.json``
+        builds it later).
     echo : callable, optional
         Gets one line per failed data set as it fails.
 
@@ -292,7 +297,7 @@ def run_batch(wf, entries, out_dir, *, executor=None, resume: bool = False, acce
 
     def kwargs(e):
         return dict(load_options=plans[e.id][0], calibrate_options=plans[e.id][1],
-                    accept_implausible=accept_implausible)
+                    accept_implausible=accept_implausible, reports=reports)
 
     if executor is None:
         for e in _progress(todo, desc=f"batch {wf.name}", total=len(todo), enabled=progress):

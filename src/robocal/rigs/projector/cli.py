@@ -95,6 +95,7 @@ RIG = Workflow(
     build_report="robocal.rigs.projector.report:build_report",
     summary=f"{_W}:summary",
     demo=f"{_W}:demo",
+    fleet="robocal.rigs.projector.fleet:fleet_member",
     simulate_help="write a simulated calibration input (with its ground truth)",
     simulate_description=("Writes OUT/projector.yaml: projector A of the seed's room, N floor points with\n"
                           "world noise and the joint angles read there, and a 'truth' section (the true\n"
