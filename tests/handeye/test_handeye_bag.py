@@ -138,6 +138,8 @@ def test_one_line_errors(bags, tmp_path, capsys):
     assert "--images read a recording: give it with --bag FILE" in _one_line_error(code, err)
     code, _, err = _run(["handeye", "calibrate", "--out", tmp_path / "nothing"], capsys)
     assert "give two pose lists" in _one_line_error(code, err)
+    code, _, err = _run(["handeye", "calibrate", bags.target, "--out", tmp_path / "one"], capsys)
+    assert "one pose list given" in _one_line_error(code, err)
 
 
 def test_no_board_found_and_another_clock(bags, tmp_path):

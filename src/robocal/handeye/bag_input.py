@@ -40,8 +40,6 @@ CLOCK_MISMATCH = 0.1
 #: Message types ``--target-poses`` takes (the target in the camera frame).
 POSE_TYPES = ("geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped",
               "geometry_msgs/msg/TransformStamped")
-_BAG_OPTIONS = ("--base", "--gripper", "--images", "--camera-info", "--camera", "--target", "--target-poses",
-                "--every")
 
 
 @dataclass

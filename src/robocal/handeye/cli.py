@@ -93,7 +93,8 @@ HANDEYE = Workflow(
                     "views a target on the gripper"),
     ),
     simulate_examples=("robocal handeye simulate --out handeye-sim --seed 1",),
-    calibrate_help="X = T_gripper_cam (eye-in-hand) or T_base_cam (eye-to-hand) from two pose lists",
+    calibrate_help="X = T_gripper_cam (eye-in-hand) or T_base_cam (eye-to-hand) from two pose lists, or from a "
+                   "ROS 1 / ROS 2 / MCAP recording (--bag: tf + images or a target-pose topic)",
     input_arguments=_PAIR_OR_BAG,
     calibrate_options=(*_SHARED, _CLOCK, *_BAG),
     calibrate_examples=(f"robocal handeye calibrate {EXAMPLES}/gripper_poses.csv {EXAMPLES}/target_poses.csv "
