@@ -98,6 +98,12 @@ def test_a_target_pose_topic_instead_of_images(bags):
     res, _ = calibrate(pair, progress=False)
     # 1 mrad / 0.2 mm of noise per axis on each published pose: X to ~0.1 mm; within 3 sigma (6 components)
     _within_3_sigma(res.X_pose, truth.X)
+    # the same poses with their covariance (ROS order: x, y, z, then rotations): rotation / translation stds
+    # read in the right places, every 2nd message taken
+    pair = load_bag_pair(truth.path, base="base_link", gripper="tool0", target_pose_topic="/camera/target_pose_cov",
+                         every=2, progress=False)
+    assert len(pair.T_cam_target) == 6 and np.allclose(pair.pose_sigmas, [1e-3, 2e-4], rtol=1e-12)
+    assert "weighted by their covariance" in str(pair.diagnostics["pose_files"])
 
 
 def test_the_command_eye_to_hand(bags, tmp_path, capsys):

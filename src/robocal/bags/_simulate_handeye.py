@@ -92,6 +92,14 @@ def _pose_stamped(w: _Writer, stamp_ns: int, T: np.ndarray):
     return w.msg("geometry_msgs/msg/PoseStamped", header=w.header(stamp_ns, "camera_optical"), pose=pose)
 
 
+def _pose_with_covariance(w: _Writer, stamp_ns: int, T: np.ndarray, noise):
+    """``geometry_msgs/PoseWithCovarianceStamped``: the pose and its covariance, ROS order (x, y, z, rx, ry, rz)."""
+    pose = _pose_stamped(w, stamp_ns, T).pose
+    cov = np.diag([noise[1] ** 2] * 3 + [noise[0] ** 2] * 3).ravel()
+    return w.msg("geometry_msgs/msg/PoseWithCovarianceStamped", header=w.header(stamp_ns, "camera_optical"),
+                 pose=w.msg("geometry_msgs/msg/PoseWithCovariance", pose=pose, covariance=cov))
+
+
 def _smooth_station(t: np.ndarray, n: int, move: float, dwell: float) -> np.ndarray:
     """The station coordinate u in [0, n-1] at times ``t`` [s]: dwell at station k, then a smoothstep to k+1."""
     period = move + dwell
@@ -132,7 +140,8 @@ def simulate_handeye_recording(path, *, format: str = "rosbag1", setup: str = "e
     pose_topic : bool
         Also write ``/camera/target_pose`` (``geometry_msgs/PoseStamped``, frame ``camera_optical``): the
         board's pose in the camera at each image stamp, as a user's detector publishes it, with
-        ``pose_noise`` = (rotation [rad], translation [m]) Gaussian noise per axis.
+        ``pose_noise`` = (rotation [rad], translation [m]) Gaussian noise per axis; and the same poses
+        with that covariance on ``/camera/target_pose_cov`` (``PoseWithCovarianceStamped``).
     camera_clock_offset : float
         Seconds added to the camera topics' header stamps.
     compress : bool
@@ -222,6 +231,9 @@ def simulate_handeye_recording(path, *, format: str = "rosbag1", setup: str = "e
                 events.append((recv + 1, len(events), lambda s=int(s), k=k, recv=recv: w.write(
                     "/camera/target_pose", "geometry_msgs/msg/PoseStamped", recv + 1, _pose_stamped(
                         w, s + off, T_pose_msg[k]))))
+                events.append((recv + 1, len(events), lambda s=int(s), k=k, recv=recv: w.write(
+                    "/camera/target_pose_cov", "geometry_msgs/msg/PoseWithCovarianceStamped", recv + 1,
+                    _pose_with_covariance(w, s + off, T_pose_msg[k], pose_noise))))
         for _, _, fn in sorted(events, key=lambda e: (e[0], e[1])):
             fn()
     X, Y = sim.X, sim.Y @ centre
