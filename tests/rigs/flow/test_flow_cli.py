@@ -76,8 +76,19 @@ def test_simulate_frames_then_odometry(tmp_path, capsys):
     assert code == 0 and "scikit-image photograph 'grass'" in text
     with np.load(out / "frames.npz") as z:
         assert z["frames"].shape == (3, 241, 64, 64) and z["frames"].dtype == np.uint8
+    # written uncompressed, so the reader memory-maps the frames instead of inflating them
+    from robocal.rigs.flow.log import read_frames_npz
+
+    assert isinstance(read_frames_npz(out / "frames.npz")["frames"], np.memmap)
     code, text, _ = _run(["flow", "odometry", str(out / "run.yaml"), "--refine", "lk", "--out", str(tmp_path / "o"), "--no-progress"], capsys)
     assert code == 0
+    # --no-report: the trajectory and the result now, the report drawn from the result later
+    code, text, _ = _run(["flow", "odometry", str(out / "run.yaml"), "--no-report", "--out", str(tmp_path / "n"),
+                          "--no-progress"], capsys)
+    assert code == 0 and "ATE" in text and "report.html" not in text
+    assert (tmp_path / "n" / "trajectory.csv").is_file() and not (tmp_path / "n" / "report.html").exists()
+    code, _, _ = _run(["flow", "report", str(tmp_path / "n" / "result.json"), "--out", str(tmp_path / "r")], capsys)
+    assert code == 0 and (tmp_path / "r" / "report.html").stat().st_size > 10_000
 
 
 def _copy_loop(tmp_path):

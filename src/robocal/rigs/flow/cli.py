@@ -108,9 +108,14 @@ RIG = Workflow(
                 Option("--no-robust", action="store_true", help="do not drop disagreeing sensors"),
                 Option("--integration", default="exact", choices=("exact", "euler"),
                        help="euler = the seed's eq. 12 literally"),
+                Option("--no-report", action="store_true",
+                       help="write trajectory.csv and result.json only (no report.html: 'robocal flow report "
+                            "OUT/result.json' draws it later); for batches of logs, about 2 s less a log"),
                 *_RUN_COMMAND_OPTIONS,
             ),
             examples=("robocal flow odometry examples/flow/loop/run.yaml --out flow-odo",
+                      "robocal flow odometry flow-sim/run.yaml --no-report --out flow-odo   (report later: "
+                      "robocal flow report flow-odo/result.json --out flow-odo-report)",
                       "robocal flow odometry examples/flow/frames/run.yaml --subpixel quarter --out flow-odo-frames",
                       "robocal flow odometry flow-sim/run.yaml --refine lk --out flow-odo"),
         ),
