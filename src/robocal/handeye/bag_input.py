@@ -308,3 +308,28 @@ def _recording(rec, chain, base, gripper, topic, n_topic, every, n_used, clocks,
         "stamps": f"robot poses interpolated at the {what}s' header stamps; receive times only compared",
         "receive_minus_header_s": {what: clocks[0], "tf": clocks[1]},
         "largest_tf_gap_s": float(gap.max()) if len(gap) else None}}
+
+
+def report_section(rep, diagnostics: dict) -> None:
+    """The report's section on where the poses came from: the recording (file, frames, tf chain, stamps,
+    clocks) when there is one, and one row per view (its image, RMS, ambiguity, pose stds, tf gap)."""
+    rec, views = diagnostics.get("recording"), diagnostics.get("views")
+    s = rep.section("Recording" if rec else "Views")
+    if rec:
+        clocks = rec.get("receive_minus_header_s") or {}
+        rows = [("file", rec["file"]), ("T_base_gripper", f"tf {rec['base']} -> {rec['gripper']}"),
+                ("tf chain", "; ".join(rec["tf_chain"])), ("topic", rec["topic"]),
+                ("frames used", f"{rec['used']} of {rec['messages']}"
+                 + (f" (every {rec['every']})" if rec["every"] > 1 else "")),
+                ("stamps", rec["stamps"]),
+                ("receive - header [ms]", ", ".join(f"{k}: {1e3 * v:.1f}" for k, v in clocks.items())),
+                ("largest tf gap [ms]", "" if rec["largest_tf_gap_s"] is None else
+                 f"{1e3 * rec['largest_tf_gap_s']:.1f}")]
+        s.table([{"quantity": k, "value": v} for k, v in rows], ["quantity", "value"])
+    if views:
+        s.table([{"view": v["image"], "pose": v["pose"], "RMS [px]": v["rms_px"], "ambiguity": v["ambiguity"],
+                  "rotation std [mrad]": 1e3 * v["rotation_std_rad"],
+                  "translation std [mm]": 1e3 * v["translation_std_m"],
+                  **({"tf gap [ms]": 1e3 * v["tf_gap_s"]} if "tf_gap_s" in v else {})} for v in views],
+                digits=4, caption="each view's target pose (planar PnP): reprojection RMS, ambiguity (RMS of the "
+                                  "best / second pose), first-order std used as its weight")

@@ -465,6 +465,10 @@ def build_report(result, *, base_dir=None):
             ["quantity", "value"], digits=4)
     s.text(d.get("convention", ""))
     s.diagnostics(result.warnings)
+    if d.get("recording") or d.get("views"):  # where the poses came from (a recording; images)
+        from robocal.handeye.bag_input import report_section
+
+        report_section(rep, d)
     cl = d.get("closure_residuals")
     if cl:
         fig, ax = new_figure(1, 2, size=(10, 3.2))
