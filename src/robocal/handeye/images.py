@@ -17,7 +17,7 @@ import numpy as np
 
 from robocal.diagnostics import Diagnostic
 
-__all__ = ["AMBIGUITY_LIMIT", "CONDITION_FACTOR", "ViewPoses", "view_poses", "pose_sigmas_of",
+__all__ = ["AMBIGUITY_LIMIT", "CONDITION_FACTOR", "ViewPoses", "view_poses", "view_pose", "pose_sigmas_of",
            "simulate_image_files"]
 
 #: rms_best / rms_second of the two planar PnP poses above which a view is ambiguous (0: clear, 1: a tie)
@@ -52,7 +52,7 @@ class ViewPoses:
 
 def view_poses(images, camera, target, *, names=None) -> ViewPoses:
     """Camera poses of ``target`` in ``images`` (paths or arrays), see the module docstring."""
-    from robocal.camera import detect_targets, pnp_covariance, solve_pnp_planar
+    from robocal.camera import detect_targets
     from robocal.errors import DegenerateGeometryError, NotEnoughDataError
 
     images = list(images)
@@ -64,21 +64,11 @@ def view_poses(images, camera, target, *, names=None) -> ViewPoses:
     missing = dict(dets.rejected)
     for d in dets.views:
         try:
-            cand = solve_pnp_planar(camera, d.object_points, d.image_points)
-            best = cand.best
-            n = len(d.object_points)
-            sigma = max(best.rms_px * np.sqrt(2 * n / max(2 * n - 6, 1)), MIN_SIGMA_PX)
-            cov = pnp_covariance(camera, d.object_points, best.T_cam_obj, sigma)
+            T, cov, rms, amb = view_pose(camera, d.object_points, d.image_points)
         except DegenerateGeometryError as exc:
             missing[d.name] = f"pose not determined ({exc.message})"
             continue
-        amb = cand.ambiguity
-        if len(cand) > 1:
-            # both IPPE poses refined into the same one: nothing to choose between
-            R2 = cand[1].T_cam_obj[:3, :3] @ best.T_cam_obj[:3, :3].T
-            if np.arccos(np.clip((np.trace(R2) - 1) / 2, -1, 1)) < np.deg2rad(1.0):
-                amb = 0.0
-        rows.append((d.name, pos[d.name], best.T_cam_obj, cov, best.rms_px, amb))
+        rows.append((d.name, pos[d.name], T, cov, rms, amb))
     if len(rows) < 3:
         raise NotEnoughDataError(f"the target's pose was found in {len(rows)} of {len(images)} images; hand-eye "
                                  "calibration needs at least 3")
@@ -107,6 +97,30 @@ def view_poses(images, camera, target, *, names=None) -> ViewPoses:
                                 + "; ".join(f"{k}: {v}" for k, v in list(missing.items())[:6]),
                                 indices=tuple(pos[k] for k in missing if k in pos)))
     return ViewPoses(nm, np.array(idx), np.array(T), C, np.array(rms), amb, sig, missing, warns)
+
+
+def view_pose(camera, object_points, image_points):
+    """One view's target pose from its corners: ``(T_cam_target, cov (6, 6), rms_px, ambiguity)``.
+
+    Both planar PnP poses (IPPE + LM), the better kept; its first-order covariance with the pixel noise
+    = the view's reprojection RMS corrected for the 6 pose parameters, floored at :data:`MIN_SIGMA_PX`;
+    ``ambiguity`` rms_best / rms_second (0 when both refine into one pose). Raises
+    :class:`~robocal.errors.DegenerateGeometryError` when the pose is not determined.
+    """
+    from robocal.camera import pnp_covariance, solve_pnp_planar
+
+    cand = solve_pnp_planar(camera, object_points, image_points)
+    best = cand.best
+    n = len(object_points)
+    sigma = max(best.rms_px * np.sqrt(2 * n / max(2 * n - 6, 1)), MIN_SIGMA_PX)
+    cov = pnp_covariance(camera, object_points, best.T_cam_obj, sigma)
+    amb = cand.ambiguity
+    if len(cand) > 1:
+        # both IPPE poses refined into the same one: nothing to choose between
+        R2 = cand[1].T_cam_obj[:3, :3] @ best.T_cam_obj[:3, :3].T
+        if np.arccos(np.clip((np.trace(R2) - 1) / 2, -1, 1)) < np.deg2rad(1.0):
+            amb = 0.0
+    return best.T_cam_obj, cov, best.rms_px, amb
 
 
 def pose_sigmas_of(view: ViewPoses) -> np.ndarray:
