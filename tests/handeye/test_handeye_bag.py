@@ -179,6 +179,15 @@ def test_tf_holes_clocks_and_frames_outside_the_tf_are_named(bags):
     assert "2 image(s) stamped outside the tf span" in codes["frames_outside_tf"], codes
     assert "-1970 ms for the images, 2 ms for tf" in codes["clock_mismatch"], codes
     assert len(pair.T_base_gripper) == 3
+    # the offset given (--clock-offset -2): every frame paired with the robot pose of its true time
+    pair = load_bag_pair(ahead.path, base="base_link", gripper="tool0", images="/camera/image_raw",
+                         target=bags.target, clock_offset="-2.0", progress=False)
+    assert not pair.warnings and pair.diagnostics["recording"]["clock_offset_s"] == -2.0
+    err = np.array([transform_error(a, b) for a, b in zip(pair.T_base_gripper, ahead.T_base_gripper)])
+    assert len(err) == 5 and err[:, 0].max() < 1e-4 and err[:, 1].max() < 3e-5, err
+    with pytest.raises(InputError, match="--clock-offset: auto is not estimated from a recording"):
+        load_bag_pair(ahead.path, base="base_link", gripper="tool0", images="/camera/image_raw",
+                      target=bags.target, clock_offset="auto", progress=False)
 
 
 def test_the_example_recording():

@@ -70,7 +70,7 @@ def _given(options: dict) -> list[str]:
 
 def load_bag_pair(bag=None, gripper_poses=None, target_poses=None, *, base=None, gripper=None, images=None,
                   camera_info=None, camera=None, target=None, target_pose_topic=None, every=None,
-                  progress: bool = True, **_) -> BagPosePair:
+                  clock_offset="none", progress: bool = True, **_) -> BagPosePair:
     """``T_base_gripper`` and ``T_cam_target`` of the frames of a recording (module docstring).
 
     Parameters
@@ -92,6 +92,10 @@ def load_bag_pair(bag=None, gripper_poses=None, target_poses=None, *, base=None,
         Instead of ``images``: a topic of the target's pose in the camera.
     every : int
         Take every ``every``-th frame (default 1).
+    clock_offset : "none" or seconds
+        Added to the frames' header stamps to put them on the tf's clock (a camera stamping on its own
+        clock, ``robocal bag inspect`` shows the offsets). ``"auto"`` (estimated from two dense pose
+        streams, :mod:`robocal.handeye.clock`) is refused: a recording's frames are too sparse for it here.
     """
     if bag is None:
         if gripper_poses is None and target_poses is None and not _given(
@@ -113,6 +117,13 @@ def load_bag_pair(bag=None, gripper_poses=None, target_poses=None, *, base=None,
     every = 1 if every is None else int(every)
     if every < 1:
         raise InputError(f"must be >= 1, got {every}", source="--every")
+    from robocal.handeye.clock import parse_clock_offset
+
+    mode = parse_clock_offset(clock_offset)
+    if mode == "auto":
+        raise InputError("auto is not estimated from a recording's frames: give the offset in seconds (the "
+                         "frames' header stamps + SECONDS = the tf's clock) or none", source="--clock-offset")
+    offset_ns = 0 if mode == "none" else int(round(float(mode) * 1e9))
     if (images is None) == (target_pose_topic is None):
         raise InputError("give the camera's view of the target: --images TOPIC (with --target) or --target-poses "
                          "TOPIC, one of the two (robocal bag inspect FILE lists the topics)", source=str(bag))
@@ -125,9 +136,14 @@ def load_bag_pair(bag=None, gripper_poses=None, target_poses=None, *, base=None,
                              f"the base); tf frames: {', '.join(tree.frames[:20])}", source=str(bag))
         chain = _chain(tree, base, gripper)
         if images is not None:
-            return _from_images(rec, tree, chain, base, gripper, images, camera_info, camera, target, every,
-                                progress)
-        return _from_pose_topic(rec, tree, chain, base, gripper, target_pose_topic, every, progress)
+            pair = _from_images(rec, tree, chain, base, gripper, images, camera_info, camera, target, every,
+                                offset_ns, progress)
+        else:
+            pair = _from_pose_topic(rec, tree, chain, base, gripper, target_pose_topic, every, offset_ns, progress)
+    pair.diagnostics["recording"]["clock_offset_s"] = offset_ns / 1e9
+    if offset_ns:
+        pair.diagnostics["recording"]["stamps"] += f" (each + the clock offset, {offset_ns / 1e9:+.6f} s)"
+    return pair
 
 
 def _chain(tree, base: str, gripper: str) -> list:
@@ -206,7 +222,7 @@ def _default_camera_info(rec, topic: str) -> str:
                      f"(CameraInfo topics: {', '.join(infos) or 'none'}) or --camera FILE")
 
 
-def _from_images(rec, tree, chain, base, gripper, topic, camera_info, camera, target, every, progress):
+def _from_images(rec, tree, chain, base, gripper, topic, camera_info, camera, target, every, offset_ns, progress):
     from robocal.bags import image_name, images as bag_images, read_camera_info
     from robocal.bags._messages import IMAGE_TYPES
     from robocal.camera import load_camera, load_target
@@ -233,8 +249,8 @@ def _from_images(rec, tree, chain, base, gripper, topic, camera_info, camera, ta
     n_topic = len(stamps)
     stamps, recv = np.asarray(stamps, np.int64)[::every], np.asarray(recv, np.int64)[::every]
     names = [image_name(topic, s) for s in stamps]
-    warns, clocks = _clock_check(chain, recv, stamps, "image")
-    robot, kept, w2, t0 = _robot_at(tree, chain, base, gripper, stamps, names, "image")
+    warns, clocks = _clock_check(chain, recv, stamps + offset_ns, "image")
+    robot, kept, w2, t0 = _robot_at(tree, chain, base, gripper, stamps + offset_ns, names, "image")
     warns += w2
     require_memory(len(kept) * cam.width * cam.height * 3.0, f"{len(kept)} decoded {cam.width}x{cam.height} images "
                    f"of {topic}", source=str(rec.path))
@@ -263,7 +279,7 @@ def _from_images(rec, tree, chain, base, gripper, topic, camera_info, camera, ta
     return pair
 
 
-def _from_pose_topic(rec, tree, chain, base, gripper, topic, every, progress):
+def _from_pose_topic(rec, tree, chain, base, gripper, topic, every, offset_ns, progress):
     from robocal.bags import image_name, read_arrays
 
     topic = rec.topic(topic, POSE_TYPES).name
@@ -274,8 +290,8 @@ def _from_pose_topic(rec, tree, chain, base, gripper, topic, every, progress):
     sel = np.arange(0, n_topic, every)
     stamps, recv = arr.stamps_ns[sel], arr.receive_ns[sel]
     names = [image_name(topic, s) for s in stamps]
-    warns, clocks = _clock_check(chain, recv, stamps, "target pose")
-    robot, kept, w2, t0 = _robot_at(tree, chain, base, gripper, stamps, names, "target pose")
+    warns, clocks = _clock_check(chain, recv, stamps + offset_ns, "target pose")
+    robot, kept, w2, t0 = _robot_at(tree, chain, base, gripper, stamps + offset_ns, names, "target pose")
     warns += w2
     if len(kept) < 3:
         raise NotEnoughDataError(f"topic {topic}: {len(kept)} target pose(s) with a robot pose; hand-eye "

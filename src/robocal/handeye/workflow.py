@@ -88,7 +88,7 @@ def load_pose_pair(gripper_poses=None, target_poses=None, *, bag=None, clock_off
     if bag is not None or target_poses is None or any(v is not None for v in bag_options.values()):
         from robocal.handeye.bag_input import load_bag_pair
 
-        return load_bag_pair(bag, gripper_poses, target_poses, **bag_options)
+        return load_bag_pair(bag, gripper_poses, target_poses, clock_offset=clock_offset, **bag_options)
 
     gripper_poses, target_poses = Path(gripper_poses), Path(target_poses)
     tick = _stages("handeye: read poses", 1)
