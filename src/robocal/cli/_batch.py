@@ -37,6 +37,9 @@ def add_batch_command(sub, rig_names) -> None:
     p.add_argument("--resume", action="store_true",
                    help="keep DIR's earlier batch and skip the data sets it already finished")
     p.add_argument("--no-fleet", action="store_true", help="skip fleet.html / fleet.json")
+    p.add_argument("--no-reports", action="store_true",
+                   help="skip each data set's report.html (its figures are most of a quick calibration's time; "
+                        "'robocal report DIR/<id>/result.json' builds one later)")
     p.add_argument("--accept-implausible", action="store_true", help=ACCEPT_IMPLAUSIBLE_HELP)
     add_out_argument(p)
     p.set_defaults(func=run_batch_command)
@@ -58,6 +61,7 @@ def run_batch_command(args) -> int:
     with open_executor(args.workers, args.scheduler) as ex:
         outcome = run_batch(wf, entries, out, executor=ex, resume=args.resume, progress=True,
                             accept_implausible=args.accept_implausible, fleet=not args.no_fleet,
+                            reports=not args.no_reports,
                             echo=lambda line: print(f"robocal: {line}", file=sys.stderr))
     for path in outcome.files:
         print(f"wrote {path}")
