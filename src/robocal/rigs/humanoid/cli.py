@@ -35,6 +35,7 @@ RIG = Workflow(
     build_report="robocal.rigs.humanoid.report:build_report",
     summary=f"{_WF}:summary",
     demo=f"{_WF}:demo",
+    fleet="robocal.rigs.humanoid.fleet:fleet_member",
     simulate_help="render a simulated run: data-set YAML + PNG images (+ truth)",
     simulate_description="True offsets ~0.5 deg, poses within the joint limits with the board fully visible, joint "
                          "readings quantised to 0.1 deg, rendered images with blur and noise.",

@@ -41,6 +41,7 @@ RIG = Workflow(
     build_report=f"{_LP}.report:build_report",
     summary=f"{_LP}.workflow:summary",
     demo=f"{_LP}.workflow:demo",
+    fleet=f"{_LP}.fleet:fleet_member",
     simulate_help="write simulated FPDP and MCT input files (and hand-eye pose lists)",
     simulate_options=(
         _POSES, _NOISE_FREE,
