@@ -25,8 +25,9 @@ _PAIRS_HELP = ("pose pairs of the closed form's relative motions: all (every pai
 
 #: ``calibrate``'s inputs: the two lists, or none with ``--bag`` (an absent one is ``[]``: no input file).
 _PAIR_OR_BAG = (Option("gripper_poses", type=Path, nargs="?", default=[],
-                       help="T_base_gripper list (CSV/YAML, scalar-last quaternions); none with --bag"),
-                Option("target_poses", type=Path, nargs="?", default=[], help="T_cam_target list (CSV/YAML)"))
+                       help="T_base_gripper list (CSV/YAML, scalar-last quaternions); by default none: --bag"),
+                Option("target_poses", type=Path, nargs="?", default=[],
+                       help="T_cam_target list (CSV/YAML); by default none: --bag"))
 
 #: A recording instead of the lists (robocal.handeye.bag_input); every default None: given or not.
 _BAG = (
