@@ -125,6 +125,23 @@ def test_simulate_calibrate_report_round_trip(name, tmp_path, capsys):
     assert check_page(cal / "report.html", width=1400) == []
 
 
+@pytest.mark.parametrize("name", RIG_NAMES)
+def test_a_declared_fleet_step_writes_a_batch_manifest(name, tmp_path, capsys):
+    """``simulate --fleet`` (a rig with a ``fleet`` step): robot folders holding the inputs, and their manifest."""
+    wf = _workflow(name)
+    if wf.fleet is None:
+        pytest.skip(f"{name} declares no fleet step")
+    from robocal.batch import load_manifest
+
+    sim = tmp_path / "fleet"
+    code, out, err = _run([name, "simulate", "--fleet", "1", *wf.quick_simulate, "--seed", "1", "--out", sim], capsys)
+    assert code == 0, err
+    (entry,) = load_manifest(sim / "fleet.yaml", rig=name)
+    assert entry.id == "robot-000" and [p.name for p in entry.inputs] == list(wf.simulated_inputs)
+    assert all(p.is_file() for p in entry.inputs)
+    assert json.loads((sim / "fleet_truth.json").read_text())["rig"] == name
+
+
 def _example_lines():
     """Every ``calibrate`` example of every rig's help whose input files ship in ``examples/``."""
     import shlex
