@@ -75,10 +75,9 @@ def check_q(q, joint_names) -> np.ndarray:
     """Joint values ``(..., n)``: float64, finite, last axis one value per joint."""
     n = len(joint_names)
     if (type(q) is np.ndarray and q.dtype == np.float64 and q.ndim and q.shape[-1] == n
-            and np.isfinite(np.add.reduce(q, axis=None))):
-        # The common call, a float64 array: O(1) checks and one sum (NaN and +-inf survive a sum; a
-        # finite sum overflowing to inf only sends q to the full check below). Issue 16: a per-element
-        # isfinite mask cost as much as the forward kinematics of a short chain.
+            and (not q.size or (np.minimum.reduce(q, axis=None) > -np.inf and np.maximum.reduce(q, axis=None) < np.inf))):
+        # The common call, a float64 array: O(1) checks and two reductions (a NaN fails both comparisons,
+        # an inf one). Issue 16: a per-element isfinite mask cost as much as the FK of a short chain.
         return q
     arr = check_array(q, "q")
     if arr.ndim == 0 or arr.shape[-1] != n:

@@ -43,19 +43,52 @@ _CONVENTIONS = ("modified", "standard")
 _EX = np.array([1.0, 0.0, 0.0])
 _EZ = np.array([0.0, 0.0, 1.0])
 _EYE34 = np.eye(4)[:3]
+_EYE34_ZERO = (False, False, False, True)
 
 
-def _times_constant(M: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """``M @ K`` for top rows ``M`` (..., 3, 4) and one constant transform ``K`` (4, 4).
+def _combine(terms):
+    """``sum(u * x)`` over (u, x, u_is_zero) terms, skipping zero ``u`` or ``x`` and unit ``x``: (3, 1) columns
+    times scalars or (N,) arrays."""
+    acc = None
+    for u, x, zero in terms:
+        if zero or (isinstance(x, float) and x == 0.0):
+            continue
+        t = u if (isinstance(x, float) and x == 1.0) else u * x
+        acc = t if acc is None else acc + t
+    return np.zeros((3, 1)) if acc is None else acc
 
-    One (3 n, 4) x (4, 4) product instead of n broadcast 4x4 products (``M`` is contiguous here).
+
+def _times_constant(cols: list, K: list, want=(0, 1, 2, 3)) -> list:
+    """Columns of ``M @ K`` for the columns of top rows ``M`` (each (3, N) or (3, 1)) and a constant ``K``
+    (4, 4, as nested lists: no NumPy scalar per entry).
+
+    Column k is ``sum_j M_j K[j, k]`` (plus ``M_3`` for k = 3: K's last row is (0, 0, 0, 1)); exact zeros
+    and ones in K are not multiplied. Elementwise on contiguous columns, no BLAS call (a threaded BLAS on
+    a tall (3 N, 4) product was 20x slower than one thread on a loaded machine).
     """
-    return (M.reshape(-1, 4) @ K).reshape(M.shape)
+    out = []
+    for k in range(4):
+        if k not in want:
+            out.append(None)
+            continue
+        acc = None
+        for j in range(3):
+            w = K[j][k]
+            if w == 0.0:
+                continue
+            t = cols[j] if w == 1.0 else cols[j] * w
+            acc = t if acc is None else acc + t
+        if k == 3:
+            acc = cols[3] if acc is None else acc + cols[3]
+        out.append(np.zeros((3, 1)) if acc is None else acc)
+    return out
 
 
 def _constant_or_none(K):
-    """``None`` for no constant (or the identity), else ``K`` (4, 4): an identity is not multiplied."""
-    return None if K is None or np.array_equal(K, np.eye(4)) else K
+    """``None`` for no constant (or the identity: not multiplied), else ``(K, K as lists, zero columns of its top rows)``."""
+    if K is None or np.array_equal(K, np.eye(4)):
+        return None
+    return K, K.tolist(), tuple(not np.any(K[:3, k]) for k in range(4))
 
 
 @dataclass(frozen=True)
@@ -397,14 +430,20 @@ class DHChain:
 
     def fk(self, q) -> np.ndarray:
         """Tool pose ``T_world_tool`` (..., 4, 4) for joint values ``q`` (..., dof)."""
-        q = self.check_q(q)
+        return self._fk_unchecked(self.check_q(q))
+
+    def _fk_unchecked(self, q: np.ndarray) -> np.ndarray:
+        """:meth:`fk` for ``q`` already validated (float64, finite, (..., dof))."""
+        cols = self._fk_columns(q)
         out = np.empty(q.shape[:-1] + (4, 4))
-        out[..., :3, :] = self._fk_top(q)
-        out[..., 3, :] = (0.0, 0.0, 0.0, 1.0)
+        flat = out.reshape(-1, 4, 4)
+        for k in range(4):
+            flat[:, :3, k] = cols[k].T
+        flat[:, 3, :] = (0.0, 0.0, 0.0, 1.0)
         return out
 
     def _fk_plan(self):
-        """Per-chain constants of :meth:`_fk_top`, built once: the constant factors between joint motions.
+        """Per-chain constants of :meth:`_fk_columns`, built once: the constant factors between joint motions.
 
         Each joint link splits into a constant part and its motion ``Z(theta, d) = Rz(theta) Tz(d)``:
         modified ``A = [Rx(alpha) Tx(a)] Z``, standard ``A = Z [Tx(a) Rx(alpha)]``. Constants between
@@ -427,51 +466,47 @@ class DHChain:
             K = C if self._convention == "standard" else None
         if self._T_tool is not None:
             K = self._T_tool if K is None else K @ self._T_tool
+        # entries: (K, K as lists, zero columns) or None; K is the constant before the motion of link i
         self._plan = (tuple(steps), _constant_or_none(K))
         return self._plan
 
-    def _fk_top(self, q: np.ndarray) -> np.ndarray:
-        """Top three rows of :meth:`fk`, shape (..., 3, 4), for validated ``q`` (internal: no checks).
+    def _fk_columns(self, q: np.ndarray, want=(0, 1, 2, 3)) -> list:
+        """The four columns of the top three rows of :meth:`fk`, each (3, N) or a constant (3, 1).
 
-        Same product as ``T_base @ A_1 @ ... @ A_n @ T_tool`` with the constants folded
-        (:meth:`_fk_plan`) and each motion applied in closed form, ``[c0, c1, c2, c3] @ Z(theta, d) =
-        [c c0 + s c1, c c1 - s c0, c2, c3 + d c2]``: a few elementwise terms per joint instead of a
-        (..., 4, 4) link stack and a batched 4x4 product (issue 16). Equal to that product to round-off.
+        ``q`` is validated, (..., dof), flattened to N configurations. ``want``: the columns the caller
+        reads (the others of the last constant product are skipped, None). Same product as
+        ``T_base @ A_1 @ ... @ A_n @ T_tool`` with the constants folded (:meth:`_fk_plan`) and each motion
+        applied in closed form, ``[c0, c1, c2, c3] @ Z(theta, d) = [c c0 + s c1, c c1 - s c0, c2, c3 + d c2]``,
+        on contiguous columns: a few elementwise terms per joint instead of a (..., 4, 4) stack per link
+        and batched 4x4 products (issue 16); zero and unit factors are not multiplied. Equal to the
+        product to round-off.
         """
         steps, K_end = self._fk_plan()
-        batch = q.shape[:-1]
-        M = None
+        qf = q.reshape(-1, q.shape[-1]) if q.shape[-1] else None  # None: no joint (the loop does not run)
+        cols = None
         for K, j, i in steps:
             lk = self._links[i]
-            if lk.joint == "revolute":
-                theta, d = q[..., j] + lk.theta, lk.d
-            else:
-                theta, d = lk.theta, q[..., j] + lk.d
+            revolute = lk.joint == "revolute"
+            theta, d = (qf[:, j] + lk.theta, lk.d) if revolute else (lk.theta, qf[:, j] + lk.d)
             c, s = np.cos(theta), np.sin(theta)
-            if M is None:  # first motion: the constant before it times Z, built column by column
-                B = _EYE34 if K is None else K[:3]
-                M = np.empty(batch + (3, 4))
-                M[..., :, 0] = np.multiply.outer(c, B[:, 0]) + np.multiply.outer(s, B[:, 1])
-                M[..., :, 1] = np.multiply.outer(c, B[:, 1]) - np.multiply.outer(s, B[:, 0])
-                M[..., :, 2] = B[:, 2]
-                M[..., :, 3] = B[:, 3] + np.multiply.outer(d, B[:, 2])
+            if cols is None:  # first motion: the constant before it times Z
+                B, zero = (_EYE34, _EYE34_ZERO) if K is None else (K[0][:3], K[2])
+                u0, u1, u2, u3 = (B[:, k:k + 1] for k in range(4))
+                cols = [_combine(((u0, c, zero[0]), (u1, s, zero[1]))),
+                        _combine(((u1, c, zero[1]), (-u0, s, zero[0]))), u2,
+                        _combine(((u3, 1.0, zero[3]), (u2, d, zero[2])))]
                 continue
             if K is not None:
-                M = _times_constant(M, K)
-            c, s = np.expand_dims(c, -1), np.expand_dims(s, -1)
-            c0, c1 = M[..., :, 0], M[..., :, 1]
-            n0 = c * c0
-            n0 += s * c1
-            n1 = c * c1
-            n1 -= s * c0
-            c0[...] = n0
-            c1[...] = n1
-            if lk.joint != "revolute" or lk.d != 0.0:  # Tz(0) moves nothing
-                M[..., :, 3] += np.expand_dims(d, -1) * M[..., :, 2]
-        if M is None:  # no joint: a constant pose
-            K = _EYE34 if K_end is None else K_end[:3]
-            return np.array(np.broadcast_to(K, batch + (3, 4)))
-        return M if K_end is None else _times_constant(M, K_end)
+                cols = _times_constant(cols, K[1])
+            c0, c1 = cols[0], cols[1]
+            cols[0] = c0 * c + c1 * s
+            cols[1] = c1 * c - c0 * s
+            if not revolute or lk.d != 0.0:  # Tz(0) moves nothing
+                cols[3] = cols[3] + cols[2] * d
+        if cols is None:  # no joint: a constant pose
+            B = _EYE34 if K_end is None else K_end[0][:3]
+            return [B[:, k:k + 1] for k in range(4)]
+        return cols if K_end is None else _times_constant(cols, K_end[1], want)
 
     def _frames_and_tip(self, q):
         frames = self.fk_all(q)

@@ -1,0 +1,95 @@
+"""Issue 16: the FK/IK fast paths (float64 arrays, checks as reductions) give the seed equations' numbers
+and keep every check the per-element path had."""
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from robocal.errors import InputError, NonFiniteError, SingularConfigurationError
+from robocal.geometry import wrap_angle
+from robocal.rigs.projector.model import NearSingularityWarning, ProjectorModel, UnreachablePointError
+
+
+def reference_spot(m, th):
+    """The previous implementation: seed eq. (6) as h s1 s2 / c2, h c1 s2 / c2."""
+    a1, a2 = th[..., 0] + m.offsets[0], th[..., 1] + m.offsets[1]
+    rho = m.h * np.sin(a2) / np.cos(a2)
+    return np.stack([rho * np.sin(a1), rho * np.cos(a1), np.full_like(rho, -m.H)], axis=-1)
+
+
+def reference_ik(m, p):
+    """The previous implementation: seed eq. (8), minus the offsets, pan through wrap_angle."""
+    x, y = p[..., 0], p[..., 1]
+    return np.stack([wrap_angle(np.arctan2(x, y) - m.offsets[0]), np.arctan2(np.hypot(x, y), m.h) - m.offsets[1]],
+                    axis=-1)
+
+
+@pytest.mark.parametrize("offsets", [(0.0, 0.0), (0.03, -0.02), (-0.04, 0.01)])
+@pytest.mark.parametrize("shape", [(), (1,), (257,), (4, 33)])
+def test_fast_paths_equal_the_seed_equations(offsets, shape):
+    rng = np.random.default_rng(len(shape) + 7 * len(offsets))
+    m = ProjectorModel(H=3.1, d1=0.15, d2=0.04, offsets=offsets, tilt_limit=math.radians(80))
+    th = np.stack([rng.uniform(-math.pi, math.pi, shape), rng.uniform(0.01, m.tilt_limit - 0.05, shape)], axis=-1)
+    f = m.spot(th)
+    # |spot| <= h tan(80 deg) ~ 17 m; tan vs sin/cos and the argument's rounding amplified by 1/c2^2 <= 33:
+    # ~1e-14 relative, so 1e-12 m
+    assert f.shape == shape + (3,) and np.abs(f - reference_spot(m, th)).max() < 1e-12
+    assert np.abs(m.spot_from_chain(th) - f).max() < 1e-12
+    assert np.abs(m.spot_world(th) - m.to_world(reference_spot(m, th))).max() < 1e-12
+    back = m.ik(f)
+    d = back - reference_ik(m, f)
+    d[..., 0] = wrap_angle(d[..., 0])  # pi and -pi are one pan
+    assert back.shape == shape + (2,) and np.abs(d).max() < 1e-13  # a few ulps of pi
+    assert np.all((back[..., 0] > -math.pi) & (back[..., 0] <= math.pi))
+    assert np.abs(m.spot(back) - f).max() < 1e-10  # round trip (spot sensitivity to tilt <= h / c2^2 ~ 100 m/rad)
+    assert np.abs(m.ik(f[..., :2]) - back).max() == 0.0  # 2 columns: the same numbers
+    assert np.abs(m.spot_world(m.ik_world(m.spot_world(th))) - m.spot_world(th)).max() < 1e-10  # through R and t
+
+
+def test_pan_at_minus_pi_is_wrapped_to_pi():
+    m = ProjectorModel(H=3.0)
+    p = np.array([[-0.0, -1.0, -3.0], [0.0, -1.0, -3.0]])  # atan2(-0.0, -1) = -pi
+    assert m.ik(p)[:, 0].tolist() == [math.pi, math.pi]
+
+
+def test_every_check_still_fires_on_float64_arrays():
+    m = ProjectorModel(H=3.0, d1=0.1, offsets=(0.01, 0.0), tilt_limit=math.radians(70))
+    th = np.array([[0.1, 0.2], [0.3, 0.4], [0.5, 0.6]])
+    for col in (0, 1):
+        for bad in (np.nan, np.inf):
+            t = th.copy()
+            t[2, col] = bad
+            for fn in (m.spot, m.spot_from_chain, m.beam_range, m.spot_jacobian, m.pose):
+                with pytest.raises(NonFiniteError, match=r"theta contains NaN or infinity \(first at index \(2, "):
+                    fn(t)
+    t = th.copy()
+    t[1, 1] = math.pi / 2
+    for fn in (m.spot, m.spot_from_chain, m.beam_range, m.spot_jacobian):
+        with pytest.raises(SingularConfigurationError, match=r"horizon .*index \(1,\)"):
+            fn(t)
+    t[1, 1] = math.radians(75)  # beyond the 70 deg limit, below the horizon
+    for fn in (m.spot, m.spot_from_chain):
+        with pytest.warns(NearSingularityWarning, match="beyond the tilt limit"):
+            fn(t)
+    p = m.spot(th)
+    with pytest.raises(InputError, match="floor is z_0"):
+        m.ik(p + [0.0, 0.0, 1e-5])
+    q = p.copy()
+    q[0, 0] = np.nan
+    with pytest.raises(NonFiniteError, match="points"):
+        m.ik(q)
+    with pytest.raises(NonFiniteError, match="points_W"):
+        m.ik_world(np.array([[np.nan, 0.0]]))
+    q[0, 0] = np.inf
+    with pytest.raises(NonFiniteError):
+        m.ik(q, check_reach=False)
+    with pytest.raises(UnreachablePointError, match=r"point\(s\) \[1\]"):
+        m.ik(np.array([[0.1, 0.1], [50.0, 0.0]]))
+    with pytest.warns(NearSingularityWarning, match="nadir"):
+        out = m.ik(np.array([[0.0, 0.0, -3.0], [0.2, 0.3, -3.0]]))
+    assert np.all(np.isfinite(out))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the common case warns of nothing
+        m.spot(th), m.ik(p), m.spot_from_chain(th)
