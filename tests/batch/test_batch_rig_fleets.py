@@ -91,3 +91,20 @@ def test_simulate_fleet_refuses_impossible_counts_and_rigs_without_a_fleet_step(
         simulate_fleet(RIG, tmp_path, 2, np.random.default_rng(0), faults=2, weak=1)
     with pytest.raises(InputError, match="declares no fleet step"):
         simulate_fleet(Workflow(name="bare", help="h"), tmp_path, 2, np.random.default_rng(0))
+
+
+def test_the_demo_fleet_names_its_planted_robot_and_links_its_report(tmp_path):
+    import numpy as np
+
+    from robocal.batch import fleet_demo
+    from robocal.rigs.projector.cli import RIG
+    from robocal.workflow import DemoContext
+
+    # 6 heads (robocal demo runs 8): one planted slip, no weak recording at this size
+    out = fleet_demo(DemoContext(tmp_path / "fleet", np.random.default_rng(3), progress=False), RIG, n=6)
+    truth = json.loads((tmp_path / "fleet" / "sim" / "fleet_truth.json").read_text())
+    (planted,) = [f["id"] for f in truth["faults"]]
+    assert out.passed and out.summary["named"].startswith(f"{planted} (offsets.1 +")
+    assert "tilt encoder zero slipped" in out.summary["planted"]
+    html = "".join(out.sections[0].items)
+    assert '<a href="fleet/fleet.html">' in html and (tmp_path / "fleet" / "fleet.html").is_file()

@@ -11,7 +11,8 @@
 * :mod:`._fleet` -- :func:`fleet_summary` and the fleet report
   (``fleet.json``, ``fleet.html``);
 * :mod:`._simulate_fleet` -- :func:`simulate_fleet`: a simulated fleet with
-  planted faults (``robocal <rig> simulate --fleet N``).
+  planted faults (``robocal <rig> simulate --fleet N``);
+* :mod:`._demo` -- :func:`fleet_demo`: ``robocal demo``'s small fleet.
 
 Names are imported from their submodule on first use (PEP 562), so that
 ``robocal --help`` and the Monte Carlo helper's serial path import no Dask.
@@ -28,6 +29,7 @@ _EXPORTS = {
     **dict.fromkeys(("BatchOutcome", "run_batch", "dataset_complete"), "_run"),
     **dict.fromkeys(("fleet_summary", "build_fleet_report", "write_fleet"), "_fleet"),
     **dict.fromkeys(("simulate_fleet", "SimulatedFleet"), "_simulate_fleet"),
+    **dict.fromkeys(("fleet_demo",), "_demo"),
 }
 
 __all__ = list(_EXPORTS)

@@ -20,7 +20,8 @@ names anyone with probability at most ``FALSE_ALARM``, whatever the fleet's
 size. A robot named leaves the other robots' reference set of that
 parameter and the test is repeated until no one more is named (a forward
 search, Hadi & Simonoff, JASA 88, 1993: a broken robot does not widen the
-band the others are judged by). Screening the reference set by the MAD
+band the others are judged by); so does a weak recording (below) from the
+start. Screening the reference set by the MAD
 instead (Iglewicz & Hoaglin's modified z > 3.5) cuts good robots' tails
 when the MAD of ten is low by chance, and named a good robot in ~9 % of
 such reports. ``s`` is never taken below the median reported std of one
@@ -172,7 +173,21 @@ def fleet_summary(results: dict, *, rig: str | None = None, failed=()) -> dict:
             continue
         own = np.array([np.nan if stds[i] is None else stds[i] * k for i in have])
         judged.append((name, have, x, own, med_std or 0.0, shown, k, med))
-    named = {}
+    weak = []
+    if len(ids) >= MIN_FLEET:
+        for i in ids:
+            if ratios[i]:
+                q = float(np.median(ratios[i]))
+                if q > WEAK:
+                    weak.append({"id": i, "std_ratio": q,
+                                 "text": f"{i}: a weak recording: its reported std is {q:.1f}x the fleet's "
+                                         f"(median over {len(ratios[i])} parameters); record it again "
+                                         "(more views, wider poses)"})
+    weak.sort(key=lambda w: -w["std_ratio"])
+    # a weak recording is judged, but judges no one: its noisy values would widen the others' reference
+    # sets (one at 5x the noise hid a 3 deg slip in a fleet of 8 projectors)
+    weak_ids = {w["id"] for w in weak}
+    named = {name: {j for j, i in enumerate(have) if i in weak_ids} for name, have, *_ in judged}
     while True:  # the forward search (module docstring): at most one round more than robots named
         tests = [(name, j, have[j], t, m, spread, shown, k, med, p)
                  for name, have, x, own, floor, shown, k, med in judged
@@ -181,7 +196,7 @@ def fleet_summary(results: dict, *, rig: str | None = None, failed=()) -> dict:
         p_limit = FALSE_ALARM / max(len(tests), 1)
         grown = False
         for name, j, *_, p_value in tests:
-            if p_value < p_limit and j not in named.setdefault(name, set()):
+            if p_value < p_limit and j not in named[name]:
                 named[name].add(j)
                 grown = True
         if not grown:
@@ -202,17 +217,6 @@ def fleet_summary(results: dict, *, rig: str | None = None, failed=()) -> dict:
                     f"{abs(dev) / spread:.0f} x the fleet's spread ({spread:.2g} {shown}; p = {p_value:.1g}); "
                     f"{std_text}: {why}"})
     standouts.sort(key=lambda s: -s["robust_sigmas"])
-    weak = []
-    if len(ids) >= MIN_FLEET:
-        for i in ids:
-            if ratios[i]:
-                q = float(np.median(ratios[i]))
-                if q > WEAK:
-                    weak.append({"id": i, "std_ratio": q,
-                                 "text": f"{i}: a weak recording: its reported std is {q:.1f}x the fleet's "
-                                         f"(median over {len(ratios[i])} parameters); record it again "
-                                         "(more views, wider poses)"})
-    weak.sort(key=lambda w: -w["std_ratio"])
     return {"schema": "robocal.fleet/1", "rig": rig, "n_robots": len(ids), "ids": ids,
             "thresholds": {"false_alarm": FALSE_ALARM, "p_value": p_limit, "judged": len(tests),
                            "standout_t": _t_limit(p_limit, len(ids)),

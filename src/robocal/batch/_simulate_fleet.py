@@ -90,7 +90,7 @@ class SimulatedFleet:
 
 
 def simulate_fleet(wf, out_dir, n: int, rng: np.random.Generator, *, faults: int | None = None,
-                   weak: int | None = None, progress: bool = False, **options) -> SimulatedFleet:
+                   weak: int | None = None, progress: bool = False, executor=None, **options) -> SimulatedFleet:
     """Simulate ``n`` robots of rig ``wf`` into ``out_dir/robot-<i>/`` with their manifest and truth.
 
     Parameters
@@ -105,6 +105,9 @@ def simulate_fleet(wf, out_dir, n: int, rng: np.random.Generator, *, faults: int
         The fleet's only randomness: spawned once per robot (module docstring).
     faults, weak : int, optional
         Planted faults and weak recordings (default :func:`planted_counts`).
+    executor : Dask Client or concurrent.futures executor, optional
+        Simulate the robots there (:func:`robocal.batch.open_executor`; the
+        workers must see ``out_dir``); the same files as serially.
     **options
         The rig's ``simulate`` options, the same for every robot.
     """
@@ -125,11 +128,18 @@ def simulate_fleet(wf, out_dir, n: int, rng: np.random.Generator, *, faults: int
     choose, *streams = rng.spawn(n + 1)
     picked = choose.choice(n, size=faults + weak, replace=False) if faults + weak else np.array([], int)
     kinds = {int(i): "fault" for i in picked[:faults]} | {int(i): "weak" for i in picked[faults:]}
+    for i in range(n):
+        (out_dir / ids[i]).mkdir(parents=True, exist_ok=True)
+    if executor is None:
+        done = (step(out_dir / ids[i], streams[i], kind=kinds.get(i), progress=False, **options) for i in range(n))
+    else:
+        extra = {"pure": False} if type(executor).__module__.split(".")[0] == "distributed" else {}
+        futures = [executor.submit(step, out_dir / ids[i], streams[i], kind=kinds.get(i), progress=False,
+                                   **options, **extra) for i in range(n)]
+        done = (f.result() for f in futures)
     planted, datasets = {}, []
-    for i in _progress(range(n), desc=f"fleet {wf.name}", total=n, enabled=progress):
-        folder = out_dir / ids[i]
-        folder.mkdir(parents=True, exist_ok=True)
-        what = step(folder, streams[i], kind=kinds.get(i), progress=False, **options) or {}
+    for i, what in enumerate(_progress(done, desc=f"fleet {wf.name}", total=n, enabled=progress)):
+        what = what or {}
         if i in kinds:
             planted[ids[i]] = {"kind": kinds[i], **what}
         inputs = [f"{ids[i]}/{name}" for name in wf.simulated_inputs]
