@@ -114,6 +114,9 @@ def run_demo(args, rigs) -> int:
             raise InputError(f"--rigs: {', '.join(unknown) or repr(args.rigs)} "
                              f"{'is not a rig with a demo' if len(unknown) == 1 else 'are not rigs with a demo'}"
                              f" (have: {', '.join(with_demo)})")
+    # after the rigs, a small fleet of the cheapest one through robocal batch (robocal.batch._demo)
+    from robocal.batch._demo import fleet_demo_workflows
+    chosen = chosen + fleet_demo_workflows(chosen)
     out = prepare_out_dir(args.out, "demo")
     report = Report("robocal demo", subtitle=f"seed {args.seed}; rigs: {', '.join(r.name for r in chosen) or 'none'}")
     overview = report.section("Summary")
