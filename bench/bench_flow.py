@@ -1,8 +1,14 @@
 """Benchmark of the flow rig: frame pairs per second of the SAD kernel on 64x64 frames
-(one core) side by side with OpenCV's pyramidal Lucas-Kanade on the same frames, and the
-log-processing rate relative to real time for 3 sensors at 400 Hz.
+(one core) side by side with OpenCV's pyramidal Lucas-Kanade and a hand-written C ``psadbw``
+kernel with the same sub-pixel fit and gates (``bench_flow_psadbw.py``, compiled here when a C
+compiler is present) on the same frames, and the log-processing rate relative to real time for 3
+sensors at 400 Hz.
 
-    python bench/bench_flow.py            # prints a Markdown table
+    python bench/bench_flow.py            # prints a Markdown table (about 1 min)
+    python bench/bench_flow.py --command [DIR]  # what a user runs: 'robocal flow odometry' on a
+                                          # 30 s, 3-sensor, 400 Hz frames log vs real time, the
+                                          # command's fixed cost, the library from files (about 3 min;
+                                          # DIR keeps the simulated log for the next run)
     python bench/bench_flow.py --seeds    # calibration accuracy and fresh-run ATE/RPE over
                                           # seeds 100-103 (docs/rigs/flow.md; about 2 min)
     python bench/bench_flow.py --s270     # where sensor s270's R bias comes from: ideal vs kernel
@@ -25,7 +31,7 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
 from robocal.rigs.flow import kernel as K  # noqa: E402
-from robocal.rigs.flow.kernel import FlowConfig, compute_flow, match_blocks  # noqa: E402
+from robocal.rigs.flow.kernel import FlowConfig, compute_flow, compute_flow_sequence, match_blocks  # noqa: E402
 from robocal.rigs.flow.log import steps_from_frames  # noqa: E402
 from robocal.rigs.flow.odometry import dead_reckon  # noqa: E402
 from robocal.rigs.flow.simulate import load_texture, shifted_pairs, simulate_run  # noqa: E402
@@ -99,6 +105,7 @@ def main():
     rows.append(("cv2.calcOpticalFlowPyrLK (25 points, 15x15, 1 level)", r_lk))
     r_pc = best_rate(lambda: [cv2.phaseCorrelate(a.astype(np.float64), b.astype(np.float64)) for a, b in zip(prev[:256], curr[:256])], 256, repeats=3)
     rows.append(("cv2.phaseCorrelate", r_pc))
+    peer = c_peer(prev, curr, r_sad)
 
     # log processing vs real time: 3 sensors at 400 Hz (rendering excluded)
     sim = default_sim("loop", 5.0, supersample=1)
@@ -123,6 +130,169 @@ def main():
         print(f"| {name} | {r:,.0f} | {r / r_lk:.1f}x |")
     print(f"\nlog processing (frames -> flow -> fusion -> trajectory), 3 sensors x 400 Hz x {sim.duration:.0f} s: "
           f"{per_run:.3f} s CPU (best of 7) = {realtime:.0f}x real time ({3 * 400 * realtime:,.0f} pairs/s end to end)")
+    if peer:
+        print("\n" + peer)
+
+
+def c_peer(prev, curr, r_sad_lanes):
+    """The C ``psadbw`` peer (bench_flow_psadbw.py) on the same pairs, measured interleaved with ours:
+    SAD + argmin alone, and the whole default ``compute_flow`` (gate, SAD, second minimum,
+    equiangular fit, trimmed mean, spread gate). Returns the Markdown lines, or a note without a
+    compiler."""
+    import bench_flow_psadbw as P
+
+    so = P.load()
+    if so is None:
+        return "C psadbw peer: no C compiler (cc, gcc, clang or $CC) on this machine: not measured"
+    n = len(prev)
+    prev = np.ascontiguousarray(prev)
+    curr = np.ascontiguousarray(curr)
+    seq = np.ascontiguousarray(np.concatenate([prev, curr[-1:]]))
+    ours = compute_flow(prev, curr)
+    c_out, c_used, c_spread = P.c_flow(so, prev, curr)
+    same = np.array_equal(np.isnan(ours.flow_px), np.isnan(c_out)) and np.nanmax(np.abs(ours.flow_px - c_out)) == 0
+    if not same:
+        raise SystemExit("the C peer's flow differs from compute_flow's: the comparison would not be like for like")
+    best = np.empty((n, 25), np.int32)
+    # interleaved, so that both see the same neighbours on a shared machine
+    rates = {"c_sad": 0.0, "c_flow": 0.0, "flow": 0.0, "seq": 0.0}
+    for _ in range(5):
+        rates["c_sad"] = max(rates["c_sad"], best_rate(lambda: P.c_sad_argmin(so, prev, curr, best), n, repeats=1))
+        rates["c_flow"] = max(rates["c_flow"], best_rate(lambda: P.c_flow(so, prev, curr), n, repeats=1))
+        rates["flow"] = max(rates["flow"], best_rate(lambda: compute_flow(prev, curr), n, repeats=1))
+        rates["seq"] = max(rates["seq"], best_rate(lambda: compute_flow_sequence(seq), n, repeats=1))
+    cc = P.compiler()
+    return "\n".join([
+        f"C peer: SSE2 psadbw, two block rows a psadbw, compiled '{cc} -O3 -march=native'; its flow equals "
+        f"compute_flow's on all {n} pairs (valid {int(np.isfinite(c_out[:, 0]).sum())}); best of 5 interleaved rounds",
+        "",
+        "| kernel | frame pairs / s | ours / C |",
+        "|---|---:|---:|",
+        f"| C: SAD + argmin (eq. 1) | {rates['c_sad']:,.0f} | |",
+        f"| ours: SAD kernel alone (pairs in SIMD lanes, transposed beforehand) | {r_sad_lanes:,.0f} | "
+        f"{r_sad_lanes / rates['c_sad']:.2f} |",
+        f"| C: the whole default compute_flow (gate, SAD, fit, trimmed mean, spread gate) | {rates['c_flow']:,.0f} | |",
+        f"| ours: compute_flow(prev, curr) | {rates['flow']:,.0f} | {rates['flow'] / rates['c_flow']:.2f} |",
+        f"| ours: compute_flow_sequence(frames) (a log's path: each frame transposed once) | {rates['seq']:,.0f} | "
+        f"{rates['seq'] / rates['c_flow']:.2f} |",
+    ])
+
+
+def _child_cpu(argv, repeats=3, **kw):
+    """Best (least) CPU seconds (user + sys) of ``repeats`` runs of a child process, and its wall time then."""
+    import resource
+    import subprocess
+
+    best = (np.inf, np.inf)
+    for _ in range(repeats):
+        r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        t0 = time.perf_counter()
+        subprocess.run(argv, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, **kw)
+        wall = time.perf_counter() - t0
+        r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+        best = min(best, (cpu, wall))
+    return best
+
+
+def command(duration=30.0, folder=None):
+    """``robocal flow odometry`` on a ``duration`` s, 3-sensor, 400 Hz frames log (the simulator's, written
+    in ``folder`` or a temporary one): CPU seconds of the command and real-time factors, the same log
+    compressed (the pre-0.2 format), the fixed cost (the same command on 0.1 s of that log), the
+    floor under it (Python + NumPy + numba + the scipy.linalg numba imports), and the library from
+    files and from memory. Every figure is the least CPU time (user + sys) of 3 runs after a warm-up
+    (numba's cache filled); the real-time factor is ``duration / CPU s``."""
+    import shutil
+    import sys as _sys
+    import tempfile
+    from pathlib import Path
+
+    from robocal.rigs.flow.log import load_run, read_frames_npz, write_frames_npz
+    from robocal.rigs.flow.workflow import evaluation_run, odometry_result, odometry_run, read_reference
+
+    base = Path(folder or tempfile.mkdtemp(prefix="robocal-bench-flow-"))
+    run = base / "run30"
+    exe = [_sys.executable, "-m", "robocal"]
+    if not (run / "run.yaml").is_file():
+        import subprocess
+
+        subprocess.run(exe + ["flow", "simulate", "--duration", str(duration), "--supersample", "1", "--no-progress",
+                              "--seed", "7", "--out", str(run)], check=True, stdout=subprocess.DEVNULL)
+    d = read_frames_npz(run / "frames.npz")
+    variants = {"compressed": d, "short": {k: (v[:, :41] if k == "frames" else v[:41] if k == "t" else v[:, :40])
+                                           for k, v in d.items()}}
+    for name, data in variants.items():
+        f = base / name
+        f.mkdir(exist_ok=True)
+        for fn in ("truth.csv", "wheel.csv"):
+            shutil.copy(run / fn, f / fn)
+        (f / "run.yaml").write_text("".join(ln for ln in (run / "run.yaml").read_text().splitlines(True)
+                                            if not ln.startswith("flow_log:")))     # the frames only
+        if name == "compressed":
+            np.savez_compressed(f / "frames.npz", frames=data["frames"], t=data["t"], gyro=data["gyro"],
+                                height=data["height"])
+        else:
+            write_frames_npz(f / "frames.npz", data["frames"], data["t"], data["gyro"], data["height"])
+    outs = iter(range(10**6))
+
+    def odo(folder, *extra):
+        # a fresh --out folder every run (the command refuses one holding another command's files)
+        return exe + ["flow", "odometry", str(folder / "run.yaml"), "--no-progress", *extra,
+                      "--out", str(base / f"out{next(outs)}")]
+
+    _child_cpu(odo(run, "--no-report"), repeats=1)                 # warm-up: numba's cache for this signature
+    rows = []
+    for label, argv, secs in (
+            (f"robocal flow odometry --no-report, {duration:g} s log (frames.npz memory-mapped)", odo(run, "--no-report"), duration),
+            (f"robocal flow odometry --no-report, the same log compressed (np.savez_compressed, the pre-0.2 files)",
+             odo(base / "compressed", "--no-report"), duration),
+            (f"robocal flow odometry with report.html, {duration:g} s log", odo(run), duration),
+            ("robocal flow odometry --no-report, 0.1 s of the same log (the fixed cost)", odo(base / "short", "--no-report"), 0.1),
+            ("floor: python -c 'import numpy, numba, scipy.linalg' (numba imports scipy.linalg when it loads a kernel)",
+             [_sys.executable, "-c", "import numpy, numba, scipy.linalg"], None),
+            ("python -c pass", [_sys.executable, "-c", "pass"], None)):
+        cpu, wall = _child_cpu(argv)
+        rows.append((label, cpu, wall, secs))
+
+    # the library, in this process (imports and numba's cache already loaded)
+    spec = load_run(run / "run.yaml")
+
+    def from_files():
+        ref = read_reference(spec)
+        od, _, steps = odometry_run(spec, reference=ref)
+        curves, errors = evaluation_run(spec, od, reference=ref)
+        odometry_result(od, spec, errors, curves=curves, steps=steps)
+
+    from_files()
+    lib = min(_cpu_of(from_files) for _ in range(3))
+    frames = read_frames_npz(run / "frames.npz")
+    frames = {k: np.array(v) for k, v in frames.items()}
+
+    def in_memory():
+        st, _ = steps_from_frames(frames["frames"], frames["t"], frames["gyro"], frames["height"], spec.focal_px)
+        dead_reckon(st, spec.array)
+
+    mem = min(_cpu_of(in_memory) for _ in range(3))
+    print(f"{duration:g} s log, 3 sensors x 400 Hz, 64x64 frames ({(run / 'frames.npz').stat().st_size / 1e6:.0f} MB); "
+          "CPU s = user + sys, least of 3 runs after a warm-up\n")
+    print("| what | CPU s | x real time | wall s (shared machine) |")
+    print("|---|---:|---:|---:|")
+    for label, cpu, wall, secs in rows:
+        print(f"| {label} | {cpu:.2f} | {'%.0fx' % (secs / cpu) if secs else ''} | {wall:.2f} |")
+    print(f"| library from files (load_run -> odometry_run -> evaluation_run -> odometry_result), in-process | "
+          f"{lib:.2f} | {duration / lib:.0f}x | |")
+    print(f"| library in memory (steps_from_frames -> dead_reckon), in-process | {mem:.2f} | {duration / mem:.0f}x | |")
+    fixed = rows[3][1]
+    print(f"\nfixed cost per call: {fixed:.2f} s CPU (0.1 s log); of it the floor (Python, NumPy, numba, "
+          f"scipy.linalg): {rows[4][1]:.2f} s")
+    if folder is None:
+        shutil.rmtree(base, ignore_errors=True)
+
+
+def _cpu_of(fn):
+    t0 = time.process_time()
+    fn()
+    return time.process_time() - t0
 
 
 def _err(a, b, p, i):
@@ -236,5 +406,8 @@ if __name__ == "__main__":
         seeds()
     elif "--s270" in sys.argv[1:]:
         s270()
+    elif "--command" in sys.argv[1:]:
+        rest = sys.argv[sys.argv.index("--command") + 1:]
+        command(folder=rest[0] if rest else None)     # a folder keeps the simulated log for the next run
     else:
         main()

@@ -90,3 +90,20 @@ def test_cached_kernels_depend_on_their_own_file_only(module):
         if isinstance(f, ast.FunctionDef) and f.name in jitted:
             called = {n.func.id for n in ast.walk(f) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)}
             assert not (called & imported), f"{f.name} calls {called & imported} from another module"
+
+
+def test_kernels_import_without_a_writable_cache_folder():
+    """A read-only install without a writable cache folder: the kernels compile per process instead of
+    ``cache=True`` failing on import (numba finds no cache locator here: only IPython's is allowed)."""
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, NUMBA_CACHE_LOCATOR_CLASSES="numba.core.caching.IPythonCacheLocator")
+    code = ("import robocal.rigs.flow.kernel_compiled as k; from numba.core.caching import NullCache; "
+            "print(k.CACHE, type(k._sad8_batch._cache).__name__)")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+    assert out.split() == ["False", "NullCache"]
+    from robocal.rigs.flow import kernel_compiled as k
+
+    assert k.CACHE and type(k._sad8_batch._cache).__name__ == "FunctionCache"   # this checkout caches

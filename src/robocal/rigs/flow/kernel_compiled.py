@@ -16,10 +16,33 @@ import math
 import numpy as np
 from numba import njit
 
-__all__: list[str] = []
+__all__: list[str] = ["CACHE"]
 
 
-@njit(cache=True, fastmath=True, nogil=True)
+def _can_cache() -> bool:
+    """Whether numba can keep this folder's compiled kernels between runs.
+
+    numba stores them in the package's ``__pycache__``, else (a read-only install) in
+    ``$NUMBA_CACHE_DIR`` or the user's cache folder (``~/.cache/numba``); with none of them
+    writable, ``cache=True`` would fail on import. Then every process compiles the kernels it
+    uses instead (~10 s once per process), which is slow but right. A stale cache cannot serve
+    old code: numba's index holds this file's modification time and size, numba's version and
+    the CPU, and the compiled functions call only functions of this file (a test checks).
+    """
+    from numba.core.caching import FunctionCache
+
+    try:
+        FunctionCache(_can_cache)       # tries numba's cache locators for this file, in numba's order
+    except RuntimeError:
+        return False
+    return True
+
+
+#: numba can store this folder's compiled kernels (:func:`_can_cache`)
+CACHE = _can_cache()
+
+
+@njit(cache=CACHE, fastmath=True, nogil=True)
 def _sad8_batch(prev_t, curr_t, coff, ys, xs, search, out, keys):  # pragma: no cover - compiled
     """SAD (eq. 1) of every 8x8 block at every integer offset, for N pairs at once.
 
@@ -100,7 +123,7 @@ def _sad8_batch(prev_t, curr_t, coff, ys, xs, search, out, keys):  # pragma: no 
                     kb[k] = min(kb[k], (np.int32(a0[k]) << 10) | o)
 
 
-@njit(cache=True, fastmath=True, nogil=True)
+@njit(cache=CACHE, fastmath=True, nogil=True)
 def _sad_batch(prev_t, curr_t, coff, ys, xs, block, search, out, keys):  # pragma: no cover - compiled
     """Generic-block-size version of :func:`_sad8_batch` (uint32 sums; the same ``coff``)."""
     n = out.shape[2]
@@ -133,7 +156,7 @@ def _sad_batch(prev_t, curr_t, coff, ys, xs, block, search, out, keys):  # pragm
                 o += 1
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=CACHE, nogil=True, fastmath=True)
 def _sad_frac(prev, curr, y0, x0, block, iy, ix, qy, qx, scale):  # pragma: no cover - compiled
     """SAD of a block against ``curr`` sampled at offset ``(ix + qx/scale, iy + qy/scale)``.
 
@@ -160,7 +183,7 @@ def _sad_frac(prev, curr, y0, x0, block, iy, ix, qy, qx, scale):  # pragma: no c
     return acc / s2
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=CACHE, nogil=True)
 def _refine_step(prev, curr, y0, x0, block, bx, by, best, step_q, scale):  # pragma: no cover - compiled
     """Try the 8 neighbours of ``(bx, by)`` (in 1/scale px units) at +/- step_q; keep the best."""
     nbx = bx
@@ -181,7 +204,7 @@ def _refine_step(prev, curr, y0, x0, block, bx, by, best, step_q, scale):  # pra
     return nbx, nby, best
 
 
-@njit(cache=True, fastmath=True, nogil=True)
+@njit(cache=CACHE, fastmath=True, nogil=True)
 def _select_lanes(prev_t, sads, keys, ys, xs, block, search, best, bo, second, gate, neigh, big):  # pragma: no cover
     """Per block and pair (lanes innermost): decode the best offset and its SAD from
     ``keys``, keep its 4 axis neighbours (for the sub-pixel fit), find the best SAD
@@ -231,7 +254,7 @@ def _select_lanes(prev_t, sads, keys, ys, xs, block, search, best, bo, second, g
                                    + abs(np.int32(prev_t[y0 + c, x0 + r, k]) - np.int32(prev_t[y0 + c, x0 + r + 1, k])))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=CACHE, nogil=True)
 def _interp3(sm, s0, sp, mode):  # pragma: no cover - compiled
     """Sub-pixel offset of a minimum from three samples at -1, 0, +1 (clipped to +/-0.5)."""
     if mode == 3:
@@ -243,7 +266,7 @@ def _interp3(sm, s0, sp, mode):  # pragma: no cover - compiled
     return min(0.5, max(-0.5, d))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=CACHE, nogil=True)
 def _refine_blocks(prev, curr, pidx, cidx, neigh, ys, xs, block, search, feat_thr, sad_thr, min_distinct, mode,
                    best, bo, second, gate, flow_b, status_b, sadmin_b, distinct_b):  # pragma: no cover
     """Per pair and block: accept/reject, then sub-pixel refinement of accepted blocks.
@@ -294,7 +317,7 @@ def _refine_blocks(prev, curr, pidx, cidx, neigh, ys, xs, block, search, feat_th
             flow_b[k, b, 1] = fy
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=CACHE, nogil=True)
 def _refine_bilinear(prev, curr, pidx, cidx, ys, xs, block, mode, status_b, flow_b):  # pragma: no cover
     """Half-pixel (mode 1, PX4FLOW) or half-then-quarter-pixel (mode 2) refinement of the
     accepted blocks with bilinear interpolation (eq. 2), starting from their integer offsets."""
@@ -319,7 +342,7 @@ def _refine_bilinear(prev, curr, pidx, cidx, ys, xs, block, mode, status_b, flow
             flow_b[k, b, 1] = qy / scale
 
 
-@njit(cache=True, nogil=True)  # no fastmath: it would drop the NaN test below
+@njit(cache=CACHE, nogil=True)  # no fastmath: it would drop the NaN test below
 def _lk_refine(prev, curr, ys, xs, block, search, used, flow, iters, max_step, out):  # pragma: no cover - compiled
     """Frame-level inverse-compositional Gauss–Newton refinement of a pure translation.
 
@@ -402,7 +425,7 @@ def _lk_refine(prev, curr, ys, xs, block, search, used, flow, iters, max_step, o
 
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=CACHE, nogil=True)
 def _small_median(a, m):  # pragma: no cover - compiled
     """Median of ``a[:m]`` (m <= a few dozen) by insertion sort, in place (cheap to compile)."""
     for i in range(1, m):
@@ -416,7 +439,7 @@ def _small_median(a, m):  # pragma: no cover - compiled
     return a[h] if m % 2 == 1 else 0.5 * (a[h - 1] + a[h])
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=CACHE, nogil=True)
 def _aggregate_frames(flow, status, cen, mode, trim, used, out_flow, agreement, spread, centroid):  # pragma: no cover
     """Per frame: median of the accepted blocks, the blocks within ``trim`` of it, the frame's
     flow (mode 0 mean, 1 median, 2 trimmed mean), scatter and centroid of the used blocks."""
@@ -489,7 +512,7 @@ def _aggregate_frames(flow, status, cen, mode, trim, used, out_flow, agreement, 
         spread[k] = math.sqrt(ss / cnt)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=CACHE, nogil=True)
 def _tensor_combine(prev, used, bflow, ys, xs, block, reg, out):  # pragma: no cover - compiled
     """Per frame: the used blocks' flows weighted by their gradient structure tensors (central
     differences in ``prev``); ``out`` holds the trimmed mean on entry, the pull in the weakly

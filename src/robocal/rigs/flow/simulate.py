@@ -23,6 +23,7 @@ from numba import njit
 
 from robocal.errors import InputError
 from robocal.rigs.flow.kernel import FlowConfig, speed_limit
+from robocal.rigs.flow.kernel_compiled import CACHE
 from robocal.rigs.flow.model import SensorArray, integrate_twists, rot2, seed_array
 
 __all__ = [
@@ -221,7 +222,7 @@ def make_trajectory(kind: str, duration: float, rate: float, *, speed: float = 0
     return t, v, w
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=CACHE, nogil=True, fastmath=True)
 def _render(tex, tex_px, centres, R_wc, f_px, window, ss, gaps, gap_contrast, tex_mean, out):  # pragma: no cover
     """Ray-cast every (sub-)pixel onto the ground z = 0 and sample the mirrored photograph."""
     ht = tex.shape[0]
