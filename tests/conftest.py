@@ -31,6 +31,17 @@ _HEAVY = {line.strip() for line in (Path(__file__).parent / "heavy_tests.txt").r
           if line.strip() and not line.startswith("#")}
 
 
+def pytest_configure(config):
+    # One BLAS thread per xdist worker unless the caller chose: with one worker per core, OpenBLAS's
+    # default (a thread per core in every worker) oversubscribes the cores, and its threads spin while
+    # waiting, so the small factorisations the estimators run get slower, not faster. Set here, in the
+    # controller before the workers start, because the workers inherit the environment and read it when
+    # NumPy is first imported.
+    if (getattr(config.option, "numprocesses", 0) or 0) > 1 and "PYTEST_XDIST_WORKER" not in os.environ:
+        for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+            os.environ.setdefault(var, "1")
+
+
 def pytest_collection_modifyitems(config, items):
     for item in items:
         if item.nodeid in _HEAVY:
