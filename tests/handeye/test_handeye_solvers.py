@@ -180,6 +180,6 @@ def test_invert_with_covariance_matches_finite_differences_and_sampling():
     assert np.allclose(G @ cov @ G.T, Ci, rtol=1e-5, atol=1e-14)
     # and by sampling (first order holds at these 1 mrad / 1 mm levels)
     d = rng.multivariate_normal(np.zeros(6), cov, size=4000)
-    s = np.array([delta(np.linalg.inv(transform_from(matrix_from_rotvec(x[:3]) @ T[:3, :3], T[:3, 3] + x[3:])), Ti)
-                  for x in d])
+    inv = np.linalg.inv(transform_from(matrix_from_rotvec(d[:, :3]) @ T[:3, :3], T[:3, 3] + d[:, 3:]))
+    s = np.c_[rotvec_from_matrix(inv[:, :3, :3] @ Ti[:3, :3].T), inv[:, :3, 3] - Ti[:3, 3]]   # delta, batched
     assert np.allclose(np.sqrt(np.diag(np.cov(s.T))), np.sqrt(np.diag(Ci)), rtol=0.08)
