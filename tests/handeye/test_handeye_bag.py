@@ -80,11 +80,17 @@ def test_images_of_a_rosbag1_give_X_within_3_sigma(bags):
 
 
 @pytest.mark.parametrize("fmt", [f for f in RECORDING_FORMATS if f != "rosbag1"])
-def test_images_of_ros2_and_mcap_recordings(fmt, bags):
+def test_images_of_ros2_and_mcap_recordings(fmt, bags, tmp_path):
+    from robocal.camera import write_camera
+
     truth = bags(fmt)                                       # the same scene (rosbag1: the test above)
+    camera = {"rosbag2": {"camera_info": "/camera/camera_info"},       # the camera from its topic, or a file
+              "mcap": {"camera": write_camera(tmp_path / "camera.yaml", truth.camera)}}[fmt]
     pair = load_bag_pair(truth.path, base="/base_link", gripper="tool0", images="camera/image_raw",
-                         camera_info="/camera/camera_info", target=bags.target, progress=False)
+                         target=bags.target, progress=False, **camera)
     assert len(pair.T_base_gripper) == 11
+    assert ("camera: " + str(camera.get("camera", "CameraInfo of /camera/camera_info"))) in str(
+        pair.diagnostics["pose_files"])
     res, _ = calibrate(pair, progress=False)
     _within_3_sigma(res.X_pose, truth.X)
 
@@ -134,6 +140,8 @@ def test_one_line_errors(bags, tmp_path, capsys):
         (["--base", "base_link", "--gripper", "tool0"], ["--images TOPIC (with --target) or --target-poses"]),
         (["--base", "world", "--gripper", "base_link", "--images", "/camera/image_raw"],
          ["tf world -> base_link is static"]),
+        (["--base", "base_link", "--gripper", "tool0", "--images", "/camera/image_raw", "--camera",
+          bags.target, "--camera-info", "/camera/camera_info"], ["give the camera once"]),
     ]
     for k, (extra, needles) in enumerate(cases):
         code, _, err = _run([*base, *extra, "--out", tmp_path / f"cal{k}"], capsys)
