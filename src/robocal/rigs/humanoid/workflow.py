@@ -92,8 +92,6 @@ def load_input(path=None, *, bag=None, joints: str = "/joint_states", images: st
                camera_info: str | None = None, camera=None, joint_map=None, **_) -> HumanoidInput:
     """The ``load_input`` step: the data-set file read and checked, its images not yet read; or, with
     ``bag``, the views taken from a recording (:func:`robocal.rigs.humanoid.bag.load_bag_input`)."""
-    from robocal.rigs.humanoid.dataset import load_dataset
-
     if bag is not None:
         if path is not None:
             raise InputError(f"give a data-set file or --bag, not both (got {path} and --bag {bag})")
@@ -103,6 +101,8 @@ def load_input(path=None, *, bag=None, joints: str = "/joint_states", images: st
                               joint_map=joint_map)
     if path is None:
         raise InputError("give a data-set file (run.yaml) or a recording with --bag FILE --images TOPIC")
+    from robocal.rigs.humanoid.dataset import load_dataset
+
     path = Path(path)
     model, data, info = load_dataset(path, detect=False)
     return HumanoidInput(path, model, data, info, _truth_of(path, model))
