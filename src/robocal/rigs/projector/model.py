@@ -416,9 +416,9 @@ class ProjectorModel:
         """:meth:`ik` for the common case, or None when a check could fail (the caller then names it).
 
         The checks are reductions on arrays eq. (8) computes anyway: z within ``floor_tol`` of ``-H``
-        (min and max), no point at the nadir (min of ``r``), every tilt within the limit (max of the tilt;
-        with ``check_reach=False`` below pi/2, which an infinite coordinate reaches); a NaN fails every
-        comparison. The pan is wrapped to ``(-pi, pi]`` by one shift of 2 pi where the offset pushed it
+        (min and max), no point at the nadir (min of the tilt), every tilt within the limit (max of the
+        tilt; with ``check_reach=False`` below pi/2, which an infinite coordinate reaches); a NaN fails
+        every comparison. The pan is wrapped to ``(-pi, pi]`` by one shift of 2 pi where the offset pushed it
         out (atan2 is in ``[-pi, pi]``), not by a modulo over all points. Issue 16.
         """
         p = points
