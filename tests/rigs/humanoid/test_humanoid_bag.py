@@ -117,3 +117,16 @@ def test_one_line_errors(recording, tmp_path, capsys):
     assert err.count("\n") == 0 and "give --camera-info TOPIC or --camera CAM.yaml" in err
     with pytest.raises(InputError, match="not both"):
         load_input(truth.path, bag=truth.path, images=IMAGE_TOPIC)
+
+
+def test_joints_in_degrees_named(recording, small_model, tmp_path):
+    # a driver publishing degrees: outside the joint limits, within them read as degrees -> the slip named
+    from dataclasses import replace
+
+    from robocal.errors import ImplausibleInputError
+
+    run = recording("rosbag1").data
+    deg = simulate_humanoid_recording(tmp_path / "deg.bag", model=small_model,
+                                      data=replace(run, theta=np.degrees(run.theta)))
+    with pytest.raises(ImplausibleInputError, match=r"look like deg, not rad"):
+        load_bag_input(deg.path, images=IMAGE_TOPIC)

@@ -298,8 +298,11 @@ def load_bag_input(bag, *, joints: str = "/joint_states", images: str | None = N
 
         def none_usable(extra=None):
             c = {**counts, **(extra or {})}
+            # every frame off the joint stream: the camera stamps on another clock than the joints
+            hint = ("; the images' header stamps are on another clock than the joints' ('robocal bag inspect' "
+                    "shows each topic's clock)" if outside.all() else "")
             return NotEnoughDataError(f"{source}: no usable image on {images}: {len(stamps)} frame(s), "
-                                      + ", ".join(f"{n} {r}" for r, n in c.items() if n))
+                                      + ", ".join(f"{n} {r}" for r, n in c.items() if n) + hint)
 
         if not picks:
             raise none_usable()
