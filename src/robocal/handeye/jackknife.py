@@ -97,12 +97,13 @@ def _perturbed(T, d):
 
 def _residuals(G, Tc, X, Y, d, w):
     """Weighted closure residuals (R, N, 6) of R perturbations ``d`` (R, 12) of X then Y on all N poses:
-    rotation vector of ``R_closure R_Y^T`` (rad) and ``t_closure - t_Y`` (m), as the refinement's."""
+    rotation vector of ``R_closure R_Y^T`` (rad) and ``t_closure - t_Y`` (m), as the refinement's, times the
+    weight matrices ``w`` (..., N, 6, 6)."""
     Xd, Yd = _perturbed(X, d[:, :6]), _perturbed(Y, d[:, 6:])
     C = G[None] @ Xd[:, None] @ Tc[None]
     Ry = Yd[:, None, :3, :3]
     r = np.concatenate([_log(C[..., :3, :3] @ np.swapaxes(Ry, -1, -2)), C[..., :3, 3] - Yd[:, None, :3, 3]], axis=-1)
-    return r * w
+    return np.einsum("...nab,...nb->...na", w, r)
 
 
 def _jacobian(G, Tc, X, Y, d, w):
@@ -116,8 +117,8 @@ def _jacobian(G, Tc, X, Y, d, w):
     return J, r0
 
 
-def jackknife_hand_eye(G, T_cam_target, X, Y, *, pose_sigmas=None, max_delete_one: int = MAX_DELETE_ONE,
-                       groups: int = GROUPS) -> Jackknife:
+def jackknife_hand_eye(G, T_cam_target, X, Y, *, pose_sigmas=None, whitening=None,
+                       max_delete_one: int = MAX_DELETE_ONE, groups: int = GROUPS) -> Jackknife:
     """The jackknife std of ``X`` (module docstring).
 
     Parameters
@@ -130,16 +131,23 @@ def jackknife_hand_eye(G, T_cam_target, X, Y, *, pose_sigmas=None, max_delete_on
         The full-data estimate (:attr:`HandEyeResult.X`, ``.Y``).
     pose_sigmas : (N, 2), optional
         As :func:`~robocal.handeye.calibrate_hand_eye`'s.
+    whitening : (N, 6, 6), optional
+        Each pose's residual whitening (:func:`robocal.handeye.weighted.closure_whitening`), for an X refined
+        with the views' full covariances; replaces the weights above.
     """
     G, Tc = np.asarray(G, float), np.asarray(T_cam_target, float)
     X, Y = np.asarray(X, float), np.asarray(Y, float)
     n = len(Tc)
-    w = _pose_weights(Tc, pose_sigmas)
-    r = _residuals(G, Tc, X, Y, np.zeros((1, 12)), w[None])[0]
-    # rotation and translation weighted by their RMS, as the refinement does (the jackknife needs the
-    # same relative weighting, not the same scale)
-    sig = np.r_[[max(np.sqrt(np.mean(r[:, :3] ** 2)), 1e-12)] * 3, [max(np.sqrt(np.mean(r[:, 3:] ** 2)), 1e-15)] * 3]
-    w = w / sig
+    if whitening is not None:
+        w = np.asarray(whitening, float)
+    else:
+        w = _pose_weights(Tc, pose_sigmas)
+        r = _residuals(G, Tc, X, Y, np.zeros((1, 12)), np.einsum("na,ab->nab", w, np.eye(6))[None])[0]
+        # rotation and translation weighted by their RMS, as the refinement does (the jackknife needs the
+        # same relative weighting, not the same scale)
+        sig = np.r_[[max(np.sqrt(np.mean(r[:, :3] ** 2)), 1e-12)] * 3,
+                    [max(np.sqrt(np.mean(r[:, 3:] ** 2)), 1e-15)] * 3]
+        w = np.einsum("na,ab->nab", w / sig, np.eye(6))     # diagonal weights as (N, 6, 6) matrices
     if n <= max_delete_one:
         kind, size = "delete-one", 1
         masks = ~np.eye(n, dtype=bool)
@@ -172,7 +180,7 @@ def jackknife_hand_eye(G, T_cam_target, X, Y, *, pose_sigmas=None, max_delete_on
         for lo in range(0, len(masks), 25):         # 25 replicates at a time: 25 x N x 6 residuals
             sl = slice(lo, lo + 25)
             for _ in range(steps):
-                rk = _residuals(G, Tc, X, Y, thetas[sl], w[None]) * masks[sl, :, None]
+                rk = _residuals(G, Tc, X, Y, thetas[sl], w[None]) * masks[sl, :, None]   # left-out pose: 0
                 thetas[sl] -= np.linalg.solve(Hk[sl], np.einsum("nai,rna->ri", J, rk)[..., None])[..., 0]
     g = len(masks)
     dev = thetas[:, :6] - thetas[:, :6].mean(axis=0)

@@ -146,7 +146,8 @@ class Calibration(tuple):
 
 
 def calibrate(pair: PosePair, *, method: str = "tsai", no_refine: bool = False, accept_implausible: bool = False,
-              pairs: str = "auto", setup: str = "eye-in-hand", pose_sigmas=None, progress: bool = True, **_):
+              pairs: str = "auto", setup: str = "eye-in-hand", pose_sigmas=None, pose_covariances=None,
+              progress: bool = True, **_):
     """``X = T_gripper_cam`` (:func:`~robocal.handeye.calibrate_hand_eye`) and the
     other closed forms on the same motions, for the report's comparison.
 
@@ -165,7 +166,11 @@ def calibrate(pair: PosePair, *, method: str = "tsai", no_refine: bool = False, 
                              times=pair.t, setup=setup, pose_sigmas=pose_sigmas,
                              accept_implausible=accept_implausible, names=pair.names)
     res.warnings = list(getattr(pair, "warnings", ())) + list(res.warnings)
-    res, pair, extra = _clock_and_jackknife(res, pair, setup=setup, refined=not no_refine, pose_sigmas=pose_sigmas)
+    whitening = None
+    if pose_covariances is not None and not no_refine:
+        res, whitening = _with_pose_covariances(res, pair, pose_covariances, setup)
+    res, pair, extra = _clock_and_jackknife(res, pair, setup=setup, refined=not no_refine, pose_sigmas=pose_sigmas,
+                                            whitening=whitening)
     comparison = []
     Tg = _gripper(pair, setup)
     for m in AXXB_METHODS:
@@ -182,7 +187,22 @@ def calibrate(pair: PosePair, *, method: str = "tsai", no_refine: bool = False, 
     return Calibration(res, comparison, extra)
 
 
-def _clock_and_jackknife(res, pair: PosePair, *, setup: str, refined: bool, pose_sigmas=None):
+def _with_pose_covariances(res, pair: PosePair, pose_covariances, setup: str):
+    """``res`` refined again on closures whitened by each view's covariance
+    (:func:`robocal.handeye.weighted.refine_with_pose_covariances`); returns it and the whitening."""
+    from robocal.handeye import HandEyeResult
+    from robocal.handeye.weighted import refine_with_pose_covariances
+
+    w = refine_with_pose_covariances(_gripper(pair, setup), pair.T_cam_target, pose_covariances, res.X, res.Y,
+                                     times=pair.t)
+    r = w.residuals
+    return HandEyeResult(
+        X=w.X, method=f"{res.method}+cov", Y=w.Y, cov=w.cov, std=w.std, rot_rms=float(np.sqrt(np.mean(r[:, :3] ** 2))),
+        trans_rms=float(np.sqrt(np.mean(r[:, 3:] ** 2))), n_motions=res.n_motions, setup=res.setup, lsq=w.lsq,
+        warnings=[x for x in res.warnings if x.code != "outliers"] + list(w.warnings)), w.whitening
+
+
+def _clock_and_jackknife(res, pair: PosePair, *, setup: str, refined: bool, pose_sigmas=None, whitening=None):
     """After :func:`~robocal.handeye.calibrate_hand_eye`: the streams' warnings; with ``--clock-offset auto``
     X, Y and the offset refined together (:func:`robocal.handeye.clock.refine_with_clock`) and the pairs
     re-paired at it; the jackknife std of X (:func:`robocal.handeye.jackknife.jackknife_hand_eye`).
@@ -214,7 +234,8 @@ def _clock_and_jackknife(res, pair: PosePair, *, setup: str, refined: bool, pose
             pair = replace(pair, T_base_gripper=s.T_base_gripper, T_cam_target=s.T_cam_target, t=s.t, stream=s)
             pose_sigmas = None
     if refined and res.cov is not None:
-        jk = jackknife_hand_eye(_gripper(pair, setup), pair.T_cam_target, res.X, res.Y, pose_sigmas=pose_sigmas)
+        jk = jackknife_hand_eye(_gripper(pair, setup), pair.T_cam_target, res.X, res.Y, pose_sigmas=pose_sigmas,
+                                whitening=whitening)
     return res, pair, {"clock": clock, "jackknife": jk, "pair": pair}
 
 
@@ -586,7 +607,8 @@ def run_images(args) -> int:
                         None if robot.t is None else robot.t[views.index],
                         (robot.form, f"{len(views.names)} of {len(images)} images of a {target.kind}"))
         cal = calibrate(pair, method=args.method, no_refine=args.no_refine, pairs=args.pairs, setup=args.setup,
-                        accept_implausible=args.accept_implausible, pose_sigmas=views.sigmas)
+                        accept_implausible=args.accept_implausible, pose_sigmas=views.sigmas,
+                        pose_covariances=_view_covariances(views))
         res = cal[0]
         res.warnings = list(views.warnings) + list(res.warnings)
         result = to_result(cal, pair)
@@ -602,6 +624,16 @@ def run_images(args) -> int:
     write_run(out, result, report)
     print(summary(result))
     return 0
+
+
+def _view_covariances(views):
+    """Each view's pose covariance (N, 6, 6) as the refinement takes it: an ambiguous view's inflated as its
+    stds are (:data:`robocal.handeye.images.AMBIGUOUS_INFLATION`)."""
+    from robocal.handeye.images import AMBIGUITY_LIMIT, AMBIGUOUS_INFLATION
+
+    C = np.array(views.cov, float)
+    C[np.asarray(views.ambiguity) > AMBIGUITY_LIMIT] *= AMBIGUOUS_INFLATION ** 2
+    return C
 
 
 def run_simulate_images(args) -> int:
