@@ -108,3 +108,19 @@ def test_the_demo_fleet_names_its_planted_robot_and_links_its_report(tmp_path):
     assert "tilt encoder zero slipped" in out.summary["planted"]
     html = "".join(out.sections[0].items)
     assert '<a href="fleet/fleet.html">' in html and (tmp_path / "fleet" / "fleet.html").is_file()
+
+
+def test_a_fleet_simulated_on_an_executor_is_the_serial_one(tmp_path):
+    from concurrent.futures import ThreadPoolExecutor
+
+    import numpy as np
+
+    from robocal.batch import simulate_fleet
+    from robocal.rigs.projector.cli import RIG
+
+    serial = simulate_fleet(RIG, tmp_path / "a", 5, np.random.default_rng(9), points=6)
+    with ThreadPoolExecutor(2) as ex:
+        pooled = simulate_fleet(RIG, tmp_path / "b", 5, np.random.default_rng(9), points=6, executor=ex)
+    assert serial.planted == pooled.planted and len(serial.planted) == 1
+    for name in ("fleet.yaml", "fleet_truth.json", *(f"{i}/projector.yaml" for i in serial.ids)):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name

@@ -135,8 +135,9 @@ def fleet_summary(results: dict, *, rig: str | None = None, failed=()) -> dict:
     dict
         ``parameters``: per parameter its ``unit`` (as shown), ``median``,
         ``robust_sigma``, ``median_std`` and per robot ``value`` / ``std``;
-        ``standouts``: ``id``, ``parameter``, ``deviation``, ``robust_sigmas``,
-        ``own_stds``, ``cause`` (``mechanical`` or ``noise``), ``text``;
+        ``standouts``: ``id``, ``parameter``, ``deviation`` (from the median),
+        ``robust_sigmas``, ``t`` and ``p_value`` (the test against the other
+        robots), ``own_stds``, ``cause`` (``mechanical`` or ``noise``), ``text``;
         ``weak``: ``id``, ``std_ratio``, ``text``; ``failed``.
     """
     ids = list(results)
