@@ -1,11 +1,13 @@
 """The line-profiler rig's FPDP scan from a robot recording (issue 15): profiles as PointCloud2, arm poses
-from joint states or tf; one simulated scan (12 poses) written as a ROS 1 bag and as MCAP."""
+from joint states or tf; one simulated scan (12 poses) written as a ROS 1 bag, a ROS 2 bag and MCAP (all three
+read back exactly; calibrated from ROS 1 and MCAP)."""
 
 import json
 
 import numpy as np
 import pytest
 
+from robocal.bags import RECORDING_FORMATS
 from robocal.cli.main import main
 from robocal.errors import InputError, NotEnoughDataError
 from robocal.geometry import rotvec_from_matrix
@@ -24,8 +26,8 @@ def scans(tmp_path_factory):
     rig = default_rig()
     data, truth = simulate_fpdp(rig, np.random.default_rng(1), n_poses=12)
     root = tmp_path_factory.mktemp("lp_bags")
-    return {fmt: simulate_lineprofiler_recording(root / ("scan.bag" if fmt == "rosbag1" else "scan"), format=fmt,
-                                                 data=data, truth=truth, rig=rig) for fmt in ("rosbag1", "mcap")}
+    return {fmt: simulate_lineprofiler_recording(root / ("scan.bag" if fmt == "rosbag1" else f"scan_{fmt}"), format=fmt,
+                                                 data=data, truth=truth, rig=rig) for fmt in RECORDING_FORMATS}
 
 
 @pytest.fixture(scope="module")
@@ -35,9 +37,10 @@ def from_files(scans):
     return calibrate_sphere(d.q, d.profiles, rig.chain, rig.sphere_radius)
 
 
-def test_profiles_and_joints_from_recording(scans):
+@pytest.mark.parametrize("fmt", RECORDING_FORMATS)
+def test_profiles_and_joints_from_recording(scans, fmt):
     # fast: the reading alone
-    s = scans["rosbag1"]
+    s = scans[fmt]
     inp = load_input(bag=s.path, profiles=PROFILE_TOPIC, joints=JOINTS_TOPIC, sphere_radius_mm=R_MM)
     # held joints come back exactly ((1 - w) a + w a = a to ~1 ulp of 0.2 m / 0.2 rad)
     np.testing.assert_allclose(inp.q, s.data.q, rtol=0, atol=1e-15)
