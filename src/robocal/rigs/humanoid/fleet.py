@@ -9,7 +9,7 @@ images. Planted:
   slipped a tooth; the calibration refuses offsets beyond 5 deg as
   implausible). That is ~8 x the spread of ``simulate``'s 0.5 deg scatter:
   a fleet of 10 cannot name it surely (with 21 parameters judged its bar is
-  ~9 spreads, :mod:`robocal.batch._fleet`); 40 robots can (~5.5), and so can
+  ~9 spreads, :mod:`robocal.batch._fleet`); 40 robots can (~5), and so can
   10 robots after a factory calibration (``--offset-scale 0.2``: ~18 x);
 * ``weak`` -- a hurried recording: half the views, 3x the blur, 5x the
   image noise: the reported stds ~4x the fleet's (from 8 views per foot;
