@@ -108,6 +108,11 @@ def test_the_demo_fleet_names_its_planted_robot_and_links_its_report(tmp_path):
     assert "tilt encoder zero slipped" in out.summary["planted"]
     html = "".join(out.sections[0].items)
     assert '<a href="fleet/fleet.html">' in html and (tmp_path / "fleet" / "fleet.html").is_file()
+    from browser import check_page, chromium_executable
+
+    if chromium_executable() is None:
+        pytest.skip("Chromium not installed (.ci/run installs Debian's chromium): fleet.html not checked in a browser")
+    assert check_page(tmp_path / "fleet" / "fleet.html", width=1400) == []  # every image loads, nothing overflows
 
 
 def test_a_fleet_simulated_on_an_executor_is_the_serial_one(tmp_path):
