@@ -5,8 +5,9 @@ Run: python bench/bench_handeye_nees.py [--trials 200] [--views 8] [--sigma-px 0
 
 * NEES: :func:`robocal.handeye.nees.nees_image_noise` (corners of the 7 x 5 board of ``handeye
   simulate-images`` with Gaussian pixel noise -> planar PnP with covariance per view -> X refined on
-  closures whitened by each view's covariance, or weighted by the views' stds only), both set-ups; mean NEES / 6 with its standard error, the median, the share of trials
-  above chi-square(6)'s 95 % quantile, and per component RMS(error) / RMS(reported std).
+  closures whitened by each view's covariance, or weighted by the views' stds only), both set-ups; mean
+  NEES / 6 with its standard error, the median, the share of trials above chi-square(6)'s 95 % quantile,
+  and per component RMS(error) / RMS(reported std).
 * jackknife: 50 data sets of 30 simulated poses (1 mrad / 0.2 mm): jackknife std / first-order std.
 * clock: 40 simulated streams (15 s, 100 Hz robot, 10 Hz camera, 37 ms offset): spread of the refined
   offset / RMS of its std, and the 7-dof NEES of (X, offset).
@@ -26,7 +27,7 @@ from scipy.stats import chi2
 def nees_table(trials: int, views: int, sigma_px: float) -> None:
     from robocal.handeye.nees import nees_image_noise
 
-    print(f"| set-up | weights | trials x views | mean NEES / 6 (+/- se) | median / 6 | > chi2(6) 95 % | "
+    print("| set-up | weights | trials x views | mean NEES / 6 (+/- se) | median / 6 | > chi2(6) 95 % | "
           "RMS err / RMS std (rx ry rz tx ty tz) | max NEES | s |")
     print("|---|---|---|---|---|---|---|---|---|")
     for setup, full in (("eye-in-hand", False), ("eye-in-hand", True), ("eye-to-hand", True)):

@@ -96,5 +96,5 @@ def refine_with_pose_covariances(G, T_cam_target, cov_rvec_t, X0, Y0, *, times=N
     r = _pose_residual(G @ X @ Tc, Y[None])
     warnings = name_outliers(res.warnings, times, what="T_base_gripper X T_cam_target = Y (whitened by the "
                                                        "view's covariance)")
-    return CovarianceRefinement(X, Y, np.asarray(res.cov)[np.ix_(idx, idx)], {k: res.std.get(f"X.{k}") for k in _LABELS},
-                                r, W, res, warnings)
+    std = {k: res.std.get(f"X.{k}") for k in _LABELS}
+    return CovarianceRefinement(X, Y, np.asarray(res.cov)[np.ix_(idx, idx)], std, r, W, res, warnings)
