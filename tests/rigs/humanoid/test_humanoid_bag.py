@@ -117,6 +117,11 @@ def test_one_line_errors(recording, tmp_path, capsys):
     assert err.count("\n") == 0 and "give --camera-info TOPIC or --camera CAM.yaml" in err
     with pytest.raises(InputError, match="not both"):
         load_input(truth.path, bag=truth.path, images=IMAGE_TOPIC)
+    # a camera stamping on another clock (1000 s ahead): every frame off the joint stream, the clocks named
+    late = recording("rosbag1", camera_clock_offset=1000.0)
+    with pytest.raises(NotEnoughDataError, match=r"26 outside the joint stream; the images' header stamps are on "
+                                                 r"another clock"):
+        load_bag_input(late.path, images=IMAGE_TOPIC)
 
 
 def test_joints_in_degrees_named(recording, small_model, tmp_path):

@@ -109,3 +109,14 @@ def test_one_line_errors(scans, tmp_path, capsys):
                        max_gap_periods=0.1)
     assert main([*args[:-2], "--profiles", PROFILE_TOPIC, "--joints", JOINTS_TOPIC, "--out", str(tmp_path / "b")]) == 2
     assert "give the sphere radius" in capsys.readouterr().err
+
+
+def test_clock_mismatch_named(scans, tmp_path):
+    # a profiler stamping 0.15 s ahead of the arm: the arm still holds each pose (0.3 s holds), the
+    # profiles stay usable, and the two clocks are named in a warning
+    s = scans["rosbag1"]
+    late = simulate_lineprofiler_recording(tmp_path / "late.bag", data=s.data, truth=s.truth, rig=s.rig,
+                                           profiler_clock_offset=0.15)
+    inp = load_bag_input(late.path, profiles=PROFILE_TOPIC, joints=JOINTS_TOPIC, sphere_radius=0.0254)
+    assert [d.code for d in inp.notes] == ["clock_mismatch"] and "look like two clocks" in inp.notes[0].message
+    np.testing.assert_allclose(inp.q, s.data.q, rtol=0, atol=1e-15)

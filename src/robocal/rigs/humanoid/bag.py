@@ -39,7 +39,7 @@ import numpy as np
 
 from robocal.errors import InputError, NotEnoughDataError
 
-__all__ = ["JOINT_NAMES", "NAO_JOINTS", "MAX_GAP_PERIODS", "STILL_WINDOW_PERIODS", "load_bag_input",
+__all__ = ["JOINT_NAMES", "NAO_JOINTS", "MAX_GAP_PERIODS", "STILL_WINDOW_PERIODS", "CLOCK_MISMATCH", "load_bag_input",
            "parse_joint_map"]
 
 #: Every joint NAOqi / naoqi_driver publish on ``/joint_states`` for a NAO H25, in their order.
@@ -56,6 +56,9 @@ JOINT_NAMES = {name: name for name in ("HeadYaw", "HeadPitch", "LHipYawPitch", "
 
 #: An image further than this many joint-state periods from the nearest joint sample is refused.
 MAX_GAP_PERIODS = 3.0
+#: Image and joint streams whose median (receive - header) differ by more [s] are named as two clocks
+#: (the hand-eye reader's threshold, :data:`robocal.handeye.bag_input.CLOCK_MISMATCH`).
+CLOCK_MISMATCH = 0.1
 #: Half-width [joint-state periods] of the window whose samples must agree for an image to be still:
 #: 1.5 periods holds the two samples bracketing the stamp and one more on each side.
 STILL_WINDOW_PERIODS = 1.5
@@ -219,8 +222,11 @@ def load_bag_input(bag, *, joints: str = "/joint_states", images: str | None = N
             q = np.column_stack([js[names_map.get(j, j)] for j in model.joint_names])
         except InputError as exc:
             raise exc.with_source(str(rec.path)) from None
-        stamps = np.asarray([rec.header_stamp_ns(data) for _, _, data in rec.raw(images, show_progress=False)],
-                            np.int64)
+        raw = [(r, rec.header_stamp_ns(data)) for _, r, data in rec.raw(images, show_progress=False)]
+        stamps = np.asarray([s for _, s in raw], np.int64)
+        # clocks: median receive - header of each stream; transports differ by ms, two clocks by much more
+        d_img = float(np.median([r - s for r, s in raw])) / 1e9 if raw else float("nan")
+        d_js = js.clock_offset
         source = str(rec.path)
         where = f"{source}: topic {js.topic}"
 
@@ -260,7 +266,12 @@ def load_bag_input(bag, *, joints: str = "/joint_states", images: str | None = N
                 speed[k] = (model.joint_names[j], np.degrees(span[j]) / ((t_j[b - 1] - t_j[a]) / 1e9))
 
         notes = [f"recording {source}: joints from {js.topic} ({1e9 / period:.1f} Hz, header stamps) interpolated "
-                 f"at the header stamps of {images} ({len(stamps)} frames); camera from {cam_from}"]
+                 f"at the header stamps of {images} ({len(stamps)} frames; receive - header {1e3 * d_img:.1f} ms, "
+                 f"joints {1e3 * d_js:.1f} ms); camera from {cam_from}"]
+        if abs(d_img - d_js) > CLOCK_MISMATCH:
+            notes.append(f"the images' and joints' header stamps look like two clocks (receive - header differs by "
+                         f"{d_img - d_js:+.3f} s; a few ms is transport): the joint angles are taken at the "
+                         "images' stamps, so they are off by the clocks' offset")
         for k in np.flatnonzero(outside):
             notes.append(f"frame {image_name(images, int(stamps[k]))}: outside the joint stream "
                          f"({(t_j[0] - stamps[k]) / 1e9 if stamps[k] < t_j[0] else (stamps[k] - t_j[-1]) / 1e9:.3f} s "

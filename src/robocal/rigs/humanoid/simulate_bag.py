@@ -65,7 +65,8 @@ def simulate_humanoid_recording(path, *, format: str = "rosbag1", rng: np.random
                                 views: int = 3, model=None, data=None, hold: float = 0.5, move: float = 0.5,
                                 joint_rate: float = 50.0, image_rate: float = 4.0, encoding: str = "mono8",
                                 camera_info: bool = True, rename: dict | None = None,
-                                image_topic: str = IMAGE_TOPIC) -> HumanoidRecordingTruth:
+                                image_topic: str = IMAGE_TOPIC,
+                                camera_clock_offset: float = 0.0) -> HumanoidRecordingTruth:
     """Simulate a NAO run (module docstring) and write it to ``path``; return its truth.
 
     Parameters
@@ -91,6 +92,9 @@ def simulate_humanoid_recording(path, *, format: str = "rosbag1", rng: np.random
         Write the ``camera_info`` topic beside the images.
     rename : dict, optional
         Recorded joint names that differ from NAOqi's (``{"LKneePitch": "LKneePich"}``: a driver's typo).
+    camera_clock_offset : float
+        Seconds added to the camera topics' header stamps (a camera on another clock; receive times
+        unchanged). ``image_stamps_ns`` are the true times.
     """
     from robocal.bags._simulate import LATENCY_NS, RECORDING_FORMATS, T0_NS, _camera_info, _image_msg, _Writer
     from robocal.rigs.humanoid.bag import NAO_JOINTS
@@ -146,6 +150,7 @@ def simulate_humanoid_recording(path, *, format: str = "rosbag1", rng: np.random
     def at(stamp, kind, fn):
         events.append((int(stamp) + LATENCY_NS[kind], len(events), fn))
 
+    off = int(round(camera_clock_offset * 1e9))
     with _Writer(path, format) as w:
         for k, s in enumerate(j_ns):
             at(s, "joints", lambda s=s, k=k: w.write(
@@ -160,10 +165,10 @@ def simulate_humanoid_recording(path, *, format: str = "rosbag1", rng: np.random
             img = grey if v < 0 else np.asarray(data.images[v])
             recv = s + LATENCY_NS["camera"]
             at(s, "camera", lambda s=s, img=img, recv=recv: w.write(image_topic,
-                                                                    *_image_msg(w, s, recv, img, encoding)))
+                                                                    *_image_msg(w, s + off, recv, img, encoding)))
             if camera_info:
                 at(s, "camera", lambda s=s, recv=recv: w.write(info_topic, "sensor_msgs/msg/CameraInfo", recv,
-                                                               _camera_info(w, s, model.camera)))
+                                                               _camera_info(w, s + off, model.camera)))
         for _, _, fn in sorted(events, key=lambda e: (e[0], e[1])):
             fn()
     hold_ns = T0_NS + np.round(hold_s * 1e9).astype(np.int64)

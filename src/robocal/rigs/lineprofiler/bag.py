@@ -42,13 +42,16 @@ from robocal.diagnostics import Diagnostic
 from robocal.errors import InputError, NotEnoughDataError
 from robocal.rigs.lineprofiler.calibrate import PoseTable, SphereInput
 
-__all__ = ["BagSphereInput", "load_bag_input", "MAX_GAP_PERIODS", "PLANE_TOLERANCE", "MIN_POINTS"]
+__all__ = ["BagSphereInput", "load_bag_input", "MAX_GAP_PERIODS", "PLANE_TOLERANCE", "MIN_POINTS", "CLOCK_MISMATCH"]
 
 #: A profile further than this many periods of the joint / tf stream from its nearest sample is dropped.
 MAX_GAP_PERIODS = 3.0
 #: Largest |y| [m] of a profile point: the measuring plane is y_L = 0; a float32 driver's y is 0 exactly,
 #: a cloud in another frame is off by centimetres.
 PLANE_TOLERANCE = 1e-4
+#: Profile and pose streams whose median (receive - header) differ by more [s] are named as two clocks
+#: (the hand-eye reader's threshold, :data:`robocal.handeye.bag_input.CLOCK_MISMATCH`).
+CLOCK_MISMATCH = 0.1
 #: A profile with fewer valid points is dropped (a circle fit needs 3; FPDP judges the rest).
 MIN_POINTS = 3
 
@@ -153,6 +156,7 @@ def load_bag_input(bag, *, profiles: str | None = None, joints: str | None = Non
                                          f"joint ({', '.join(names)}); need 2 or more")
             stream = f"{js.topic} ({', '.join(names)})"
             period = float(np.median(np.diff(t_s)))
+            d_pose = js.clock_offset
         else:
             tree = read_tf(rec, show_progress=show_progress)
             up_p, up_c = tree.path(base, flange)
@@ -161,6 +165,8 @@ def load_bag_input(bag, *, profiles: str | None = None, joints: str | None = Non
                    if dyn else np.array([stamps.min(), stamps.max()], np.int64))
             period = max((float(np.median(np.diff(e.stamps_ns))) for e in dyn if len(e.stamps_ns) > 1), default=0.0)
             stream = f"tf {base} -> {flange}"
+            d_pose = (float(np.median(np.concatenate([e.receive_ns - e.stamps_ns for e in dyn]))) / 1e9
+                      if dyn else pc.clock_offset)
     outside = (stamps < t_s[0]) | (stamps > t_s[-1])
     keep = ~outside
     if joints is not None:
@@ -184,6 +190,11 @@ def load_bag_input(bag, *, profiles: str | None = None, joints: str | None = Non
                          f"message {k}, |y| up to {1e3 * y:.3g} mm; tolerance {1e3 * PLANE_TOLERANCE:g} mm): the "
                          f"clouds must be in the profiler's measuring frame L ('{pc.frame_id}' is not)")
     notes = []
+    if abs(pc.clock_offset - d_pose) > CLOCK_MISMATCH:
+        notes.append(Diagnostic("clock_mismatch", f"the profiles' and the {stream}'s header stamps look like two "
+                                f"clocks: receive - header is {1e3 * pc.clock_offset:.0f} ms for the profiles, "
+                                f"{1e3 * d_pose:.0f} ms for the poses (expected: a few ms apart); the poses are "
+                                "taken at the profiles' stamps, so they are off by the clocks' offset"))
     for mask, why in ((outside, f"outside the span of {stream}"),
                       (far, f"further than {max_gap_periods:g} periods ({max_gap_periods * period / 1e6:.1f} ms) "
                             f"from a sample of {stream}"),

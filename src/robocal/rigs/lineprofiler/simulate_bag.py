@@ -56,13 +56,14 @@ def _cloud(w, stamp_ns: int, xz: np.ndarray, frame: str):
 def simulate_lineprofiler_recording(path, *, format: str = "rosbag1", rng: np.random.Generator | None = None,
                                     poses: int = 16, hold: float = 0.3, move: float = 0.3, joint_rate: float = 100.0,
                                     data=None, truth=None, rig=None, base_frame: str = "base_link",
-                                    flange_frame: str = "flange",
-                                    laser_frame: str = "profiler") -> LineProfilerRecordingTruth:
+                                    flange_frame: str = "flange", laser_frame: str = "profiler",
+                                    profiler_clock_offset: float = 0.0) -> LineProfilerRecordingTruth:
     """Simulate an FPDP scan (module docstring) and write it to ``path``; return its truth.
 
     ``data``, ``truth`` (both, from :func:`.simulate.simulate_fpdp` on ``rig``): write a scan already
     simulated (the same scan in several formats); otherwise ``poses`` poses are simulated with ``rng``
-    (default seed 0).
+    (default seed 0). ``profiler_clock_offset`` [s] is added to the profiles' header stamps (a profiler on
+    another clock; receive times and ``profile_stamps_ns`` unchanged).
     """
     from robocal.bags._simulate import LATENCY_NS, RECORDING_FORMATS, T0_NS, _Writer
     from robocal.rigs.lineprofiler.model import default_rig
@@ -104,7 +105,7 @@ def simulate_lineprofiler_recording(path, *, format: str = "rosbag1", rng: np.ra
         for k, s in enumerate(p_ns):
             events.append((int(s) + _PROFILE_LATENCY_NS, len(events), lambda s=s, k=k: w.write(
                 PROFILE_TOPIC, "sensor_msgs/msg/PointCloud2", s + _PROFILE_LATENCY_NS,
-                _cloud(w, s, np.asarray(data.profiles[k]), laser_frame))))
+                _cloud(w, s + int(round(profiler_clock_offset * 1e9)), np.asarray(data.profiles[k]), laser_frame))))
         for _, _, fn in sorted(events, key=lambda e: (e[0], e[1])):
             fn()
     hold_ns = T0_NS + np.round(hold_s * 1e9).astype(np.int64)
