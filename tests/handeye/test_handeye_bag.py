@@ -213,3 +213,13 @@ def test_the_example_recording():
     # the figures docs/bags.md shows [mm], to within 10 um (below the smallest std, 13 um: another OpenCV's
     # corner refinement may move them by micrometres, the documented answer stays right)
     assert np.allclose(1e3 * res.X[:3, 3], [34.958, 60.000, 120.027], atol=0.01), 1e3 * res.X[:3, 3]
+
+
+def test_a_repeated_header_stamp_keeps_the_first_message():
+    from robocal.handeye.bag_input import _unique_stamps
+
+    stamps = np.array([30, 10, 20, 10, 40, 20], np.int64) + 1_700_000_000_000_000_000   # receive order
+    kept, recv, (w,) = _unique_stamps(stamps, np.arange(6), "/cam/image_raw", "image")
+    assert recv.tolist() == [0, 1, 2, 4] and kept.tolist() == stamps[[0, 1, 2, 4]].tolist()
+    assert w.code == "repeated_stamps" and w.message.startswith("2 image(s) of /cam/image_raw repeat"), w.message
+    assert _unique_stamps(stamps[:3], np.arange(3), "/t", "image")[2] == []

@@ -188,11 +188,29 @@ def _robot_at(tree, chain, base, gripper, stamps_ns, names, what: str):
         if holes.all():
             raise InputError(f"{tree.source}: every {what} is farther than {1e3 * limit:.0f} ms from the nearest "
                              f"tf sample of {base} -> {gripper} (largest gap {1e3 * ps.gap.max():.0f} ms)")
-    keep = ~holes
+    return _rows(ps, np.flatnonzero(~holes)), idx[~holes], warns, t0
+
+
+def _unique_stamps(stamps, recv, topic: str, what: str):
+    """``(stamps, recv, warnings)`` with a repeated header stamp's later messages dropped (a driver that does
+    not advance its stamp: which pose a repeated stamp has is unknowable), counted and named."""
+    first = np.sort(np.unique(stamps, return_index=True)[1])
+    if len(first) == len(stamps):
+        return stamps, recv, []
+    from robocal.bags import image_name
+
+    rep = np.setdiff1d(np.arange(len(stamps)), first)
+    return stamps[first], recv[first], [Diagnostic(
+        "repeated_stamps", f"{len(rep)} {what}(s) of {topic} repeat an earlier header stamp, dropped: "
+        + ", ".join(image_name(topic, s) for s in stamps[rep][:4]) + (" ..." if len(rep) > 4 else ""))]
+
+
+def _rows(ps, idx):
+    """The :class:`~robocal.bags.PoseStream` ``ps`` at rows ``idx``."""
     from robocal.bags import PoseStream
 
-    ps = PoseStream(ps.parent, ps.child, ps.stamps_ns[keep], ps.T[keep], ps.gap[keep], ps.edges)
-    return ps, idx[keep], warns, t0
+    idx = np.asarray(idx, int)
+    return PoseStream(ps.parent, ps.child, ps.stamps_ns[idx], ps.T[idx], ps.gap[idx], ps.edges)
 
 
 def _clock_check(chain, recv_ns, stamps_ns, what: str) -> list:
@@ -223,7 +241,7 @@ def _default_camera_info(rec, topic: str) -> str:
 
 
 def _from_images(rec, tree, chain, base, gripper, topic, camera_info, camera, target, every, offset_ns, progress):
-    from robocal.bags import image_name, images as bag_images, read_camera_info
+    from robocal.bags import image_name, iter_images, read_camera_info
     from robocal.bags._messages import IMAGE_TYPES
     from robocal.camera import load_camera, load_target
     from robocal.handeye.images import view_poses
@@ -248,13 +266,23 @@ def _from_images(rec, tree, chain, base, gripper, topic, camera_info, camera, ta
         raise InputError(f"{rec.path}: topic {topic} holds no images")
     n_topic = len(stamps)
     stamps, recv = np.asarray(stamps, np.int64)[::every], np.asarray(recv, np.int64)[::every]
+    stamps, recv, warns = _unique_stamps(stamps, recv, topic, "image")
     names = [image_name(topic, s) for s in stamps]
-    warns, clocks = _clock_check(chain, recv, stamps + offset_ns, "image")
+    w1, clocks = _clock_check(chain, recv, stamps + offset_ns, "image")
     robot, kept, w2, t0 = _robot_at(tree, chain, base, gripper, stamps + offset_ns, names, "image")
+    warns += w1
     warns += w2
     require_memory(len(kept) * cam.width * cam.height * 3.0, f"{len(kept)} decoded {cam.width}x{cam.height} images "
                    f"of {topic}", source=str(rec.path))
-    frames = list(bag_images(rec, topic, stamps[kept], show_progress=progress))
+    # the robot row of each decoded frame by its stamp, not by position (frames come in receive order)
+    row = {int(s): i for i, s in enumerate(stamps[kept])}
+    decoded, seen = [], set()
+    for s, img in iter_images(rec, topic, stamps[kept], tolerance=0.0, show_progress=progress):
+        if s not in seen:  # a later message repeating a stamp matches it too: the first one only
+            seen.add(s)
+            decoded.append((s, img))
+    robot = _rows(robot, [row[int(s)] for s, _ in decoded])
+    frames = [(image_name(topic, s), img) for s, img in decoded]
     try:
         views = view_poses([img for _, img in frames], cam, target_obj, names=[n for n, _ in frames])
     except (NotEnoughDataError, DetectionError) as exc:  # no board found, or in fewer than 3 frames
@@ -288,9 +316,14 @@ def _from_pose_topic(rec, tree, chain, base, gripper, topic, every, offset_ns, p
         raise InputError(f"{rec.path}: topic {topic} holds no poses")
     n_topic = len(arr.stamps_ns)
     sel = np.arange(0, n_topic, every)
+    first = np.sort(np.unique(arr.stamps_ns[sel], return_index=True)[1])
+    warns = [] if len(first) == len(sel) else _unique_stamps(arr.stamps_ns[sel], arr.receive_ns[sel], topic,
+                                                             "target pose")[2]
+    sel = sel[first]
     stamps, recv = arr.stamps_ns[sel], arr.receive_ns[sel]
     names = [image_name(topic, s) for s in stamps]
-    warns, clocks = _clock_check(chain, recv, stamps + offset_ns, "target pose")
+    w1, clocks = _clock_check(chain, recv, stamps + offset_ns, "target pose")
+    warns += w1
     robot, kept, w2, t0 = _robot_at(tree, chain, base, gripper, stamps + offset_ns, names, "target pose")
     warns += w2
     if len(kept) < 3:
