@@ -111,3 +111,20 @@ def test_offset_std_matches_monte_carlo():
     ratio = err.std(ddof=1) / np.sqrt(np.mean(std ** 2))
     assert 0.65 < ratio < 1.5, ratio
     assert abs(err.mean()) < 3 * err.std(ddof=1) / np.sqrt(len(err))      # no bias beyond its 3-sigma
+
+
+def test_an_outlier_sample_is_named_by_its_camera_row():
+    s = simulate_streams(np.random.default_rng(3), duration=8.0)
+    from robocal.geometry import matrix_from_rotvec
+
+    Tc = s.T_cam_target.copy()
+    Tc[40, :3, :3] = matrix_from_rotvec([0.06, 0.0, 0.03]) @ Tc[40, :3, :3]      # 3.8 deg, ~60x the noise
+    tc = np.r_[-5.0, s.t_cam]                   # a first sample before the robot log: cropped, rows shift by 1
+    Tc = np.concatenate([Tc[:1], Tc])
+    p = pair_streams(s.t_robot, s.T_base_gripper, tc, Tc, "auto")
+    assert p.cropped["camera"] == 1 and p.index[0] == 1
+    res = calibrate_hand_eye(p.T_base_gripper, p.T_cam_target, pairs="consecutive", refine=False)
+    c = refine_with_clock(p, res.X, res.Y)
+    out = [w for w in c.warnings if w.code == "outliers"]
+    assert out and out[0].indices == (41,), c.warnings
+    assert out[0].message.startswith(f"pose 41 (t = {tc[41]:.3f} s): "), out[0].message

@@ -275,8 +275,7 @@ class ClockRefinement:
     warnings: list = field(default_factory=list)
 
 
-def refine_with_clock(pairing: StreamPairing, X0, Y0, *, setup: str = "eye-in-hand", times=None
-                      ) -> ClockRefinement:
+def refine_with_clock(pairing: StreamPairing, X0, Y0, *, setup: str = "eye-in-hand") -> ClockRefinement:
     """X, the target pose Y and the clock offset by least squares on every kept camera sample.
 
     Residual of sample ``i``: ``G(t_cam[i] + dt) X T_cam_target[i]`` against ``Y`` (rotation vector, rad;
@@ -285,7 +284,8 @@ def refine_with_clock(pairing: StreamPairing, X0, Y0, *, setup: str = "eye-in-ha
     ``robocal.estimation`` (LM, finite differences) gives the 13 x 13 covariance. The samples are those of
     ``pairing`` less the ones within a margin (4 correlation grid steps + 2 robot intervals) of the robot
     stream's ends, so that the set stays fixed while ``dt`` moves. Starts: ``X0``, ``Y0`` (a refined X at
-    the pairing's offset), ``pairing.clock_offset``.
+    the pairing's offset), ``pairing.clock_offset``. Outliers are named by their row in the camera file
+    (from 0) and their stamp.
     """
     from robocal.estimation import Problem, solve
     from robocal.handeye.motions import _LABELS, _perturbed, _pose_residual, _sigmas, name_outliers
@@ -333,11 +333,15 @@ def refine_with_clock(pairing: StreamPairing, X0, Y0, *, setup: str = "eye-in-ha
     idx = [res.free_labels.index(k) for k in labels]
     cov = np.asarray(res.cov)[np.ix_(idx, idx)]
     repaired = _repaired(pairing, dt)
-    kept_times = pairing.t[use] if times is None else times
+    # the solver numbers the samples it used; the user knows the camera file's rows
+    rows = pairing.index[use]
+    t_row = np.full(int(pairing.index.max()) + 1, np.nan)
+    t_row[pairing.index] = pairing.t
+    warns = [Diagnostic(w.code, w.message, w.params, tuple(int(rows[i]) for i in w.indices))
+             if w.code == "outliers" and w.indices else w for w in res.warnings]
     return ClockRefinement(X, Y, dt, res.std.get("clock_offset"), cov,
                            float(np.sqrt(np.mean(r[:, :3] ** 2))), float(np.sqrt(np.mean(r[:, 3:] ** 2))),
-                           repaired, res,
-                           name_outliers(res.warnings, kept_times, what="T_base_gripper(t + dt) X T_cam_target = Y"))
+                           repaired, res, name_outliers(warns, t_row, what="T_base_gripper(t + dt) X T_cam_target = Y"))
 
 
 def _repaired(p: StreamPairing, offset: float) -> StreamPairing:
