@@ -88,6 +88,10 @@ def test_cli(scans, tmp_path, capsys):
     assert t[1] is None  # undetermined, not a number
     np.testing.assert_allclose([t[0], t[2]], s.rig.X[[0, 2], 3], atol=5e-4)  # 0.5 mm: ~20 sigma of the fit
     assert "T_E_L translation [mm]" in capsys.readouterr().out
+    # the rig's plausibility check runs on the recording's data as on its files: a diameter given as the radius
+    assert main(["lineprofiler", "calibrate", "--bag", str(s.path), "--profiles", PROFILE_TOPIC, "--joints",
+                 JOINTS_TOPIC, "--sphere-radius", str(2 * R_MM), "--out", str(tmp_path / "d")]) == 2
+    assert "the sphere radius (50.8 mm) looks like the diameter" in capsys.readouterr().err
 
 
 def test_one_line_errors(scans, tmp_path, capsys):
