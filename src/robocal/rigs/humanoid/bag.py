@@ -272,13 +272,15 @@ def load_bag_input(bag, *, joints: str = "/joint_states", images: str | None = N
             notes.append(f"the images' and joints' header stamps look like two clocks (receive - header differs by "
                          f"{d_img - d_js:+.3f} s; a few ms is transport): the joint angles are taken at the "
                          "images' stamps, so they are off by the clocks' offset")
-        for k in np.flatnonzero(outside):
-            notes.append(f"frame {image_name(images, int(stamps[k]))}: outside the joint stream "
-                         f"({(t_j[0] - stamps[k]) / 1e9 if stamps[k] < t_j[0] else (stamps[k] - t_j[-1]) / 1e9:.3f} s "
-                         "beyond it), refused")
-        for k in np.flatnonzero(far):
-            notes.append(f"frame {image_name(images, int(stamps[k]))}: nearest joint sample {1e3 * gap[k]:.1f} ms "
-                         f"away (> {max_gap_periods:g} periods of {1e-6 * period:.1f} ms), refused")
+        # one note per reason (a camera running a minute past the joints is 1800 frames, not 1800 notes)
+        if outside.any():
+            beyond = np.maximum(t_j[0] - stamps, stamps - t_j[-1])[outside] / 1e9
+            notes.append(f"{int(outside.sum())} frame(s) outside the joint stream, refused (first "
+                         f"{image_name(images, int(stamps[outside][0]))}; up to {beyond.max():.3f} s beyond it)")
+        if far.any():
+            notes.append(f"{int(far.sum())} frame(s) further than {max_gap_periods:g} joint-state periods "
+                         f"({max_gap_periods * period / 1e6:.1f} ms) from a joint sample, refused (first "
+                         f"{image_name(images, int(stamps[far][0]))}, largest gap {1e3 * gap[far].max():.1f} ms)")
         n_moving = int(moving.sum())
         if n_moving:
             first = int(np.argmax(moving))
