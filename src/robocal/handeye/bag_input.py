@@ -46,12 +46,14 @@ POSE_TYPES = ("geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovari
 class BagPosePair(PosePair):
     """A :class:`~robocal.handeye.workflow.PosePair` read from a recording, with what the calibration and the
     result take from it: ``pose_sigmas`` (N, 2) rotation [rad] / translation [m] std per view (or None),
+    ``pose_covariances`` (N, 6, 6) of the image views (as ``calibrate-images`` gives them, or None),
     ``warnings`` (views dropped or down-weighted, clocks), ``diagnostics`` (merged into the result's)."""
 
     bag: Path | None = None
     extra_files: tuple = ()
     source_names: tuple = ("T_base_gripper", "T_cam_target")
     pose_sigmas: np.ndarray | None = None
+    pose_covariances: np.ndarray | None = None
     warnings: list = field(default_factory=list)
     diagnostics: dict = field(default_factory=dict)
 
@@ -245,6 +247,7 @@ def _from_images(rec, tree, chain, base, gripper, topic, camera_info, camera, ta
     from robocal.bags._messages import IMAGE_TYPES
     from robocal.camera import load_camera, load_target
     from robocal.handeye.images import view_poses
+    from robocal.handeye.workflow import _view_covariances
     from robocal.resources import require_memory
 
     if target is None:
@@ -291,7 +294,7 @@ def _from_images(rec, tree, chain, base, gripper, topic, camera_info, camera, ta
         robot.T[views.index], views.T_cam_target, rec.path, rec.path, (robot.stamps_ns[views.index] - t0) / 1e9,
         ("", ""), bag=rec.path, extra_files=tuple(Path(p) for p in (camera, target) if p is not None),
         source_names=(f"{rec.path.name} tf {base} -> {gripper}", f"{rec.path.name} {topic}"),
-        pose_sigmas=views.sigmas, warnings=warns + list(views.warnings))
+        pose_sigmas=views.sigmas, pose_covariances=_view_covariances(views), warnings=warns + list(views.warnings))
     gap = robot.gap[views.index]
     pair.diagnostics = {
         **_recording(rec, chain, base, gripper, topic, n_topic, every, len(kept), clocks, gap, "image"),

@@ -162,6 +162,8 @@ def calibrate(pair: PosePair, *, method: str = "tsai", no_refine: bool = False, 
     tick()
     if pose_sigmas is None:  # a recording's image views carry their own stds (bag_input.BagPosePair)
         pose_sigmas = getattr(pair, "pose_sigmas", None)
+    if pose_covariances is None:  # ... and covariances, as calibrate-images passes them
+        pose_covariances = getattr(pair, "pose_covariances", None)
     res = calibrate_hand_eye(pair.T_base_gripper, pair.T_cam_target, method, refine=not no_refine, pairs=pairs,
                              times=pair.t, setup=setup, pose_sigmas=pose_sigmas,
                              accept_implausible=accept_implausible, names=pair.names)
