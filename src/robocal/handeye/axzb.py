@@ -155,6 +155,10 @@ def calibrate_robot_world(T_cam_world, T_gripper_base, *, refine: bool = True, p
         ``A``: the world (target) frame seen by the camera, metres.
     T_gripper_base : array_like, shape (N, 4, 4)
         ``B``: the inverse of the robot's forward kinematics.
+    refine : bool
+        Refine X and Z jointly from Shah's closed form by least squares on each measured ``A`` against
+        ``Z B X^-1`` (:func:`_rw_residual`: rotation and translation residuals weighted by their RMS, the
+        camera's pose error), which gives their covariance.
     pairs : {'auto', 'consecutive', 'all'}
         The gripper motions of the excitation check (:func:`~robocal.handeye.motions.pair_indices`).
     times : array_like, shape (N,), optional
