@@ -118,7 +118,7 @@ def api_vs_numpy(sizes, repeats: int) -> None:
     o1, o2 = m.offsets
     rng = np.random.default_rng(16)
     print(f"API vs plain NumPy on the same seed equations (projector {m.name}: h = {m.h:g} m, offsets {o1:g}, "
-          f"{o2:g} rad; tilt 0.01 rad to the limit); median of {repeats} alternating repeats; "
+          f"{o2:g} rad; tilt 0.01 rad to the limit); median CPU time of {5 * repeats} alternating samples; "
           f"ratio = NumPy time / API time (goal >= 0.9 from 100 points)")
     print(f"| {'N':>9s} | {'FK eq. 6 API':>12s} | {'NumPy':>10s} | {'ratio':>5s} | {'IK eq. 8 API':>12s} | "
           f"{'NumPy':>10s} | {'ratio':>5s} | {'D-H chain API':>13s} | {'NumPy':>10s} | {'ratio':>5s} |")
@@ -143,15 +143,19 @@ def api_vs_numpy(sizes, repeats: int) -> None:
 
 
 def paired_medians(api, peer, n: int, repeats: int) -> tuple[float, float]:
-    """Median time per call [s] of ``api`` and ``peer``, timed alternately (load drifts hit both alike)."""
-    k = max(1, min(2_000, 200_000 // n))  # calls per sample: ~10-50 ms per sample at every N
+    """Median CPU time per call [s] of ``api`` and ``peer``, timed alternately in short samples.
+
+    CPU time of this process (``time.process_time``), not wall time: on a shared machine the wall clock
+    also counts the time other processes hold the core; alternating ~5 ms samples puts load drifts on both.
+    """
+    k = max(1, min(5_000, 50_000 // n))  # calls per sample: ~5 ms per sample below 10^6 points
     ta, tp = [], []
-    for _ in range(repeats):
+    for _ in range(5 * repeats):
         for fn, ts in ((api, ta), (peer, tp)):
-            t0 = time.perf_counter()
+            t0 = time.process_time()
             for _ in range(k):
                 fn()
-            ts.append((time.perf_counter() - t0) / k)
+            ts.append((time.process_time() - t0) / k)
     return float(np.median(ta)), float(np.median(tp))
 
 
