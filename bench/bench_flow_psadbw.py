@@ -4,6 +4,7 @@ spread gate as :func:`robocal.rigs.flow.kernel.compute_flow` with its defaults (
 8x8, +/-4 px), compiled by the bench where a C compiler is present.
 
     python bench/bench_flow_psadbw.py     # compiles, checks it against compute_flow, prints the rates
+                                          # (the C-peer table of bench_flow.py alone, ~30 s)
 
 ``psadbw`` (``_mm_sad_epu8``) sums the absolute differences of 8 byte pairs in one instruction, so an
 8x8 block's SAD at one offset is 4 instructions on two-row registers: the firmware's own trick on its
@@ -188,9 +189,17 @@ def c_sad_argmin(so, prev, curr, best):
 
 
 if __name__ == "__main__":
-    import sys
+    from bench_flow import c_peer
 
-    sys.argv[1:] = ["--c-only"]
-    from bench_flow import main
+    import robocal.rigs.flow.kernel as K
+    from robocal.rigs.flow.simulate import load_texture, shifted_pairs
 
-    main()
+    tex, _ = load_texture("gravel")
+    prev, curr, _ = shifted_pairs(tex, 512, np.random.default_rng(0), binning=2)
+    o1 = K.block_origins(K.FlowConfig())
+    ys, xs = np.repeat(o1, 5), np.tile(o1, 5)
+    pt = np.ascontiguousarray(prev[:256].transpose(1, 2, 0))
+    ct = np.ascontiguousarray(curr[:256].transpose(1, 2, 0))
+    sads = np.empty((25, 81, 256), np.uint16)
+    keys = np.empty((25, 256), np.int32)
+    print(c_peer(prev, curr, (lambda: K._sad8_batch(pt, ct, 0, ys, xs, 4, sads, keys), 256)))

@@ -25,7 +25,7 @@ def _can_cache() -> bool:
     numba stores them in the package's ``__pycache__``, else (a read-only install) in
     ``$NUMBA_CACHE_DIR`` or the user's cache folder (``~/.cache/numba``); with none of them
     writable, ``cache=True`` would fail on import. Then every process compiles the kernels it
-    uses instead (~10 s once per process), which is slow but right. A stale cache cannot serve
+    uses instead (seconds, once per process), which is slow but right. A stale cache cannot serve
     old code: numba's index holds this file's modification time and size, numba's version and
     the CPU, and the compiled functions call only functions of this file (a test checks).
     """
