@@ -359,12 +359,14 @@ def _npz_members(path, src: str) -> dict:
     return members
 
 
-def _require_frames_memory(shape, dtype, src: str) -> None:
-    """Refuse before reading when the frames would not fit (the header gives their shape)."""
+def _require_frames_memory(shape, dtype, src: str, *, mapped: bool = False) -> None:
+    """Refuse before reading when the frames would not fit (the header gives their shape); memory-mapped
+    frames live in the page cache, not in the process: the working copies only."""
     from robocal.resources import require_memory
 
     nbytes = float(np.prod(shape, dtype=float)) * np.dtype(dtype).itemsize
-    require_memory(nbytes * FRAMES_BYTES_PER_BYTE, f"reading the {'x'.join(map(str, shape))} frames", source=src)
+    per_byte = FRAMES_BYTES_PER_BYTE - 1.0 if mapped else FRAMES_BYTES_PER_BYTE
+    require_memory(nbytes * per_byte, f"reading the {'x'.join(map(str, shape))} frames", source=src)
 
 
 def write_frames_npz(path, frames, t, gyro, height) -> Path:
@@ -408,7 +410,7 @@ def read_frames_npz(path):
             raise FileFormatError(f"missing array(s) {', '.join(missing)} (have: {', '.join(members) or 'none'})",
                                   source=src)
         shape, dtype, offset = members["frames"]
-        _require_frames_memory(shape, dtype, src)
+        _require_frames_memory(shape, dtype, src, mapped=offset is not None)
         with np.load(path, allow_pickle=False) as z:
             data = {k: z[k] for k in ("t", "gyro", "height")}
             data["frames"] = (z["frames"] if offset is None or 0 in shape
