@@ -98,3 +98,29 @@ def test_no_module_over_600_lines():
     long = {str(py.relative_to(SRC)): n for py in SRC.rglob("*.py")
             if (n := len(py.read_text(encoding="utf-8").splitlines())) > 650}
     assert not long, long
+
+
+def _diagnostic_codes(path: Path) -> set[str]:
+    """The literal codes of ``Diagnostic("code", ...)`` / ``Diagnostic(code="...")`` calls in one module."""
+    codes = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if not isinstance(node, ast.Call):
+            continue
+        name = node.func.id if isinstance(node.func, ast.Name) else getattr(node.func, "attr", None)
+        if name != "Diagnostic":
+            continue
+        args = [a for a in node.args[:1]] + [k.value for k in node.keywords if k.arg == "code"]
+        codes.update(a.value for a in args if isinstance(a, ast.Constant) and isinstance(a.value, str))
+    return codes
+
+
+def test_every_warning_code_written_is_documented():
+    from robocal.diagnostics import CODES
+
+    used = {}
+    for py in SRC.rglob("*.py"):
+        for code in _diagnostic_codes(py):
+            used.setdefault(code, str(py.relative_to(SRC)))
+    assert len(used) >= 10, "the scan found too few Diagnostic(...) calls: it no longer reads the code"
+    missing = {c: f for c, f in used.items() if c not in CODES}
+    assert not missing, f"codes written but not in robocal.diagnostics.CODES: {missing}"
