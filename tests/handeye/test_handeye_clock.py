@@ -128,3 +128,15 @@ def test_an_outlier_sample_is_named_by_its_camera_row():
     out = [w for w in c.warnings if w.code == "outliers"]
     assert out and out[0].indices == (41,), c.warnings
     assert out[0].message.startswith(f"pose 41 (t = {tc[41]:.3f} s): "), out[0].message
+
+
+def test_robot_world_pairs_two_streams(tmp_path, capsys):
+    s = simulate_streams(np.random.default_rng(4), duration=6.0)
+    g = write_poses(tmp_path / "robot.csv", s.T_base_gripper, s.t_robot)
+    c = write_poses(tmp_path / "camera.csv", s.T_cam_target, s.t_cam)
+    assert main(["handeye", "robot-world", str(g), str(c), "--clock-offset", "auto", "--out", str(tmp_path / "rw")]) == 0
+    out = capsys.readouterr().out
+    res = load_result(tmp_path / "rw" / "result.json")
+    # the correlation alone: within its grid step (10 ms), no std
+    assert abs(res.estimate["clock_offset"] - OFFSET) < 0.01 and res.std["clock_offset"] is None
+    assert res.diagnostics["streams"]["n_pairs"] == len(s.t_cam) and "streams: " in out

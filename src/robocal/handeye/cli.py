@@ -138,6 +138,9 @@ HANDEYE = Workflow(
                          Option("--pairs", default="auto", choices=["auto", "consecutive", "all"],
                                 help="pose pairs of the excitation check's gripper motions (Shah's closed form "
                                      "and the refinement use every pose): " + _PAIRS_HELP.split(": ", 1)[1]),
+                         Option("--clock-offset", default="none", metavar="auto|none|SECONDS", to=None,
+                                help="two timed streams on two clocks, as for calibrate; auto: the rotation-rate "
+                                     "correlation only (not refined with X and Z: no std)"),
                          accept_implausible_option()),
                 examples=(f"robocal handeye robot-world {EXAMPLES}/gripper_poses.csv {EXAMPLES}/target_poses.csv "
                           "--out rw",)),

@@ -395,6 +395,7 @@ def robot_world_result(res, pair: PosePair, *, setup: str = "eye-in-hand", pairs
         "closure_residuals": _rw_closure(res, pair, setup),
         "solver": solver_record(res.lsq),
     }
+    _streams_into(result, pair, None, None, names["Zinv"][0])      # the offset: the correlation's, no std
     return result
 
 
@@ -414,7 +415,7 @@ def run_robot_world(args) -> int:
     from robocal.errors import RobocalError
     from robocal.io import prepare_out_dir, write_run
 
-    pair = load_pose_pair(args.gripper_poses, args.target_poses)
+    pair = load_pose_pair(args.gripper_poses, args.target_poses, clock_offset=getattr(args, "clock_offset", "none"))
     try:
         res = robot_world(pair, no_refine=args.no_refine, accept_implausible=args.accept_implausible,
                           setup=args.setup, pairs=args.pairs)
