@@ -13,8 +13,9 @@ covariance instead:
 * the closure ``G[i] X T_cam_target[i] = Y`` then moves by ``R_GX (J_l d_r)`` in rotation and ``R_GX d_t``
   in translation, ``R_GX`` the rotation of ``G[i] X`` (the robot poses taken as exact: their error, if
   any, is left to the residuals' common scale);
-* residual ``i`` is multiplied by ``L_i^-1``, ``L_i L_i^T`` that covariance at the start's X; the noise
-  scale is still estimated from the residuals (``robocal.estimation``: ``s^2 (J^T J)^-1``).
+* residual ``i`` is multiplied by ``S_i^-1/2`` (``diag(w^-1/2) V^T`` of ``S_i = V diag(w) V^T``), ``S_i``
+  that covariance at the start's X; the noise scale is still estimated from the residuals
+  (``robocal.estimation``: ``s^2 (J^T J)^-1``).
 
 The X and Y parameterisation, the residual and the solver are :func:`~robocal.handeye.calibrate_hand_eye`'s.
 """
@@ -45,7 +46,8 @@ class CovarianceRefinement:
 
 
 def closure_whitening(G, X, T_cam_target, cov_rvec_t) -> np.ndarray:
-    """``L_i^-1`` (N, 6, 6): the whitening of each pose's closure residual (module docstring).
+    """``W_i`` (N, 6, 6) with ``W_i^T W_i = S_i^-1``: the whitening of each pose's closure residual (module
+    docstring).
 
     ``G`` (N, 4, 4) the robot poses as the closure takes them, ``X`` (4, 4), ``cov_rvec_t`` (N, 6, 6) over
     the OpenCV rotation vector of ``R_cam_target`` (rad) and ``t_cam_target`` (m).
@@ -63,7 +65,11 @@ def closure_whitening(G, X, T_cam_target, cov_rvec_t) -> np.ndarray:
     M = B @ A
     S = M @ C @ np.swapaxes(M, -1, -2)
     S = 0.5 * (S + np.swapaxes(S, -1, -2))
-    return np.linalg.inv(np.linalg.cholesky(S))
+    # S^-1/2 by eigen-decomposition, eigenvalues floored at 1e-12 of each view's largest: a view whose pose
+    # is (nearly) undetermined along a direction gets ~no weight there instead of a failed Cholesky
+    w, V = np.linalg.eigh(S)
+    w = np.maximum(w, 1e-12 * w[:, -1:])
+    return np.swapaxes(V / np.sqrt(w)[:, None, :], -1, -2)
 
 
 def refine_with_pose_covariances(G, T_cam_target, cov_rvec_t, X0, Y0, *, times=None):

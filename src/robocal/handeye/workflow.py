@@ -236,8 +236,11 @@ def _clock_and_jackknife(res, pair: PosePair, *, setup: str, refined: bool, pose
             pair = replace(pair, T_base_gripper=s.T_base_gripper, T_cam_target=s.T_cam_target, t=s.t, stream=s)
             pose_sigmas = None
     if refined and res.cov is not None:
-        jk = jackknife_hand_eye(_gripper(pair, setup), pair.T_cam_target, res.X, res.Y, pose_sigmas=pose_sigmas,
-                                whitening=whitening)
+        try:
+            jk = jackknife_hand_eye(_gripper(pair, setup), pair.T_cam_target, res.X, res.Y, pose_sigmas=pose_sigmas,
+                                    whitening=whitening)
+        except np.linalg.LinAlgError:           # a replicate without a determined X: no jackknife, the rest stands
+            jk = None
     return res, pair, {"clock": clock, "jackknife": jk, "pair": pair}
 
 
