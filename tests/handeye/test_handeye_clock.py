@@ -140,3 +140,20 @@ def test_robot_world_pairs_two_streams(tmp_path, capsys):
     # the correlation alone: within its grid step (10 ms), no std
     assert abs(res.estimate["clock_offset"] - OFFSET) < 0.01 and res.std["clock_offset"] is None
     assert res.diagnostics["streams"]["n_pairs"] == len(s.t_cam) and "streams: " in out
+
+
+def test_a_repetitive_motion_is_flagged():
+    # a wrist swinging about one tilted axis with a 2 s period: every whole period fits alike (|omega|
+    # correlates to 0.999 at each); the random motion of simulate_streams has its runner-up at 0.71
+    from robocal.geometry import matrix_from_rotvec, transform_from
+
+    ax = np.array([0.3, 0.5, 0.8]) / np.linalg.norm([0.3, 0.5, 0.8])
+    tr, tc = np.arange(0, 20, 0.01), np.arange(0.5, 19, 0.1)
+
+    def poses(t):
+        return transform_from(matrix_from_rotvec(np.outer(0.5 * np.sin(np.pi * t), ax)), np.zeros((len(t), 3)))
+    p = pair_streams(tr, poses(tr), tc, poses(tc + OFFSET), "auto")
+    w = [d for d in p.warnings if d.code == "weakly_determined"]
+    assert w and "a repetitive motion" in w[0].message, p.warnings
+    s = simulate_streams(np.random.default_rng(1), duration=10.0)
+    assert not pair_streams(s.t_robot, s.T_base_gripper, s.t_cam, s.T_cam_target, "auto").warnings

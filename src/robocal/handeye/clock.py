@@ -84,7 +84,7 @@ def _median_step(t) -> float:
 
 
 def correlate_rates(t_robot, R_robot, t_cam, R_cam, *, max_offset: float | None = None
-                    ) -> tuple[float, float, float]:
+                    ) -> tuple[float, float, float, tuple | None]:
     """The clock offset (s) at the peak of the normalised cross-correlation of the two streams' ``|omega|``.
 
     Each rate is resampled (linear interpolation) on a grid of its own stream's start with one step for
@@ -94,8 +94,10 @@ def correlate_rates(t_robot, R_robot, t_cam, R_cam, *, max_offset: float | None 
     the signals, their squares and the masks); lags sharing less than half the shorter stream, or beyond
     ``max_offset`` (s), are not considered.
 
-    Returns ``(offset, peak, step)``: ``robot(t_cam + offset)`` pairs with ``cam(t_cam)``; ``peak`` the
-    coefficient at the peak (1: identical rate profiles); ``step`` the grid step (s).
+    Returns ``(offset, peak, step, runner_up)``: ``robot(t_cam + offset)`` pairs with ``cam(t_cam)``;
+    ``peak`` the coefficient at the peak (1: identical rate profiles); ``step`` the grid step (s);
+    ``runner_up`` ``(offset, coefficient)`` of the highest other local maximum at least 0.2 s away (a
+    repetitive motion's next period), or None.
     """
     from scipy.signal import correlate, correlation_lags
 
@@ -135,7 +137,12 @@ def correlate_rates(t_robot, R_robot, t_cam, R_cam, *, max_offset: float | None 
         c = r[k - 1] - 2 * r[k] + r[k + 1]
         if c < 0:
             frac = float(np.clip(0.5 * (r[k - 1] - r[k + 1]) / c, -0.5, 0.5))
-    return float(offsets[k] + frac * h), float(r[k]), float(h)
+    from scipy.signal import find_peaks
+
+    peaks, _ = find_peaks(np.where(np.isfinite(r), r, -1.0))
+    far = peaks[np.abs(offsets[peaks] - offsets[k]) >= 0.2]
+    runner = None if not far.size else (float(offsets[far[np.argmax(r[far])]]), float(np.max(r[far])))
+    return float(offsets[k] + frac * h), float(r[k]), float(h), runner
 
 
 def interpolate_stream(t_src, T_src, t_query) -> np.ndarray:
@@ -230,7 +237,14 @@ def pair_streams(t_robot, T_robot, t_cam, T_cam, clock_offset="none", *, names=(
                                  "stamps: hand-eye calibration by time needs at least 3 poses in each stream")
     corr = step = None
     if mode == "auto":
-        offset, corr, step = correlate_rates(tr, Tr[:, :3, :3], tc, Tc[:, :3, :3], max_offset=max_offset)
+        offset, corr, step, runner = correlate_rates(tr, Tr[:, :3, :3], tc, Tc[:, :3, :3], max_offset=max_offset)
+        if runner is not None and runner[1] > 1 - 0.2 * (1 - corr) - 0.02:
+            # a repetitive motion: another offset (the next period) fits nearly as well as the best
+            warns.append(Diagnostic(
+                "weakly_determined", f"the rotation rates of {names[0]} and {names[1]} correlate nearly as well "
+                f"at {1e3 * runner[0]:.1f} ms ({runner[1]:.3f}) as at the clock offset found ({1e3 * offset:.1f} "
+                f"ms, {corr:.3f}): a repetitive motion; give --clock-offset SECONDS if it is known, or record a "
+                "motion that does not repeat", params=("clock_offset",)))
         if corr < MIN_CORRELATION:
             warns.append(Diagnostic(
                 "weakly_determined", f"the rotation rates of {names[0]} and {names[1]} correlate only to "
