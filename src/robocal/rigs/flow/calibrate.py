@@ -39,8 +39,6 @@ import numpy as np
 
 from robocal.diagnostics import Diagnostic
 from robocal.errors import InputError, NotEnoughDataError
-from robocal.geometry import wrap_angle
-from robocal.estimation import Problem, solve
 from robocal.rigs.flow.kernel_bias import displacement_bias
 from robocal.rigs.flow.model import SensorArray, rot2
 from robocal.rigs.flow.odometry import SensorSteps
@@ -208,12 +206,16 @@ class ArrayCalibration:
 
 def _near(ref, angles) -> np.ndarray:
     """``angles`` (rad) wrapped to within half a turn of ``ref`` (270 deg stays 270, not -90)."""
+    from robocal.geometry import wrap_angle
+
     ref = np.asarray(ref, dtype=float)
     return ref + wrap_angle(np.asarray(angles, dtype=float) - ref)
 
 
 def _problem(M, dP, dth, names, x0s, keep):
     """The windowed model of the module doc over the windows ``keep[i]`` of each sensor."""
+    from robocal.estimation import Problem  # imported when calibrating: odometry does without scipy.optimize
+
     prob = Problem()
     for i, nm in enumerate(names):
         Mi, dPi, dthi = M[i][keep[i]], dP[keep[i]], dth[keep[i]]
@@ -231,6 +233,8 @@ def _problem(M, dP, dth, names, x0s, keep):
 
 
 def _solve(prob, loss):
+    from robocal.estimation import solve
+
     return solve(prob, method="lm" if loss == "linear" else "trf", loss=loss)
 
 
@@ -262,6 +266,8 @@ def calibrate_array(steps: SensorSteps, t_ref, poses_ref, nominal: SensorArray, 
         scatter understates the error and grows with ``window``; the
         jackknife sees the correlation and does not depend on ``window``.
     """
+    from robocal.geometry import wrap_angle
+
     if steps.disp.shape[0] != nominal.n:
         raise InputError(f"the log has {steps.disp.shape[0]} sensors but the array describes {nominal.n}")
     poses = interpolate_poses(t_ref, poses_ref, steps.t)

@@ -24,7 +24,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from robocal.errors import DegenerateGeometryError, InputError, NotEnoughDataError
-from robocal.geometry import rigid_fit, wrap_angle
 
 __all__ = ["TrajectoryErrors", "align_trajectory", "ate", "rpe_lengths", "rpe_per_distance", "evaluate_trajectory",
            "plot_trajectories", "RPE_LENGTHS", "RPE_HEADLINE", "RPE_FRACTIONS"]
@@ -62,6 +61,8 @@ def align_trajectory(est, ref):
     aligned : ndarray (N, 3)
     method : str
     """
+    from robocal.geometry import rigid_fit  # here: robocal.geometry imports scipy.spatial
+
     est = np.asarray(est, float)
     ref = np.asarray(ref, float)
     try:
@@ -217,6 +218,8 @@ def evaluate_trajectory(est, ref, *, lengths=RPE_LENGTHS) -> TrajectoryErrors:
     least two of each; on a short run they are fractions of its path
     (:func:`rpe_lengths`; ``rpe_note`` says what was done).
     """
+    from robocal.geometry import wrap_angle  # here: robocal.geometry imports scipy.spatial
+
     est = np.asarray(est, float)
     ref = np.asarray(ref, float)
     if est.shape != ref.shape or est.ndim != 2 or est.shape[1] != 3:

@@ -19,7 +19,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from robocal.errors import DegenerateGeometryError, InputError, NotEnoughDataError
-from robocal.geometry import wrap_angle
 from robocal.validation import check_array
 
 __all__ = ["SensorArray", "seed_array", "rot2", "se2_exp", "se2_log", "integrate_twists", "relative_twists"]
@@ -208,6 +207,8 @@ def integrate_twists(twists, pose0=(0.0, 0.0, 0.0), *, method: str = "exact"):
 
 def relative_twists(poses):
     """Body twists between consecutive poses ``(K+1, 3) -> (K, 3)`` (inverse of :func:`integrate_twists`)."""
+    from robocal.geometry import wrap_angle  # here: robocal.geometry imports scipy.spatial (issue 16, fixed cost)
+
     p = np.asarray(poses, float)
     d = p[1:, :2] - p[:-1, :2]
     c, s = np.cos(p[:-1, 2]), np.sin(p[:-1, 2])
