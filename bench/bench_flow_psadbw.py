@@ -196,6 +196,7 @@ if __name__ == "__main__":
 
     tex, _ = load_texture("gravel")
     prev, curr, _ = shifted_pairs(tex, 512, np.random.default_rng(0), binning=2)
+    prev, curr = np.concatenate([prev] * 4), np.concatenate([curr] * 4)     # bench_flow.py's 2048 pairs
     o1 = K.block_origins(K.FlowConfig())
     ys, xs = np.repeat(o1, 5), np.tile(o1, 5)
     pt = np.ascontiguousarray(prev[:256].transpose(1, 2, 0))
