@@ -38,7 +38,7 @@ import numpy as np
 from robocal.errors import InputError, SingularConfigurationError
 from robocal.geometry import wrap_angle  # re-exported: part of this module's API
 from robocal.kinematics import DHChain
-from robocal.kinematics._common import finite_fast as _finite
+from robocal.kinematics._common import finite_fast as _finite, lo_hi as _lo_hi
 from robocal.validation import check_array, check_rotation_matrix
 
 __all__ = [
@@ -243,16 +243,17 @@ class ProjectorModel:
 
         The common call: a float64 array, finite, every actual tilt ``a2 = theta2 + o2`` within
         +-``tilt_limit`` (no warning, the beam meets the floor). Decided by :func:`_finite` and the min and
-        max of ``a2`` (a NaN fails every comparison). Issue 16.
+        max of ``a2`` (argmin / argmax, see ``lo_hi``; a NaN fails every comparison). Issue 16.
         """
         if not (type(theta) is np.ndarray and theta.dtype is _F8 and theta.ndim and theta.shape[-1] == 2
-                and theta.size and _finite(theta)):
+                and theta.size):
             return None
         a2 = theta[..., 1] + self.offsets[1]
         lim = self.tilt_limit + 1e-12
-        # |a2| <= lim as the max of |a2|: an elementwise call and one reduction, cheaper than min and max
-        ok = _max(np.abs(a2), axis=None) <= lim and math.cos(lim) > HORIZON_TOL  # a limit within 1e-9 of pi/2:
-        return (theta, a2) if ok else None  # the horizon check is needed too
+        lo, hi = _lo_hi(a2)
+        ok = (lo >= -lim and hi <= lim and _finite(theta[..., 0])
+              and math.cos(lim) > HORIZON_TOL)  # a limit within 1e-9 of pi/2: the horizon check is needed too
+        return (theta, a2) if ok else None
 
     def _checked_theta(self, theta, what: str) -> np.ndarray:
         """``theta`` validated with the per-element checks: raise at the horizon, warn beyond the tilt limit."""
@@ -315,13 +316,26 @@ class ProjectorModel:
         SingularConfigurationError
             Where the beam is horizontal or points upwards (no floor hit).
         """
-        fast = self._fast_theta(theta)
-        if fast is None:
-            theta = self._checked_theta(theta, "spot")
-            a2 = theta[..., 1] + self.offsets[1]
+        o1, o2 = self.offsets
+        t = theta
+        if type(t) is np.ndarray and t.dtype is _F8 and t.ndim and t.shape[-1] == 2 and t.size:
+            # the checks inline (issue 16; see _fast_theta): every tilt within the limit (min and max; a NaN
+            # fails the comparisons), the pan finite, the limit clear of the horizon
+            a1, a2 = t[..., 0] + o1, t[..., 1] + o2
+            lim = self.tilt_limit + 1e-12
+            if a1.ndim == 1:  # argmin / argmax inline (see lo_hi): the calls around them cost as much
+                ok = (a2[a2.argmin()] >= -lim and a2[a2.argmax()] <= lim and a1[a1.argmin()] > -math.inf
+                      and a1[a1.argmax()] < math.inf)
+            else:
+                lo, hi = _lo_hi(a2)
+                ok = lo >= -lim and hi <= lim and _finite(a1)
+            if not (ok and math.cos(lim) > HORIZON_TOL):
+                t = None
         else:
-            theta, a2 = fast
-        a1 = theta[..., 0] + self.offsets[0]
+            t = None
+        if t is None:
+            theta = self._checked_theta(theta, "spot")
+            a1, a2 = theta[..., 0] + o1, theta[..., 1] + o2
         # h s2 / c2 as h tan(a2): one transcendental call instead of two (equal to round-off); the
         # products are written straight into the output columns (no temporaries to copy). Issue 16.
         rho = np.tan(a2)
@@ -428,12 +442,9 @@ class ProjectorModel:
         H, h = self.H, self.H - self.d1
         f = p.reshape(-1, p.shape[-1])
         if p.shape[-1] == 3:
-            dz = f[:, 2] + H
-            # sum (z + H)^2 <= tol^2 (one dot, below 8192 points) is enough for |z + H| <= tol; else min and
-            # max with bounds rounded inwards: never looser than |z + H| <= floor_tol (exact near -H, Sterbenz)
-            if not ((dz.size <= 8192 and np.dot(dz, dz) <= floor_tol * floor_tol)
-                    or (_min(f[:, 2]) >= math.nextafter(-H - floor_tol, math.inf)
-                        and _max(f[:, 2]) <= math.nextafter(-H + floor_tol, -math.inf))):
+            # bounds rounded inwards: never looser than |z + H| <= floor_tol (exact near -H, Sterbenz)
+            lo, hi = _lo_hi(f[:, 2])
+            if not (lo >= math.nextafter(-H - floor_tol, math.inf) and hi <= math.nextafter(-H + floor_tol, -math.inf)):
                 return None
         out = np.empty(p.shape[:-1] + (2,))
         o = out.reshape(-1, 2)
@@ -449,15 +460,15 @@ class ProjectorModel:
         # the min and max of the tilt decide the nadir (tilt at least atan(2 NADIR_TOL): r > NADIR_TOL h with
         # margin) and the reach; a NaN fails every comparison, an infinite coordinate gives a tilt of pi/2
         # (beyond the reach, or refused when check_reach=False)
-        lo2, hi2 = _min(a2), _max(a2)
+        lo2, hi2 = _lo_hi(a2)
         top = self.tilt_limit + 1e-12 if check_reach else math.nextafter(math.pi / 2, 0.0)
         if not (lo2 + o2 > 2 * NADIR_TOL and hi2 + o2 <= top and abs(o1) < math.pi):
             return None
         # the pan is atan2 - o1 in [-pi - |o1|, pi + |o1|]: one shift of 2 pi where it left (-pi, pi]
         # (atan2(-0.0, y < 0) = -pi included), not a modulo over all points
-        if o1 >= 0 and _min(a1) <= -math.pi:
+        if o1 >= 0 and a1[a1.argmin()] <= -math.pi:
             np.add(a1, 2 * math.pi, out=a1, where=a1 <= -math.pi)
-        if o1 < 0 and _max(a1) > math.pi:
+        if o1 < 0 and a1[a1.argmax()] > math.pi:
             np.subtract(a1, 2 * math.pi, out=a1, where=a1 > math.pi)
         return out
 
