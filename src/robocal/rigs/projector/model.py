@@ -440,30 +440,32 @@ class ProjectorModel:
         if not (type(p) is np.ndarray and p.dtype is _F8 and p.ndim and p.size and p.shape[-1] in (2, 3)):
             return None
         H, h = self.H, self.H - self.d1
-        f = p.reshape(-1, p.shape[-1])
-        if p.shape[-1] == 3:
-            # bounds rounded inwards: never looser than |z + H| <= floor_tol (exact near -H, Sterbenz)
-            lo, hi = _lo_hi(f[:, 2])
-            if not (lo >= math.nextafter(-H - floor_tol, math.inf) and hi <= math.nextafter(-H + floor_tol, -math.inf)):
+        f = p if p.ndim == 2 else p.reshape(-1, p.shape[-1])
+        x, y = f[:, 0], f[:, 1]
+        if f.shape[1] == 3:
+            # bounds rounded inwards: never looser than |z + H| <= floor_tol (exact near -H, Sterbenz);
+            # argmin / argmax inline (see lo_hi)
+            z = f[:, 2]
+            if not (z[z.argmin()] >= math.nextafter(-H - floor_tol, math.inf)
+                    and z[z.argmax()] <= math.nextafter(-H + floor_tol, -math.inf)):
                 return None
-        out = np.empty(p.shape[:-1] + (2,))
-        o = out.reshape(-1, 2)
+        r = np.hypot(x, y)
+        # the min and max of r decide the nadir (r > NADIR_TOL h) and the reach (r <= h tan(tilt_limit), so the
+        # tilt atan(r / h) is within the limit to round-off, well inside its 1e-12 rad margin); a NaN fails
+        # every comparison, an infinite coordinate the upper one
+        top = h * math.tan(self.tilt_limit) if check_reach else math.inf
         o1, o2 = self.offsets
+        if not (r[r.argmin()] > NADIR_TOL * h and r[r.argmax()] < top and abs(o1) < math.pi):
+            return None
+        out = np.empty(p.shape[:-1] + (2,))
+        o = out if out.ndim == 2 else out.reshape(-1, 2)
         a1, a2 = o[:, 0], o[:, 1]
-        np.arctan2(f[:, 0], f[:, 1], out=a1)
-        r = np.hypot(f[:, 0], f[:, 1])
+        np.arctan2(x, y, out=a1)
         np.arctan(np.divide(r, h, out=r), out=a2)  # atan(r / h): equal to atan2(r, h) to round-off, 1.8x faster
         if o1:  # per column: one broadcast call on (N, 2) runs an inner loop of 2 values, 10x slower at 10^4
             a1 -= o1
         if o2:
             a2 -= o2
-        # the min and max of the tilt decide the nadir (tilt at least atan(2 NADIR_TOL): r > NADIR_TOL h with
-        # margin) and the reach; a NaN fails every comparison, an infinite coordinate gives a tilt of pi/2
-        # (beyond the reach, or refused when check_reach=False)
-        lo2, hi2 = _lo_hi(a2)
-        top = self.tilt_limit + 1e-12 if check_reach else math.nextafter(math.pi / 2, 0.0)
-        if not (lo2 + o2 > 2 * NADIR_TOL and hi2 + o2 <= top and abs(o1) < math.pi):
-            return None
         # the pan is atan2 - o1 in [-pi - |o1|, pi + |o1|]: one shift of 2 pi where it left (-pi, pi]
         # (atan2(-0.0, y < 0) = -pi included), not a modulo over all points
         if o1 >= 0 and a1[a1.argmin()] <= -math.pi:
