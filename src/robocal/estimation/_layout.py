@@ -55,7 +55,13 @@ class _Layout:
                 rows.append(kt)
                 cols.append(free_pos[kr])
                 vals.append(factor)
-        self.M = sp.csc_array((vals, (rows, cols)), shape=(n, len(self.free_full)))
+        self._M_triplets = (vals, rows, cols)
+        self._M = None
+        # the same map as index arrays: the solver calls full_from_free at every evaluation, and a sparse
+        # product costs ~0.15 ms a call, more than a small problem's residuals
+        self._tied_to = np.array([k for k in self.tied if self.tied[k][0] in free_pos], dtype=int)
+        self._tied_from = np.array([free_pos[self.tied[k][0]] for k in self._tied_to], dtype=int)
+        self._tied_factor = np.array([self.tied[k][1] for k in self._tied_to], dtype=float)
         self.free_pos = free_pos
         self.lower = lo[self.free_full]
         self.upper = hi[self.free_full]
@@ -68,8 +74,21 @@ class _Layout:
     def free_labels(self) -> list[str]:
         return [self.labels[k] for k in self.free_full]
 
+    @property
+    def M(self):
+        """``full = M @ x_free + c`` as a sparse (N, n_free) matrix (built on first use)."""
+        if self._M is None:
+            vals, rows, cols = self._M_triplets
+            self._M = sp.csc_array((vals, (rows, cols)), shape=(self.n_full, len(self.free_full)))
+        return self._M
+
     def full_from_free(self, x: np.ndarray) -> np.ndarray:
-        return self.M @ x + self.c
+        x = np.asarray(x, dtype=float)
+        full = self.c.copy()
+        full[self.free_full] = x
+        if self._tied_to.size:
+            full[self._tied_to] += self._tied_factor * x[self._tied_from]
+        return full
 
     def split(self, full: np.ndarray) -> dict[str, np.ndarray]:
         return {b.name: full[b.offset:b.offset + b.size].reshape(b.shape).copy() for b in self.blocks}

@@ -70,7 +70,10 @@ def loss_derivatives(z: np.ndarray, loss: str) -> tuple[np.ndarray, np.ndarray]:
 
 def robust_cost(f: np.ndarray, loss: str = "linear", f_scale: float = 1.0) -> float:
     """``0.5 * f_scale^2 * sum(rho((f / f_scale)^2))``, the cost ``least_squares`` minimises."""
-    rho, _ = _rho((np.asarray(f) / f_scale) ** 2, loss)
+    f = np.asarray(f)
+    if loss == "linear":  # the common case, at every iterate: no rho arrays
+        return float(0.5 * np.dot(f, f)) if f.ndim == 1 else float(0.5 * np.sum(f**2))
+    rho, _ = _rho((f / f_scale) ** 2, loss)
     return float(0.5 * f_scale**2 * np.sum(rho))
 
 
@@ -113,19 +116,21 @@ class _Tracker:
     def __init__(self, ev, loss, f_scale, callback, bar):
         self.ev, self.loss, self.f_scale = ev, loss, f_scale
         self.callback, self.bar = callback, bar
-        self.cache: list[tuple[np.ndarray, np.ndarray]] = []
+        self.cache: list[tuple[bytes, np.ndarray]] = []
         self.history: list[float] = []
         self.last_x = self.last_f = self.last_J = None
 
     def lookup(self, x):
-        for xx, f in reversed(self.cache):
-            if np.array_equal(xx, x):
+        # keyed by the bytes of x: np.array_equal over the cache cost more than a small problem's residuals
+        key = np.ascontiguousarray(x, dtype=float).tobytes()
+        for kk, f in reversed(self.cache):
+            if kk == key:
                 return f
         return None
 
     def fun(self, x):
         f = self.ev.weighted(x)
-        self.cache = self.cache[-3:] + [(np.array(x, copy=True), f)]
+        self.cache = self.cache[-3:] + [(np.ascontiguousarray(x, dtype=float).tobytes(), f)]
         # a copy: SciPy 1.11/1.12 scale the returned residuals in place for a robust loss, which
         # corrupted the cached ones (robust residual variance off by 1e12 at the lowest pins)
         return f.copy()
