@@ -247,7 +247,7 @@ def _from_images(rec, tree, chain, base, gripper, topic, camera_info, camera, ta
     from robocal.bags._messages import IMAGE_TYPES
     from robocal.camera import load_camera, load_target
     from robocal.handeye.images import view_poses
-    from robocal.handeye.workflow import _view_covariances
+    from robocal.handeye.commands import _view_covariances
     from robocal.resources import require_memory
 
     if target is None:

@@ -82,7 +82,7 @@ HANDEYE = Workflow(
     load_input=f"{_HE}:load_pose_pair",
     calibrate=f"{_HE}:calibrate",
     to_result=f"{_HE}:to_result",
-    build_report=f"{_HE}:build_report",
+    build_report="robocal.handeye.report:build_report",
     summary=f"{_HE}:summary",
     simulate_help="write two simulated pose lists (gripper, target) and their truth",
     simulate_options=(
@@ -106,7 +106,7 @@ HANDEYE = Workflow(
     commands=(
         Command("calibrate-images", help="X from images of a target and the robot poses: each view's pose with its "
                                          "covariance, ambiguous / badly conditioned views named and down-weighted",
-                run=f"{_HE}:run_images",
+                run="robocal.handeye.commands:run_images",
                 options=(Option("--images", type=Path, required=True,
                                 help="folder of images (.png/.jpg/...), one per robot pose, in name order"),
                          Option("--robot", type=Path, required=True, help="T_base_gripper list, one pose per image"),
@@ -119,7 +119,7 @@ HANDEYE = Workflow(
                           "robocal handeye calibrate-images --images he-img/images --robot he-img/robot_poses.csv "
                           "--camera he-img/camera.yaml --target he-img/target.yaml --out he-img-cal")),
         Command("simulate-images", help="render views of a chessboard with the robot poses, camera, target, truth",
-                run=f"{_HE}:run_simulate_images",
+                run="robocal.handeye.commands:run_simulate_images",
                 options=(Option("--poses", type=number_at_least(int, 3, why="AX = XB needs 3 poses"), default=8,
                                 help="number of views"),
                          Option("--seed", type=int, default=0, help="random seed"),

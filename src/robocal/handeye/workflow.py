@@ -19,8 +19,18 @@ from robocal.io import CalibrationResult, hash_inputs
 from robocal.progress import progress as _progress
 
 __all__ = ["SOLVER_FIELDS", "solver_record", "PosePair", "load_pose_pair", "calibrate", "to_result", "robot_world",
-           "robot_world_result", "build_report", "summary", "simulate_files", "run_robot_world", "run_images",
-           "run_simulate_images"]
+           "robot_world_result", "summary", "simulate_files", "run_robot_world"]
+
+# the report and the image commands live in their own modules (.report, .commands); their names stay
+# importable from here, where the declaration and older code found them
+def __getattr__(name):
+    if name == "build_report":
+        from robocal.handeye.report import build_report
+        return build_report
+    if name in ("run_images", "run_simulate_images"):
+        from robocal.handeye import commands
+        return getattr(commands, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 _LABELS = ("rx", "ry", "rz", "tx", "ty", "tz")
 
@@ -416,6 +426,7 @@ def _rw_closure(res, pair: PosePair, setup: str) -> dict:
 def run_robot_world(args) -> int:
     """``robocal handeye robot-world GRIPPER TARGET --out DIR``: ``DIR/result.json`` and ``DIR/report.html``."""
     from robocal.errors import RobocalError
+    from robocal.handeye.report import build_report
     from robocal.io import prepare_out_dir, write_run
 
     pair = load_pose_pair(args.gripper_poses, args.target_poses, clock_offset=getattr(args, "clock_offset", "none"))
@@ -477,82 +488,6 @@ def _streams_line(result) -> str:
             f"{c.get('robot', 0)} unused; {off}\n")
 
 
-def build_report(result, *, base_dir=None):
-    """The hand-eye report from the result alone: poses, per-pose closure residuals, the closed forms
-    compared, the solver record."""
-    from robocal.report import Report, new_figure, solver_section
-
-    rw = result.method.startswith("robot-world")
-    rep = Report("handeye: robot-world AX = ZB" if rw else "handeye: AX = XB", subtitle=result.method)
-    d = result.diagnostics
-    s = rep.section("Estimate")
-    s.parameters(result.estimate, result.std, result.units)
-    s.table([{"quantity": "rotation residual RMS [mrad]", "value": 1e3 * (d.get("rotation_rms_rad") or np.nan)},
-             {"quantity": "translation residual RMS [mm]", "value": 1e3 * (result.residual_rms or np.nan)}],
-            ["quantity", "value"], digits=4)
-    s.text(d.get("convention", ""))
-    s.diagnostics(result.warnings)
-    if d.get("recording") or d.get("views"):  # where the poses came from (a recording; images)
-        from robocal.handeye.bag_input import report_section
-
-        report_section(rep, d)
-    cl = d.get("closure_residuals")
-    if cl:
-        fig, ax = new_figure(1, 2, size=(10, 3.2))
-        n = np.arange(len(cl["rotation_rad"]))
-        for a, key, label in ((ax[0], "rotation_rad", "rotation residual [mrad]"),
-                              (ax[1], "translation_m", "translation residual [mm]")):
-            v = 1e3 * np.asarray(cl[key], float)
-            if len(n) <= 200:
-                a.bar(n, v)
-            else:                               # 10^4 bars take seconds to draw and show nothing more
-                a.plot(n, v, ".", ms=2)
-            a.set_xlabel("pose")
-            a.set_ylabel(label)
-        rep.section("Residuals").figure(fig, "closure residual per pose: " + d.get(
-            "closure", "T_base_gripper[i] X T_cam_target[i] = Y") + " (Y: the target's pose)")
-    cmp = d.get("solver_comparison")
-    if cmp:
-        rows = [{"closed form": c["method"],
-                 "rotation vs estimate [mrad]": None if "error" in c else 1e3 * c["rotation_diff_rad"],
-                 "translation vs estimate [mm]": None if "error" in c else 1e3 * c["translation_diff_m"],
-                 "rotation RMS [mrad]": None if "error" in c else 1e3 * c["rotation_rms_rad"],
-                 "translation RMS [mm]": None if "error" in c else 1e3 * c["translation_rms_m"],
-                 **({"failed": c["error"]} if any("error" in e for e in cmp) else {})} for c in cmp]
-        pairs = next((c["pairs"] for c in cmp if "pairs" in c), "all")
-        nm = next((c["n_motions"] for c in cmp if "n_motions" in c), None)
-        which = {"all": "the relative motions of all pose pairs",
-                 "consecutive": "the motions between consecutive poses",
-                 "auto": "the estimate's motions (--pairs auto: all pairs up to 200 poses, else consecutive "
-                         "ones and well-conditioned longer ones)"}.get(pairs, pairs)
-        rep.section("Closed-form solvers compared").table(
-            rows, digits=4, caption="each closed form against the estimate above, on " + which
-            + ("" if nm is None else f" ({nm} motions)"))
-    st = d.get("streams")
-    if st:
-        rows = [{"stream": k, "stamps not advancing (dropped)": st["dropped_stamps"].get(k, 0),
-                 "outside the other's span": st["cropped"].get(k, 0)} for k in ("robot", "camera")]
-        rep.section("Streams and clocks").table(
-            rows, caption=f"{st['n_pairs']} pairs by time; camera samples outside the robot stream are cropped, robot "
-            f"samples before the first / after the last camera sample unused. Clock offset ({st['mode']}): "
-            f"{1e3 * st['clock_offset_s']:.3f} ms" + ("" if st.get("correlation") is None else
-                                                       f", rotation-rate correlation {st['correlation']:.3f}")
-            + (". " + st["clock_offset_meaning"] if st.get("clock_offset_meaning") else ""))
-    jk = d.get("jackknife")
-    if jk:
-        comp = ("rx [mrad]", "ry [mrad]", "rz [mrad]", "tx [mm]", "ty [mm]", "tz [mm]")
-        rows = [{"component": c, "first-order std": None if f is None else 1e3 * f, "jackknife std": 1e3 * j,
-                 "jackknife / first-order": None if not f else j / f}
-                for c, f, j in zip(comp, jk["first_order_std"], jk["std"])]
-        rep.section("Jackknife").table(
-            rows, digits=4, caption=f"{jk['pose']}: {jk['kind']} jackknife over {jk['replicates']} replicates "
-            f"({jk['poses_per_replicate']} pose(s) left out each) beside the refinement's first-order std; a ratio "
-            "far from 1 says the residuals are not the independent, alike noise the first-order std assumes "
-            "(a few poses carry the error or the information)")
-    solver_section(rep.section("Solver (refinement)"), d.get("solver") or {})
-    return rep
-
-
 # ----------------------------------------------------------------------------- simulate
 def simulate_files(out_dir: Path, rng: np.random.Generator, *, poses: int = 16, noise_free: bool = False,
                    setup: str = "eye-in-hand", progress: bool = True, **_) -> list[Path]:
@@ -583,71 +518,3 @@ def simulate_files(out_dir: Path, rng: np.random.Generator, *, poses: int = 16, 
 
 
 # ----------------------------------------------------------------------------- images in
-_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
-
-
-def run_images(args) -> int:
-    """``robocal handeye calibrate-images --images DIR --robot POSES --camera CAM --target TARGET.yaml --out D``.
-
-    The target's pose in each image with its covariance (:func:`robocal.handeye.images.view_poses`), paired
-    with the robot pose of the same rank (images in name order, one robot pose per image; an image without
-    a usable pose drops its robot pose, named), then :func:`calibrate` with the per-view stds as weights.
-    """
-    from robocal.camera import load_camera, load_target
-    from robocal.errors import InputError, RobocalError, ShapeError
-    from robocal.handeye.images import view_poses
-    from robocal.io import load_poses, prepare_out_dir, write_run
-
-    images = sorted(p for p in Path(args.images).iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES) \
-        if Path(args.images).is_dir() else []
-    if not images:
-        raise InputError(f"no images (.png, .jpg, ...) in {args.images}")
-    robot = load_poses(args.robot)
-    if len(robot) != len(images):
-        raise ShapeError(f"{args.robot} has {len(robot)} poses but {args.images} has {len(images)} images: one "
-                         "robot pose per image, in the images' name order", source=str(args.robot))
-    camera, target = load_camera(args.camera), load_target(args.target)
-    try:
-        views = view_poses(images, camera, target)
-        pair = PosePair(robot.T[views.index], views.T_cam_target, Path(args.robot), Path(args.target),
-                        None if robot.t is None else robot.t[views.index],
-                        (robot.form, f"{len(views.names)} of {len(images)} images of a {target.kind}"))
-        cal = calibrate(pair, method=args.method, no_refine=args.no_refine, pairs=args.pairs, setup=args.setup,
-                        accept_implausible=args.accept_implausible, pose_sigmas=views.sigmas,
-                        pose_covariances=_view_covariances(views))
-        res = cal[0]
-        res.warnings = list(views.warnings) + list(res.warnings)
-        result = to_result(cal, pair)
-        result.inputs = hash_inputs([Path(args.robot), Path(args.camera), Path(args.target), *images])
-        result.diagnostics["views"] = [
-            {"image": n, "pose": int(i), "rms_px": float(r), "ambiguity": float(a), "rotation_std_rad": float(s[0]),
-             "translation_std_m": float(s[1])}
-            for n, i, r, a, s in zip(views.names, views.index, views.rms_px, views.ambiguity, views.sigmas)]
-        report = build_report(result)
-    except RobocalError as exc:
-        raise exc if exc.source is not None else exc.with_source(f"{args.images} + {args.robot}") from None
-    out = prepare_out_dir(args.out, "handeye-calibrate-images")
-    write_run(out, result, report)
-    print(summary(result))
-    return 0
-
-
-def _view_covariances(views):
-    """Each view's pose covariance (N, 6, 6) as the refinement takes it: an ambiguous view's inflated as its
-    stds are (:data:`robocal.handeye.images.AMBIGUOUS_INFLATION`)."""
-    from robocal.handeye.images import AMBIGUITY_LIMIT, AMBIGUOUS_INFLATION
-
-    C = np.array(views.cov, float)
-    C[np.asarray(views.ambiguity) > AMBIGUITY_LIMIT] *= AMBIGUOUS_INFLATION ** 2
-    return C
-
-
-def run_simulate_images(args) -> int:
-    """``robocal handeye simulate-images --out DIR``: rendered views, robot poses, camera, target, truth."""
-    from robocal.handeye.images import simulate_image_files
-    from robocal.io import prepare_out_dir
-
-    out = prepare_out_dir(args.out, "handeye-simulate-images")
-    for p in simulate_image_files(out, np.random.default_rng(args.seed), poses=args.poses, setup=args.setup):
-        print(f"wrote {p}")
-    return 0
