@@ -2,8 +2,8 @@
 
 First (issue 16), the library API against a plain NumPy implementation of the same seed equations, written
 here without validation, at 1, 100, 10^4 and 10^6 points, each pair timed alternately in the same run
-(median of the repeats; ratio = peer time / API time, so 1.0 is parity and the goal is >= 0.9 from
-100 points up):
+(median CPU time of 5 x ``--repeats`` short samples each; ratio = peer time / API time, so 1.0 is parity
+and the goal is >= 0.9 from 100 points up):
 
 * ``FK eq. 6`` -- :meth:`ProjectorModel.spot` vs ``h tan(t2 + o2) (sin, cos)(t1 + o1)`` into an (N, 3) array;
 * ``IK eq. 8`` -- :meth:`ProjectorModel.ik` on (N, 3) floor points vs ``atan2(x, y) - o1`` wrapped to
