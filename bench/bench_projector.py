@@ -105,8 +105,8 @@ def numpy_dh_link(alpha, a, theta, d):
 
 def numpy_chain_spot(th, d1, d2, H, o1, o2):
     """Seed Table 1 chain in plain NumPy, then the beam z_E met with the floor z_0 = -H: spot (N, 3)."""
-    T = (numpy_dh_link(math.pi, 0.0, -math.pi / 2 + o1 + th[:, 0], d1) @ numpy_dh_link(-math.pi / 2, 0.0, o2 + th[:, 1], 0.0)
-         @ numpy_dh_link(math.pi / 2, 0.0, 0.0, d2))
+    T = (numpy_dh_link(math.pi, 0.0, -math.pi / 2 + o1 + th[:, 0], d1)
+         @ numpy_dh_link(-math.pi / 2, 0.0, o2 + th[:, 1], 0.0) @ numpy_dh_link(math.pi / 2, 0.0, 0.0, d2))
     p, z = T[:, :3, 3], T[:, :3, 2]
     s = (-H - p[:, 2]) / z[:, 2]
     return p + s[:, None] * z

@@ -85,7 +85,8 @@ def _times_constant(cols: list, K: list, want=(0, 1, 2, 3)) -> list:
 
 
 def _constant_or_none(K):
-    """``None`` for no constant (or the identity: not multiplied), else ``(K, K as lists, zero columns of its top rows)``."""
+    """``None`` for no constant (or the identity: not multiplied), else ``(K, K as lists, zero columns of
+    its top rows)``."""
     if K is None or np.array_equal(K, np.eye(4)):
         return None
     return K, K.tolist(), tuple(not np.any(K[:3, k]) for k in range(4))
