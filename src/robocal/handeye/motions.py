@@ -125,7 +125,11 @@ def relative_motions(T_base_gripper, T_cam_target, *, pairs: str = "auto"):
 
 
 def _axes_angles(R: np.ndarray):
-    rv = rotvec_from_matrix(R)
+    # motions are products of validated poses: the NumPy log map (~20 us) rather than SciPy's Rotation,
+    # whose validation and re-orthogonalisation cost ~0.2 ms a call, twice per calibration (issue 16)
+    from robocal.handeye._lie import log_so3
+
+    rv = log_so3(R)
     ang = np.linalg.norm(rv, axis=-1)
     axes = rv / np.maximum(ang, 1e-300)[..., None]
     return axes, ang
@@ -193,14 +197,14 @@ def check_motions(A, B=None, *, min_rotation: float = MIN_ROTATION, min_axis_spr
         timestamps, or units); its ``indices`` are the poses to blame.
     """
     A = np.asarray(A, float)
-    _, ang = _axes_angles(A[:, :3, :3])
+    all_axes, ang = _axes_angles(A[:, :3, :3])
     warns = []
     if ang.max() < min_rotation:
         raise DegenerateGeometryError(
             f"too little rotation: the largest relative rotation is {np.rad2deg(ang.max()):.3g} deg "
             f"(< {np.rad2deg(min_rotation):.3g} deg); the rotation of {what} is not determined, "
             "rotate the sensor about at least two different axes")
-    axes, _ = _axes_angles(A[ang >= min_rotation, :3, :3])
+    axes = all_axes[ang >= min_rotation]
     if len(axes) >= 2:
         # sign-free spread from the 3 x 3 scatter S = sum a a^T (eigenvalues = squared singular values of
         # the stacked axes); for two axes at angle phi the ratio s2/s1 is tan(phi/2).

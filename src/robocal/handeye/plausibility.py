@@ -12,8 +12,8 @@ import numpy as np
 
 from robocal.errors import DegenerateGeometryError
 from robocal.geometry import invert_transform, project_to_rotation, rotvec_from_matrix, transform_from
-from robocal.handeye.axxb import solve_ax_xb
-from robocal.handeye.motions import _pose_residual, relative_motions
+from robocal.handeye.axxb import _check_method, _solve_checked
+from robocal.handeye.motions import _check_poses, _motions, _pose_residual, pair_indices, relative_motions
 
 __all__ = ["TRANS_ROT_RATIO_MAX", "TRANS_FLOOR", "ROT_TRY", "REACH_FACTOR", "ROT_IMPLAUSIBLE", "SWAP_CANDIDATES",
            "closure_residuals", "judge_poses"]
@@ -48,13 +48,19 @@ def closure_residuals(T_base_gripper, T_cam_target, method: str = "tsai", *, pai
     """
     Tg, Tc = np.asarray(T_base_gripper, float), np.asarray(T_cam_target, float)
     A, B = relative_motions(Tg, Tc, pairs=pairs)
+    return _closure_residuals(Tg, Tc, A, B, _check_method(method), pairs)
+
+
+def _closure_residuals(Tg, Tc, A, B, m: str, pairs: str):
+    """:func:`closure_residuals` on validated poses and their motions (``m`` a checked method name): the
+    plausibility check calls it once per slip tried, on transforms of poses already validated."""
     try:
-        X, _ = solve_ax_xb(A, B, method)
+        X, _ = _solve_checked(A, B, m)
     except DegenerateGeometryError:
         if pairs != "consecutive":
             raise
         # consecutive motions about one axis can still span several with more pairs
-        X, _ = solve_ax_xb(*relative_motions(Tg, Tc, pairs="auto"), method)
+        X, _ = _solve_checked(*_motions(Tg, Tc, *pair_indices(Tg, "auto")), m)
     Yall = Tg @ X @ Tc
     Y = transform_from(project_to_rotation(np.mean(Yall[:, :3, :3], axis=0)), Yall[:, :3, 3].mean(axis=0))
     r = _pose_residual(Yall, Y[None])
@@ -165,8 +171,16 @@ def judge_poses(T_base_gripper, T_cam_target, *, names=("T_base_gripper", "T_cam
     """
     from robocal.plausibility import Slip, check_slips
 
-    Tg, Tc = np.asarray(T_base_gripper, float), np.asarray(T_cam_target, float)
-    rot, trans, X = closure_residuals(Tg, Tc, method)
+    Tg, Tc = _check_poses(T_base_gripper, names[0]), _check_poses(T_cam_target, names[1])
+    m = _check_method(method)
+
+    def closure_residuals(a, b, _method=None):
+        # the lists are validated once above; every slip tried is a rigid transform of them (inverted,
+        # re-read quaternions, swapped, scaled), so the trials skip validation (issue 16: this check ran
+        # the closed form ~10 times per calibration, a third of its time)
+        return _closure_residuals(a, b, *_motions(a, b, *pair_indices(a, "consecutive")), m, "consecutive")
+
+    rot, trans, X = closure_residuals(Tg, Tc)
     out = []
     gname, tname = names
 
