@@ -3,19 +3,12 @@
 import cv2
 import numpy as np
 import pytest
-import yaml
 
 from robocal.cli.main import main
 from robocal.geometry import PoseWithCovariance, matrix_from_rotvec
 from robocal.handeye import SETUPS, calibrate_hand_eye, simulate_eye_in_hand, transform_error
 from robocal.io import load_result
-
-
-def _truth(path, name):
-    d = yaml.safe_load(path.read_text())[name]
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = d["rotation"], d["translation"]
-    return T
+from truth_files import truth_pose
 
 
 @pytest.mark.parametrize("setup", ["eye-in-hand", "eye-to-hand"])
@@ -38,7 +31,7 @@ def test_rendered_views_calibrate_end_to_end(tmp_path, capsys, setup):
     assert yname in res.poses
     for name in (xname,):          # the target pose is in the detector's corner numbering (images.py)
         est = PoseWithCovariance.from_result(res, name)
-        err = est.error_to(_truth(sim / "truth.yaml", name))
+        err = est.error_to(truth_pose(sim / "truth.yaml", name))
         # rendered views (1 grey level of noise, 0.02-0.03 px corner RMS, pixel sigma floored at 0.05 px):
         # X to ~10-70 um / 0.1 mrad; each component within 5 of its own std (6 components)
         assert np.all(np.abs(err.vector) < 5 * est.std), (name, err.vector / est.std)

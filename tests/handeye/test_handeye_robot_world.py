@@ -4,19 +4,12 @@ result and the report."""
 import json
 
 import numpy as np
-import yaml
 
 from robocal.cli.main import main
 from robocal.geometry import PoseWithCovariance, matrix_from_rotvec
 from robocal.handeye import simulate_eye_in_hand
 from robocal.io import load_result, write_poses
-
-
-def _truth(path, name):
-    d = yaml.safe_load(path.read_text())[name]
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = d["rotation"], d["translation"]
-    return T
+from truth_files import truth_pose
 
 
 def test_robot_world_eye_to_hand_names_its_frames(tmp_path, capsys):
@@ -33,7 +26,7 @@ def test_robot_world_eye_to_hand_names_its_frames(tmp_path, capsys):
     assert len(res.diagnostics["closure_residuals"]["rotation_rad"]) == 20
     for name in ("T_base_cam", "T_gripper_target"):
         pose = PoseWithCovariance.from_result(res, name)
-        err = pose.error_to(_truth(sim / "truth.yaml", name))
+        err = pose.error_to(truth_pose(sim / "truth.yaml", name))
         # 1 mrad / 0.2 mm per view, 20 views; the inverses' stds by first-order propagation. 12
         # components: a 4.5-sigma bound fails by chance < 1e-4 (the seed gives at most ~2 sigma)
         assert np.all(np.abs(err.vector) < 4.5 * pose.std), (name, err.vector / pose.std)

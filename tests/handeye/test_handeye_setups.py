@@ -11,13 +11,7 @@ from robocal.errors import ImplausibleInputError, InputError
 from robocal.geometry import PoseWithCovariance
 from robocal.handeye import calibrate_hand_eye, simulate_eye_to_hand
 from robocal.io import load_result
-
-
-def _truth(path, name):
-    d = yaml.safe_load(path.read_text())[name]
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = d["rotation"], d["translation"]
-    return T
+from truth_files import truth_pose
 
 
 def test_eye_to_hand_round_trip_names_its_frames(tmp_path, capsys):
@@ -32,7 +26,7 @@ def test_eye_to_hand_round_trip_names_its_frames(tmp_path, capsys):
     assert set(res.poses) == {"T_base_cam", "T_gripper_target"}
     assert res.diagnostics["setup"] == "eye-to-hand"
     for name in ("T_base_cam", "T_gripper_target"):
-        err = PoseWithCovariance.from_result(res, name).error_to(_truth(sim / "truth.yaml", name))
+        err = PoseWithCovariance.from_result(res, name).error_to(truth_pose(sim / "truth.yaml", name))
         std = PoseWithCovariance.from_result(res, name).std
         # 1 mrad / 0.2 mm per view over 20 views: each component within 4.5 of its own std (the stds are
         # the refinement's first-order ones; 12 components, so a 4.5-sigma bound fails by chance < 1e-4)
