@@ -21,7 +21,7 @@ def test_one_worker_is_serial_and_bad_arguments_are_refused():
 def test_an_existing_cluster_is_used_as_it_is(tmp_path, toy):
     distributed = pytest.importorskip("distributed")
     lines = []
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
                                   silence_logs=40) as cluster:
         with open_executor(scheduler=cluster.scheduler_address, echo=lines.append) as client:
             assert sum(client.nthreads().values()) == 2

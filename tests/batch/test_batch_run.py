@@ -114,7 +114,7 @@ def test_a_killed_worker_re_runs_its_tasks_elsewhere(tmp_path):
     wf = make_toy_workflow(attempts)
     manifest = write_fleet(tmp_path / "in", 8, sleep=1.0, fail={"r05"})
     out = tmp_path / "out"
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
                                   silence_logs=50) as cluster, distributed.Client(cluster) as client:
         pids = client.run(os.getpid)
         victim = sorted(pids.values())[0]

@@ -84,10 +84,10 @@ def open_executor(workers: int | None = None, scheduler: str | None = None, *, e
         return
     n = int(workers or available_cores())
     has_bokeh = importlib.util.find_spec("bokeh") is not None
-    # ":0": a free port, never a clash with another user's 8787; no dashboard without bokeh
-    address = ":0" if dashboard and has_bokeh else None
-    with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=address,
+    # ":0": a free port, never a clash with another user's 8787. Always given: the scheduler serves its HTTP
+    # endpoints even without bokeh (no dashboard then), and with None it takes 8787 and warns when that is busy
+    with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                       silence_logs=40) as cluster, Client(cluster) as client:
-        board = cluster.dashboard_link if address else "off (pip install bokeh to get it)"
+        board = cluster.dashboard_link if dashboard and has_bokeh else "off (pip install bokeh to get it)"
         say(f"dask: local cluster of {n} worker process(es); dashboard {board}")
         yield client

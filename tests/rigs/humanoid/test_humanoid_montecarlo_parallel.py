@@ -22,7 +22,7 @@ def test_calibration_monte_carlo_is_the_same_on_threads_and_dask_workers(model):
         _same(serial, calibration_monte_carlo(model, 6, np.random.default_rng(4), n_per_foot=4, executor=ex,
                                               batch_size=2))
     # worker processes: the model and the closures travel by cloudpickle
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
                                   silence_logs=40) as cluster, distributed.Client(cluster) as client:
         _same(serial, calibration_monte_carlo(model, 6, np.random.default_rng(4), n_per_foot=4, executor=client,
                                               batch_size=2))
