@@ -1,5 +1,7 @@
 """Images in (issue 13): rendered views -> each view's pose with its covariance -> X, in both set-ups."""
 
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pytest
@@ -57,3 +59,37 @@ def test_per_view_stds_down_weight_a_bad_view():
     assert e_w[0] < e_plain[0] / 5 and e_w[1] < e_plain[1] / 5, (e_plain, e_w)
     with pytest.raises(Exception, match="pose_sigmas must be"):
         calibrate_hand_eye(sim.T_base_gripper, Tc, pose_sigmas=sig[:5])
+
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "handeye"
+
+
+def test_calibrate_with_an_image_folder_is_calibrate_images(tmp_path, capsys):
+    # issue 13's form of the command (calibrate ROBOT --images DIR ...) and calibrate-images: one loader, so the
+    # same estimate to the last bit on the committed example (6 rendered views)
+    a, b = tmp_path / "a", tmp_path / "b"
+    files = ["--camera", str(EXAMPLE / "camera.yaml"), "--target", str(EXAMPLE / "target.yaml")]
+    assert main(["handeye", "calibrate", str(EXAMPLE / "robot_poses.csv"), "--images", str(EXAMPLE / "images"),
+                 *files, "--out", str(a)]) == 0
+    assert main(["handeye", "calibrate-images", "--robot", str(EXAMPLE / "robot_poses.csv"), "--images",
+                 str(EXAMPLE / "images"), *files, "--out", str(b)]) == 0
+    ra, rb = load_result(a / "result.json"), load_result(b / "result.json")
+    xa, xb = PoseWithCovariance.from_result(ra, "T_gripper_cam"), PoseWithCovariance.from_result(rb, "T_gripper_cam")
+    assert np.array_equal(xa.T, xb.T) and np.array_equal(xa.std, xb.std)
+    assert ra.method == rb.method and ra.method.endswith("+cov")        # each view weighted by its covariance
+    assert len(ra.diagnostics["views"]) == 6 and ra.inputs == rb.inputs
+    assert abs(xa.T[0, 3] - 0.035) < 5 * xa.std[3]                      # truth 35 mm (examples/handeye/truth.yaml)
+
+
+@pytest.mark.parametrize("argv, match", [
+    (["--images", "{ex}/images", "--camera", "{ex}/camera.yaml", "--target", "{ex}/target.yaml"],
+     "--images DIR needs the robot poses"),
+    (["{ex}/robot_poses.csv", "--images", "{tmp}/nowhere", "--camera", "{ex}/camera.yaml", "--target",
+      "{ex}/target.yaml"], "no such folder; with --bag, --images names an image topic"),
+    (["{ex}/robot_poses.csv", "--images", "{ex}/images"], "needs --camera CAM and --target TARGET.yaml"),
+])
+def test_an_image_folder_without_what_it_needs_is_one_line(tmp_path, capsys, argv, match):
+    argv = [a.format(ex=EXAMPLE, tmp=tmp_path) for a in argv]
+    assert main(["handeye", "calibrate", *argv, "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and match in err[0], err

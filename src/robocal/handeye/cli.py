@@ -37,7 +37,8 @@ _BAG = (
     Option("--base", default=None, to="load_input", help="tf frame of the robot base (e.g. base_link)"),
     Option("--gripper", default=None, to="load_input", help="tf frame of the gripper / flange (e.g. tool0)"),
     Option("--images", default=None, to="load_input",
-           help="image topic (sensor_msgs/Image or CompressedImage) of the target; with --target"),
+           help="the target's images: with --bag an image topic (sensor_msgs/Image or CompressedImage); without, "
+                "a folder of images, one per robot pose of GRIPPER in name order; with --target and a camera"),
     Option("--camera-info", default=None, to="load_input",
            help="CameraInfo topic (default: the camera_info beside the image topic)"),
     Option("--camera", type=Path, default=None, to="load_input",
@@ -94,12 +95,15 @@ HANDEYE = Workflow(
                     "views a target on the gripper"),
     ),
     simulate_examples=("robocal handeye simulate --out handeye-sim --seed 1",),
-    calibrate_help="X = T_gripper_cam (eye-in-hand) or T_base_cam (eye-to-hand) from two pose lists, or from a "
-                   "ROS 1 / ROS 2 / MCAP recording (--bag: tf + images or a target-pose topic)",
+    calibrate_help="X = T_gripper_cam (eye-in-hand) or T_base_cam (eye-to-hand) from two pose lists, from the "
+                   "robot poses and a folder of images (--images DIR --camera --target), or from a ROS 1 / ROS 2 / "
+                   "MCAP recording (--bag: tf + images or a target-pose topic)",
     input_arguments=_PAIR_OR_BAG,
     calibrate_options=(*_SHARED, _CLOCK, *_BAG),
     calibrate_examples=(f"robocal handeye calibrate {EXAMPLES}/gripper_poses.csv {EXAMPLES}/target_poses.csv "
                         "--method park --out he",
+                        "robocal handeye calibrate examples/handeye/robot_poses.csv --images examples/handeye/images "
+                        "--camera examples/handeye/camera.yaml --target examples/handeye/target.yaml --out he-img",
                         "robocal handeye calibrate --bag examples/bags/handeye.bag --base base_link --gripper tool0 "
                         "--images /camera/image_raw/compressed --target examples/bags/handeye_target.yaml "
                         "--out he-bag"),

@@ -95,6 +95,14 @@ def load_pose_pair(gripper_poses=None, target_poses=None, *, bag=None, clock_off
     from robocal.handeye.clock import pair_streams, parse_clock_offset
     from robocal.io import load_poses
 
+    images = bag_options.get("images")
+    if bag is None and target_poses is None and images is not None and (
+            gripper_poses is not None or Path(images).is_dir()):
+        # a folder of images, one per robot pose (the same path as 'calibrate-images')
+        from robocal.handeye.commands import load_image_pair
+
+        return load_image_pair(gripper_poses, images, bag_options.get("camera"),
+                               bag_options.get("target"))
     if bag is not None or target_poses is None or any(v is not None for v in bag_options.values()):
         from robocal.handeye.bag_input import load_bag_pair
 
