@@ -62,7 +62,7 @@ RIG = Workflow(
     help="dead reckoning from several optical-flow sensors (Li, Guan and Chu 2017)",
     description=DESCRIPTION,
     simulate="robocal.rigs.flow.commands:simulate_files",
-    load_input="robocal.rigs.flow.log:load_run",
+    load_input="robocal.rigs.flow.workflow:load_input",
     calibrate="robocal.rigs.flow.workflow:calibrate_input",
     to_result="robocal.rigs.flow.workflow:calibration_result",
     build_report="robocal.rigs.flow.report:build_report",
@@ -90,14 +90,23 @@ RIG = Workflow(
         "robocal flow simulate --texture brick --gap 0.5,0.2,0.05 --no-frames --out flow-sim-brick",
     ),
     calibrate_help="calibrate R, psi, phi, scale of every sensor from a run with a reference",
-    input_arguments=(Option("input", type=Path, help="run.yaml with a 'reference' trajectory"),),
+    # optional (none with --bag: the default [] hands load_input no path); not named `input` (humanoid's reason)
+    input_arguments=(Option("run", type=Path, nargs="?", default=[], metavar="INPUT",
+                            help="run.yaml with a 'reference' trajectory; none with --bag"),),
     calibrate_options=(
+        Option("--bag", type=Path, default=None, to="load_input",
+               help="a ROS 1 .bag, ROS 2 bag folder / .db3 or .mcap recording: each sensor's "
+                    "mavros_msgs/OpticalFlowRad topic and a nav_msgs/Odometry reference (with --map)"),
+        Option("--map", type=Path, default=None, to="load_input",
+               help="with --bag: YAML of the array (as run.yaml) and 'topics: {flow: {SENSOR: TOPIC}, reference: "
+                    "TOPIC}' (docs/rigs/flow.md, 'From a recording')"),
         Option("--window", type=float, default=0.1, help="window length, s"),
         Option("--loss", default="linear", choices=("linear", "soft_l1", "huber", "cauchy"),
                help="robust loss of the window residuals (scipy least_squares names)"),
         *_kernel_options(),
     ),
-    calibrate_examples=("robocal flow calibrate examples/flow/calibration/run.yaml --out flow-cal",),
+    calibrate_examples=("robocal flow calibrate examples/flow/calibration/run.yaml --out flow-cal",
+                        "robocal flow calibrate --bag drive.bag --map topics.yaml --out flow-cal-bag"),
     commands=(
         Command(
             "odometry", help="dead reckoning from a run (flow log or raw frames)",

@@ -531,6 +531,8 @@ def load_steps(spec: RunSpec, config: FlowConfig | None = None, *, allow_missing
                              f"{spec.array.n} sensors of {spec.path.name}, got {d['frames'].shape}")
         steps, flows = steps_from_frames(d["frames"], d["t"], d["gyro"], d["height"], spec.focal_px, config, progress=progress)
         return steps, flows
+    if getattr(spec, "records", None) is not None:  # a recording's records (robocal.rigs.flow.bag), in memory
+        return steps_from_records(spec.records, spec.focal_px, config, sigma_px=spec.sigma_px), None
     from robocal.resources import require_memory
 
     # peak 1.4 GB for a 10^6-row, 70 MB flow.csv (odometry, calibrate, evaluate): ~20 x the file

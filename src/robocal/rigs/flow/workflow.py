@@ -30,7 +30,7 @@ from robocal.rigs.flow.simulate import SimConfig, SimRun
 
 __all__ = ["write_simulation", "judge_run", "odometry_run", "calibration_run", "evaluation_run", "array_yaml",
            "mounted_array", "calibrate_input", "calibration_result", "odometry_result", "evaluation_result",
-           "summary", "trajectory_curves", "frames_table", "read_reference", "KERNEL_OPTIONS", "flow_config",
+           "summary", "trajectory_curves", "frames_table", "read_reference", "load_input", "KERNEL_OPTIONS", "flow_config",
            "check_kernel_options"]
 
 #: The kernel's options (``--subpixel`` ...): they act on raw frames only.
@@ -59,7 +59,25 @@ def check_kernel_options(options: dict, spec: RunSpec) -> None:
 def read_reference(spec: RunSpec):
     """The run's reference trajectory ``(t, poses)``, or None when it names none (read once per command:
     1.5 s per 10^5 rows in the core CSV loader)."""
+    if getattr(spec, "reference_data", None) is not None:  # a recording's reference topic (robocal.rigs.flow.bag)
+        return spec.reference_data
     return None if spec.reference is None else read_poses_csv(spec.reference)
+
+
+def load_input(path=None, *, bag=None, map=None, **_) -> RunSpec:
+    """The ``load_input`` step: ``run.yaml`` read and checked, or, with ``bag``, a recording through its topic
+    map (:func:`robocal.rigs.flow.bag.load_bag_run`): the same records and reference, in memory."""
+    from robocal.rigs.flow.log import load_run
+
+    if bag is not None:
+        if path is not None:
+            raise InputError(f"give a run.yaml or --bag, not both (got {path} and --bag {bag})")
+        from robocal.rigs.flow.bag import load_bag_run
+
+        return load_bag_run(bag, map)
+    if path is None:
+        raise InputError("give a run.yaml, or a recording with --bag FILE --map topics.yaml")
+    return load_run(path)
 
 
 def mounted_array() -> SensorArray:
@@ -141,7 +159,8 @@ def judge_run(spec: RunSpec, steps, config: FlowConfig, *, allow_missing: bool =
 
             def rebuild(gyro=1.0, focal=spec.focal_px):
                 if not records:
-                    records.append(read_flow_csv(spec.flow_log, spec.array.n, allow_missing=allow_missing))
+                    records.append(getattr(spec, "records", None)
+                                   or read_flow_csv(spec.flow_log, spec.array.n, allow_missing=allow_missing))
                 rec = records[0]
                 return steps_from_records(_replace(rec, gyro=rec.gyro * gyro), focal, config, sigma_px=spec.sigma_px)
 
@@ -306,7 +325,8 @@ def calibration_result(cal, spec: RunSpec | None = None, *, method: str = "windo
     return CalibrationResult(
         rig="flow", method=method, estimate=keys,
         std={k: cal.std.get(k) for k in keys}, units=cal.units(),
-        residual_rms=cal.residual_rms, residual_unit="m", warnings=list(cal.warnings),
+        residual_rms=cal.residual_rms, residual_unit="m",
+        warnings=list(cal.warnings) + list(getattr(spec, "warnings", ())),  # a recording's clock_mismatch
         inputs=hash_inputs(spec.inputs()) if spec is not None else {}, diagnostics=diag)
 
 
