@@ -126,3 +126,21 @@ def test_clock_mismatch_named(recording):
     # on receive times the reference still covers the flow (the recorder's latencies differ by 4 ms)
     t_ref = spec.reference_data[0]
     assert t_ref[0] <= spec.records.t[0] + 0.01 and t_ref[-1] >= spec.records.t[-1] - 0.01
+
+
+def test_odometry_like_the_file(recording, run_yaml, tmp_path, capsys):
+    # `robocal flow odometry --bag`: the file path's trajectory, to float32 rounding of the records
+    # (flow ~1e-7 px per step, summed over 600 steps at ~0.6 mm/px: far below 1e-6 m)
+    truth = recording("rosbag2")
+    a, b = tmp_path / "file", tmp_path / "bag"
+    assert main(["flow", "odometry", str(run_yaml), "--no-report", "--out", str(a)]) == 0
+    assert main(["flow", "odometry", "--bag", str(truth.path), "--map", str(truth.map), "--no-report",
+                 "--out", str(b)]) == 0
+    t_a, p_a = read_poses_csv(a / "trajectory.csv")
+    t_b, p_b = read_poses_csv(b / "trajectory.csv")
+    np.testing.assert_allclose(t_b, t_a, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(p_b, p_a, rtol=0, atol=1e-6)
+    ra, rb = (json.loads((d / "result.json").read_text()) for d in (a, b))
+    assert rb["estimate"]["ate_rmse"] == pytest.approx(ra["estimate"]["ate_rmse"], abs=1e-6)
+    assert main(["flow", "odometry", "--out", str(tmp_path / "none")]) == 2
+    assert "give a run.yaml, or a recording with --bag FILE --map topics.yaml" in capsys.readouterr().err

@@ -54,6 +54,16 @@ def _kernel_options(*, simulate: bool = False, debias: bool = True) -> tuple:
     return opts + (Option("--no-progress", action="store_true", help="never show progress bars"),)
 
 
+#: ``--bag FILE --map topics.yaml`` (issue 15; robocal.rigs.flow.bag): calibrate and odometry from a recording.
+_BAG_OPTIONS = (
+    Option("--bag", type=Path, default=None, to="load_input",
+           help="a ROS 1 .bag, ROS 2 bag folder / .db3 or .mcap recording: each sensor's "
+                "mavros_msgs/OpticalFlowRad topic and a nav_msgs/Odometry reference (with --map)"),
+    Option("--map", type=Path, default=None, to="load_input",
+           help="with --bag: YAML of the array (as run.yaml) and 'topics: {flow: {SENSOR: TOPIC}, reference: "
+                "TOPIC}' (docs/rigs/flow.md, 'From a recording')"),
+)
+
 _RUN_COMMAND_OPTIONS = _kernel_options() + (
     accept_implausible_option(),)
 
@@ -94,12 +104,7 @@ RIG = Workflow(
     input_arguments=(Option("run", type=Path, nargs="?", default=[], metavar="INPUT",
                             help="run.yaml with a 'reference' trajectory; none with --bag"),),
     calibrate_options=(
-        Option("--bag", type=Path, default=None, to="load_input",
-               help="a ROS 1 .bag, ROS 2 bag folder / .db3 or .mcap recording: each sensor's "
-                    "mavros_msgs/OpticalFlowRad topic and a nav_msgs/Odometry reference (with --map)"),
-        Option("--map", type=Path, default=None, to="load_input",
-               help="with --bag: YAML of the array (as run.yaml) and 'topics: {flow: {SENSOR: TOPIC}, reference: "
-                    "TOPIC}' (docs/rigs/flow.md, 'From a recording')"),
+        *_BAG_OPTIONS,
         Option("--window", type=float, default=0.1, help="window length, s"),
         Option("--loss", default="linear", choices=("linear", "soft_l1", "huber", "cauchy"),
                help="robust loss of the window residuals (scipy least_squares names)"),
@@ -109,10 +114,11 @@ RIG = Workflow(
                         "robocal flow calibrate --bag drive.bag --map topics.yaml --out flow-cal-bag"),
     commands=(
         Command(
-            "odometry", help="dead reckoning from a run (flow log or raw frames)",
+            "odometry", help="dead reckoning from a run (flow log or raw frames, or a recording)",
             run="robocal.rigs.flow.commands:run_odometry",
             options=(
-                Option("input", type=Path, help="run.yaml"),
+                Option("input", type=Path, nargs="?", default=None, help="run.yaml; none with --bag"),
+                *_BAG_OPTIONS,
                 Option("--allow-missing", action="store_true", help="treat missing sensor records as invalid frames"),
                 Option("--no-robust", action="store_true", help="do not drop disagreeing sensors"),
                 Option("--integration", default="exact", choices=("exact", "euler"),
@@ -126,7 +132,8 @@ RIG = Workflow(
                       "robocal flow odometry flow-sim/run.yaml --no-report --out flow-odo   (report later: "
                       "robocal flow report flow-odo/result.json --out flow-odo-report)",
                       "robocal flow odometry examples/flow/frames/run.yaml --subpixel quarter --out flow-odo-frames",
-                      "robocal flow odometry flow-sim/run.yaml --refine lk --out flow-odo"),
+                      "robocal flow odometry flow-sim/run.yaml --refine lk --out flow-odo",
+                      "robocal flow odometry --bag drive.bag --map topics.yaml --out flow-odo-bag"),
         ),
         Command(
             "evaluate", help="ATE / RPE of flow (and wheel) odometry against the reference",

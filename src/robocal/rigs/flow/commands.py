@@ -123,7 +123,9 @@ def run_odometry(args) -> int:
     from robocal.rigs.flow.workflow import (check_kernel_options, evaluation_run, flow_config, frames_table,
                                             odometry_result, odometry_run, read_reference, trajectory_curves)
 
-    spec = load_run(args.input)
+    from robocal.rigs.flow.workflow import load_input
+
+    spec = load_input(args.input, bag=args.bag, map=args.map)  # run.yaml, or a recording (issue 15)
     out = _out(args, "flow-odometry")
     opts = _kernel_options(args)
     check_kernel_options(opts, spec)
@@ -134,6 +136,7 @@ def run_odometry(args) -> int:
     od, flows, steps = odometry_run(spec, config=flow_config(opts, spec), allow_missing=args.allow_missing,
                                     robust=not args.no_robust, method=args.integration, progress=_progress(show),
                                     accept_implausible=args.accept_implausible, reference=reference)
+    od.warnings.extend(getattr(spec, "warnings", ()))  # a recording's clock_mismatch
     tick()
     write_poses_csv(out / "trajectory.csv", od.t, od.poses, comment=f"flow odometry of {spec.path.name}")
     errors = None
