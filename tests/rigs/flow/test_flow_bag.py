@@ -82,7 +82,8 @@ def test_calibrates_like_the_file(recording, run_yaml, tmp_path, capsys):
     for k, v in want.estimate.items():
         assert abs(got["estimate"][k] - v) < 1e-3 * want.std[k], k
     assert any(k.endswith(".mcap") for k in got["inputs"]) and any(k.endswith(".topics.yaml") for k in got["inputs"])
-    capsys.readouterr()
+    assert got["diagnostics"]["messages"][0].startswith("recording ")
+    assert "note: recording " in capsys.readouterr().out and "messages" not in want.diagnostics
 
 
 def test_one_line_errors(recording, tmp_path, capsys):
@@ -144,3 +145,16 @@ def test_odometry_like_the_file(recording, run_yaml, tmp_path, capsys):
     assert rb["estimate"]["ate_rmse"] == pytest.approx(ra["estimate"]["ate_rmse"], abs=1e-6)
     assert main(["flow", "odometry", "--out", str(tmp_path / "none")]) == 2
     assert "give a run.yaml, or a recording with --bag FILE --map topics.yaml" in capsys.readouterr().err
+
+
+def test_sensor_on_another_clock(recording, run_yaml):
+    # one sensor stamping 1000 s ahead: on header stamps it would never overlap the others; named, and on
+    # receive times (every flow topic 1 ms after its stamp) the records are flow.csv's again
+    truth = recording("mcap", clock_offset=(("s120", 1000.0),))
+    spec = load_bag_run(truth.path, truth.map)
+    (w,) = spec.warnings
+    assert w.code == "clock_mismatch" and f"{flow_topic('s120')} (-1000.000 s)" in w.message
+    file = load_run(run_yaml)
+    want = read_flow_csv(file.flow_log, file.array.n)
+    np.testing.assert_allclose(spec.records.t, want.t, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(spec.records.flow, want.flow, rtol=0, atol=1e-6)

@@ -322,6 +322,8 @@ def calibration_result(cal, spec: RunSpec | None = None, *, method: str = "windo
             "window_s": cal.window, "window_residuals": windows, "solver": cal.lsq.to_dict()}
     if cal.array_file:
         diag["array_file"] = cal.array_file
+    if getattr(spec, "notes", None):  # a recording's: topics, intervals, clock used (robocal.rigs.flow.bag)
+        diag["messages"] = list(spec.notes)
     return CalibrationResult(
         rig="flow", method=method, estimate=keys,
         std={k: cal.std.get(k) for k in keys}, units=cal.units(),
@@ -345,7 +347,7 @@ def summary(result: CalibrationResult) -> str:
             lines.append(f"  {k:14s} {conv(v):10.4f} {u:5s} +/- {conv(result.std[k]):<12.4f} +/- {conv(sysk[k]):.4f}")
     how = systematic_note(d.get("std_systematic_kernel_source", "constant"), bool(d.get("kernel_debiased")))
     lines.append(f"  kernel systematic: {how}")
-    return "\n".join(lines)
+    return "\n".join([f"note: {m}" for m in d.get("messages") or []] + lines)
 
 
 def frames_table(od: Odometry) -> list:
