@@ -163,8 +163,11 @@ def load_bag_run(bag, map_file, *, show_progress: bool = False) -> BagRunSpec:
     from scipy.spatial.transform import Rotation
 
     from robocal.bags import open_recording, read_arrays
-    from robocal.bags._reader import stamp_ns
+    from robocal.bags._reader import _default_typestore, stamp_ns
     from robocal.rigs.flow.mavlink_convert import flow_records
+
+    # ROS 2 bags before Iron carry no message definitions: the reader's store decodes them, and Humble's lacks mavros
+    register_types(_default_typestore())
 
     if map_file is None:
         raise InputError("--bag needs --map topics.yaml (the array and each sensor's OpticalFlowRad topic; see "
