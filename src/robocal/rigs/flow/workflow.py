@@ -24,6 +24,7 @@ from robocal.rigs.flow.kernel import FlowConfig, compute_flow_sequence, speed_li
 from robocal.rigs.flow.log import (RunSpec, load_steps, read_poses_csv, write_flow_csv, write_frames_npz,
                                    write_poses_csv)
 from robocal.rigs.flow.model import SensorArray, seed_array
+from robocal.rigs.flow.inputs import load_input  # noqa: F401 (the step, in a light module)
 from robocal.rigs.flow.odometry import Odometry, dead_reckon
 from robocal.rigs.flow.report import compare_text, display, plot_series, systematic_note  # noqa: F401 (re-exported)
 from robocal.rigs.flow.simulate import SimConfig, SimRun
@@ -62,22 +63,6 @@ def read_reference(spec: RunSpec):
     if getattr(spec, "reference_data", None) is not None:  # a recording's reference topic (robocal.rigs.flow.bag)
         return spec.reference_data
     return None if spec.reference is None else read_poses_csv(spec.reference)
-
-
-def load_input(path=None, *, bag=None, map=None, **_) -> RunSpec:
-    """The ``load_input`` step: ``run.yaml`` read and checked, or, with ``bag``, a recording through its topic
-    map (:func:`robocal.rigs.flow.bag.load_bag_run`): the same records and reference, in memory."""
-    from robocal.rigs.flow.log import load_run
-
-    if bag is not None:
-        if path is not None:
-            raise InputError(f"give a run.yaml or --bag, not both (got {path} and --bag {bag})")
-        from robocal.rigs.flow.bag import load_bag_run
-
-        return load_bag_run(bag, map)
-    if path is None:
-        raise InputError("give a run.yaml, or a recording with --bag FILE --map topics.yaml")
-    return load_run(path)
 
 
 def mounted_array() -> SensorArray:
