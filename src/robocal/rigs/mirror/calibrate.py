@@ -52,6 +52,7 @@ from robocal.rigs.mirror.checks import (
     rectangle_warnings,
 )
 from robocal.rigs.mirror.consistency import _consensus_choice, _consistency_warnings, _name_outliers
+from robocal.rigs.mirror.model import PoseCovarianceStd
 from robocal.rigs.mirror.joint import (  # noqa: F401  (re-exported)
     _checked_body_cov,
     _labels,
@@ -109,7 +110,7 @@ __all__ = [
 
 
 @dataclass
-class MirrorCalibration:
+class MirrorCalibration(PoseCovarianceStd):
     """Result of :func:`calibrate` (K images, joint refinement).
 
     Attributes
@@ -153,16 +154,6 @@ class MirrorCalibration:
     @property
     def T_c_r(self) -> np.ndarray:
         return invert_transform(self.T_r_c)
-
-    @property
-    def std_rotation(self) -> np.ndarray:
-        """Per-axis std of the rotation [rad], (3,)."""
-        return np.sqrt(np.diag(self.cov)[:3])
-
-    @property
-    def std_translation(self) -> np.ndarray:
-        """Per-axis std of ``t_rc`` [m], (3,)."""
-        return np.sqrt(np.diag(self.cov)[3:])
 
     def residuals(self):
         """``(marker (K, 4, 2), body list of (N_k, 2))`` reprojection residuals [px], projected - observed."""

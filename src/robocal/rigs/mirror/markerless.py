@@ -92,7 +92,7 @@ from robocal.geometry import (
     transform_from,
 )
 from robocal.rigs.mirror.conditioning import conditioning
-from robocal.rigs.mirror.model import F_X, ri_from_r_points
+from robocal.rigs.mirror.model import F_X, PoseCovarianceStd, ri_from_r_points
 from robocal.validation import check_array
 
 __all__ = ["MarkerlessObservation", "MarkerlessCalibration", "calibrate_markerless", "closed_form",
@@ -135,17 +135,9 @@ class MarkerlessObservation:
         return {"name": self.name, "uv": self.uv.tolist(), "ids": self.ids.tolist()}
 
 
-class _MarkerlessAnswer:
+class _MarkerlessAnswer(PoseCovarianceStd):
     """What :class:`MarkerlessCalibration` and :class:`~robocal.rigs.mirror.mixed.MixedCalibration` derive from
     their ``cov`` (6, 6) (rotvec left [rad], t [m]) and their markerless poses."""
-
-    @property
-    def std_rotation(self) -> np.ndarray:
-        return np.sqrt(np.diag(self.cov)[:3])
-
-    @property
-    def std_translation(self) -> np.ndarray:
-        return np.sqrt(np.diag(self.cov)[3:])
 
     def residuals(self) -> list:
         """Reprojection residuals [px] of the markerless poses' reflections, projected - observed."""

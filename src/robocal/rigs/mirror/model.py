@@ -80,6 +80,7 @@ __all__ = [
     "householder_compose",
     "virtual_transform",
     "MirrorScene",
+    "PoseCovarianceStd",
 ]
 
 #: ``F = diag(-1, 1, 1)``: the x flip that turns a mirror image back into a right-handed frame.
@@ -287,3 +288,19 @@ class MirrorScene:
         """Mirror images of the body points in the camera frame, (K, N, 3)."""
         n, d = self.planes()
         return reflect_points(self.body_points_c()[None], n[:, None], d[:, None])
+
+
+class PoseCovarianceStd:
+    """``std_rotation`` / ``std_translation`` of a camera-pose estimate from its ``cov`` (6, 6) of
+    ``(rotvec [rad] as a left perturbation, t_rc [m])``: the one definition the patent path's
+    :class:`~robocal.rigs.mirror.calibrate.MirrorCalibration` and the markerless answers share."""
+
+    @property
+    def std_rotation(self) -> np.ndarray:
+        """Per-axis std of the rotation [rad], (3,)."""
+        return np.sqrt(np.diag(self.cov)[:3])
+
+    @property
+    def std_translation(self) -> np.ndarray:
+        """Per-axis std of ``t_rc`` [m], (3,)."""
+        return np.sqrt(np.diag(self.cov)[3:])
