@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
+from robocal.bags._tf import CLOCK_MISMATCH
 from robocal.diagnostics import Diagnostic
 from robocal.errors import FileFormatError, InputError
 from robocal.rigs.flow.log import FlowRecords, RunSpec
@@ -67,8 +68,6 @@ uint32 time_delta_distance_us
 float32 distance
 """
 REFERENCE_TYPES = ("nav_msgs/msg/Odometry",)
-#: Streams whose median (receive - header) differ by more [s] are named as two clocks (the hand-eye reader's).
-CLOCK_MISMATCH = 0.1
 
 
 def register_types(typestore) -> None:
@@ -117,16 +116,11 @@ def _bag_files(bag: Path) -> list[Path]:
 def _read_map(path):
     """The map file: the array + camera (as run.yaml) and ``topics: {flow: {sensor: topic}, reference: topic}``."""
     from robocal.io import load_document
-    from robocal.rigs.flow.model import SensorArray
+    from robocal.rigs.flow.log import array_and_camera
 
     doc = load_document(path)
     src = str(path)
-    array = SensorArray.from_document(doc)
-    cam = doc.sub("camera")
-    focal = cam.float("focal_px", positive=True)
-    window = cam.int("window", default=64, minimum=8)
-    rate = cam.float("rate", kind="frequency", default=None) if "rate" in cam else None
-    sigma_px = cam.float("sigma_px", positive=True) if "sigma_px" in cam else None
+    array, focal, window, rate, sigma_px = array_and_camera(doc)
     topics = doc.raw("topics") if "topics" in doc else None
     if not isinstance(topics, dict) or not isinstance(topics.get("flow"), dict) or not topics["flow"]:
         raise FileFormatError("needs 'topics: {flow: {SENSOR: TOPIC, ...}}' (each sensor's mavros_msgs/OpticalFlowRad "

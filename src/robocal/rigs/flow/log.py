@@ -61,6 +61,7 @@ __all__ = [
     "write_poses_csv",
     "read_frames_npz",
     "write_frames_npz",
+    "array_and_camera",
 ]
 
 FLOW_COLUMNS = ["t [s]", "dt [s]", "sensor", "flow_u [px]", "flow_v [px]", "gyro_x [rad/s]", "gyro_y [rad/s]",
@@ -493,16 +494,23 @@ class RunSpec:
         return [p for p in (self.path, self.flow_log, self.frames, self.reference, self.wheel) if p is not None]
 
 
-def load_run(path) -> RunSpec:
-    """Parse and check a run description (see module doc)."""
-    doc = load_document(path)
-    base = Path(path).parent
+def array_and_camera(doc):
+    """``(array, focal_px, window, rate, sigma_px)`` of a run description's ``sensors`` and ``camera``
+    sections (run.yaml, and the topic map of a recording, which holds the same two sections)."""
     array = SensorArray.from_document(doc)
     cam = doc.sub("camera")
     focal = cam.float("focal_px", positive=True)
     window = cam.int("window", default=64, minimum=8)
     rate = cam.float("rate", kind="frequency", default=None) if "rate" in cam else None
     sigma_px = cam.float("sigma_px", positive=True) if "sigma_px" in cam else None
+    return array, focal, window, rate, sigma_px
+
+
+def load_run(path) -> RunSpec:
+    """Parse and check a run description (see module doc)."""
+    doc = load_document(path)
+    base = Path(path).parent
+    array, focal, window, rate, sigma_px = array_and_camera(doc)
 
     def opt(key):
         if key not in doc:
