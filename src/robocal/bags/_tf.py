@@ -20,7 +20,11 @@ import numpy as np
 from robocal.bags._reader import UnknownFrameError, closest_names, open_recording, seconds_from_ns, stamp_ns
 from robocal.errors import InputError
 
-__all__ = ["TfEdge", "TfTree", "PoseStream", "read_tf"]
+__all__ = ["TfEdge", "TfTree", "PoseStream", "read_tf", "CLOCK_MISMATCH", "tf_clock_offset"]
+
+#: Two streams whose median (receive - header) [s] differ by more than this look like two clocks (a camera's
+#: own, sim time): transport latencies differ by milliseconds. The one threshold of every rig's bag reader.
+CLOCK_MISMATCH = 0.1
 
 #: Message types that carry tf (ROS 2 / ROS 1 tf2, ROS 1's old tf).
 TF_TYPES = ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage")
@@ -28,6 +32,13 @@ TF_TYPES = ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage")
 
 def _frame(name: str) -> str:
     return name.lstrip("/")
+
+
+def tf_clock_offset(edges) -> float | None:
+    """Median receive time minus header stamp [s] over the dynamic edges of a tf chain (``None`` when every
+    edge is static: static transforms carry no clock), the tf side of a clock comparison."""
+    dyn = [e.receive_ns - e.stamps_ns for e in edges if not e.static]
+    return float(np.median(np.concatenate(dyn))) / 1e9 if dyn else None
 
 
 @dataclass(frozen=True)

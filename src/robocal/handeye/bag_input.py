@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from robocal.bags._tf import CLOCK_MISMATCH, tf_clock_offset
 from robocal.diagnostics import Diagnostic
 from robocal.errors import DetectionError, InputError, NotEnoughDataError
 from robocal.handeye.workflow import PosePair
@@ -34,9 +35,6 @@ __all__ = ["MAX_GAP_PERIODS", "CLOCK_MISMATCH", "POSE_TYPES", "BagPosePair", "lo
 #: A frame farther than this many (slowest dynamic edge's) tf periods from the nearest tf sample is dropped:
 #: within a normal stream the nearest sample is at most half a period away, so this is a hole of >= 4 periods.
 MAX_GAP_PERIODS = 2.0
-#: Image and tf streams whose median (receive - header) differ by more [s] are flagged: transport
-#: latencies differ by milliseconds, another clock (a camera's own, sim time) by much more.
-CLOCK_MISMATCH = 0.1
 #: Message types ``--target-poses`` takes (the target in the camera frame).
 POSE_TYPES = ("geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped",
               "geometry_msgs/msg/TransformStamped")
@@ -218,8 +216,7 @@ def _rows(ps, idx):
 def _clock_check(chain, recv_ns, stamps_ns, what: str) -> list:
     """``(warnings, (frames' offset, tf's offset))``: median receive - header [s] of each stream, and a
     ``clock_mismatch`` warning when they differ by more than :data:`CLOCK_MISMATCH`."""
-    tf = np.concatenate([e.receive_ns - e.stamps_ns for e in chain if not e.static])
-    d_img, d_tf = float(np.median(recv_ns - stamps_ns)) / 1e9, float(np.median(tf)) / 1e9
+    d_img, d_tf = float(np.median(recv_ns - stamps_ns)) / 1e9, tf_clock_offset(chain)
     if abs(d_img - d_tf) <= CLOCK_MISMATCH:
         return [], (d_img, d_tf)
     return [Diagnostic("clock_mismatch", f"the {what} and tf header stamps look like two clocks: receive minus "

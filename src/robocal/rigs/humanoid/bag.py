@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from robocal.bags._tf import CLOCK_MISMATCH
 from robocal.errors import InputError, NotEnoughDataError
 
 __all__ = ["JOINT_NAMES", "NAO_JOINTS", "MAX_GAP_PERIODS", "STILL_WINDOW_PERIODS", "CLOCK_MISMATCH", "load_bag_input",
@@ -56,9 +57,6 @@ JOINT_NAMES = {name: name for name in ("HeadYaw", "HeadPitch", "LHipYawPitch", "
 
 #: An image further than this many joint-state periods from the nearest joint sample is refused.
 MAX_GAP_PERIODS = 3.0
-#: Image and joint streams whose median (receive - header) differ by more [s] are named as two clocks
-#: (the hand-eye reader's threshold, :data:`robocal.handeye.bag_input.CLOCK_MISMATCH`).
-CLOCK_MISMATCH = 0.1
 #: Half-width [joint-state periods] of the window whose samples must agree for an image to be still:
 #: 1.5 periods holds the two samples bracketing the stamp and one more on each side.
 STILL_WINDOW_PERIODS = 1.5

@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from robocal.bags._tf import CLOCK_MISMATCH, tf_clock_offset
 from robocal.diagnostics import Diagnostic
 from robocal.errors import InputError, NotEnoughDataError
 from robocal.rigs.lineprofiler.calibrate import PoseTable, SphereInput
@@ -49,9 +50,6 @@ MAX_GAP_PERIODS = 3.0
 #: Largest |y| [m] of a profile point: the measuring plane is y_L = 0; a float32 driver's y is 0 exactly,
 #: a cloud in another frame is off by centimetres.
 PLANE_TOLERANCE = 1e-4
-#: Profile and pose streams whose median (receive - header) differ by more [s] are named as two clocks
-#: (the hand-eye reader's threshold, :data:`robocal.handeye.bag_input.CLOCK_MISMATCH`).
-CLOCK_MISMATCH = 0.1
 #: A profile with fewer valid points is dropped (a circle fit needs 3; FPDP judges the rest).
 MIN_POINTS = 3
 
@@ -165,8 +163,7 @@ def load_bag_input(bag, *, profiles: str | None = None, joints: str | None = Non
                    if dyn else np.array([stamps.min(), stamps.max()], np.int64))
             period = max((float(np.median(np.diff(e.stamps_ns))) for e in dyn if len(e.stamps_ns) > 1), default=0.0)
             stream = f"tf {base} -> {flange}"
-            d_pose = (float(np.median(np.concatenate([e.receive_ns - e.stamps_ns for e in dyn]))) / 1e9
-                      if dyn else pc.clock_offset)
+            d_pose = tf_clock_offset(dyn) if dyn else pc.clock_offset
     outside = (stamps < t_s[0]) | (stamps > t_s[-1])
     keep = ~outside
     if joints is not None:
