@@ -36,29 +36,71 @@ Python API over them; every name stays importable from here.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 
 from robocal.errors import InputError, ShapeError
-from robocal.rigs.flow.kernel_compiled import (  # noqa: F401 (the compiled loops, re-exported for tests and benches)
-    _aggregate_frames,
-    _interp3,
-    _lk_refine,
-    _refine_bilinear,
-    _refine_blocks,
-    _refine_step,
-    _sad8_batch,
-    _sad_batch,
-    _sad_frac,
-    _select_lanes,
-    _small_median,
-    _tensor_combine,
-)
 from robocal.rigs.flow.kernel_config import AGGREGATE_MODES, SIGMA_PX, SUBPIXEL_MODES, FlowConfig, block_origins
 from robocal.rigs.flow.kernel_metric import compensate_rotation, metric_displacement, rotational_flow, speed_limit
 from robocal.validation import check_array
+
+#: the numba loops re-exported from here for tests and benches (imported on first access: numba's import
+#: alone costs ~0.6-1 s of a command's start-up, which the C kernel does not pay)
+_COMPILED = ("_aggregate_frames", "_interp3", "_lk_refine", "_refine_bilinear", "_refine_blocks", "_refine_step",
+             "_sad8_batch", "_sad_batch", "_sad_frac", "_select_lanes", "_small_median", "_tensor_combine")
+
+#: environment variable choosing the block matcher: ``auto`` (default: C when built, else numba),
+#: ``c`` (the C extension; an error when it was not built) or ``numba``
+KERNEL_ENV = "ROBOCAL_FLOW_KERNEL"
+
+
+def __getattr__(name):
+    if name in _COMPILED:
+        from robocal.rigs.flow import kernel_compiled
+
+        return getattr(kernel_compiled, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def _flowc():
+    """The C extension :mod:`robocal.rigs.flow._flowc`, or None when it was not built (no C compiler or
+    Python headers at install time: setuptools builds it as optional)."""
+    global _FLOWC
+    if _FLOWC is False:
+        try:
+            from robocal.rigs.flow import _flowc as mod
+        except ImportError:
+            mod = None
+        _FLOWC = mod
+    return _FLOWC
+
+
+_FLOWC = False      # not yet looked for
+
+
+def kernel_backend() -> str:
+    """Which block matcher :func:`compute_flow` and :func:`match_blocks` run: ``"c"`` (the C extension
+    ``_flowc``: SSE2 ``psadbw`` on x86, plain C elsewhere, no numba import) or ``"numba"`` (the numba
+    kernel of :mod:`.kernel_compiled`, when the extension was not built or ``ROBOCAL_FLOW_KERNEL=numba``).
+
+    Both give bit-identical block flows, statuses and frame flows (integer SADs; the same double-precision
+    fit and aggregation in the same order; tests/rigs/flow/test_flow_kernel_c.py). ``refine="lk"`` and
+    ``aggregate="tensor"`` add a numba step after either.
+    """
+    choice = os.environ.get(KERNEL_ENV, "auto").strip().lower() or "auto"
+    if choice not in ("auto", "c", "numba"):
+        raise InputError(f"${KERNEL_ENV} must be 'auto', 'c' or 'numba', got {choice!r}")
+    if choice == "numba":
+        return "numba"
+    if _flowc() is None:
+        if choice == "c":
+            raise InputError(f"${KERNEL_ENV}=c but the C kernel (robocal.rigs.flow._flowc) was not built at install "
+                             "(no C compiler or Python headers then): reinstall with a compiler, or unset it")
+        return "numba"
+    return "c"
+
 
 __all__ = [
     "FlowConfig",
@@ -76,6 +118,7 @@ __all__ = [
     "SUBPIXEL_MODES",
     "AGGREGATE_MODES",
     "SIGMA_PX",
+    "kernel_backend",
 ]
 
 _BATCH = 256  # frame pairs per kernel call: large enough to fill SIMD lanes, small enough for L2
@@ -173,14 +216,27 @@ def _match_indexed(prev, curr, pidx, cidx, config: FlowConfig) -> BlockMatches:
     ys = np.repeat(o1, config.grid)
     xs = np.tile(o1, config.grid)
     nb = ys.size
-    side = 2 * config.search + 1
-    w = config.window
     flow = np.empty((n, nb, 2))
     status = np.empty((n, nb), np.int8)
     sad_min = np.empty((n, nb))
     distinct = np.empty((n, nb))
     texture = np.empty((n, nb))
     mode = SUBPIXEL_MODES.index(config.subpixel)
+    centres = (np.stack([xs, ys], axis=1) + (config.block - 1) / 2.0).astype(float)
+    if kernel_backend() == "c":
+        # natural layout, no batches: the C kernel reads each pair where it lies (a memory map too)
+        if n:
+            _flowc().match(prev, curr, int(pidx[0]), int(cidx[0]), n, config.window, config.block, config.search,
+                           ys.astype(np.int64), xs.astype(np.int64), float(config.feature_threshold),
+                           float(config.sad_limit), float(config.min_distinctness), mode,
+                           flow, status, sad_min, distinct, texture)
+        return BlockMatches(flow, status, sad_min, distinct, centres, texture)
+    import cv2
+
+    from robocal.rigs.flow.kernel_compiled import _refine_bilinear, _refine_blocks, _sad8_batch, _sad_batch, _select_lanes
+
+    side = 2 * config.search + 1
+    w = config.window
     for s in range(0, n, _BATCH):
         e = min(n, s + _BATCH)
         m = e - s
@@ -215,8 +271,7 @@ def _match_indexed(prev, curr, pidx, cidx, config: FlowConfig) -> BlockMatches:
         if mode in (1, 2):
             _refine_bilinear(prev, curr, pidx[s:e], cidx[s:e], ys, xs, config.block, mode, status[s:e], flow[s:e])
         texture[s:e] = gate.T
-    centres = np.stack([xs, ys], axis=1) + (config.block - 1) / 2.0
-    return BlockMatches(flow, status, sad_min, distinct, centres.astype(float), texture)
+    return BlockMatches(flow, status, sad_min, distinct, centres, texture)
 
 
 @dataclass
@@ -295,6 +350,12 @@ def _aggregate(bm: BlockMatches, config: FlowConfig):
     centroid = np.empty((n, 2))
     cen = bm.centres - (config.window - 1) / 2.0
     mode = {"mean": 0, "median": 1, "trimmed": 2, "tensor": 2}[config.aggregate]
+    if kernel_backend() == "c":
+        _flowc().aggregate(np.ascontiguousarray(bm.flow), np.ascontiguousarray(bm.status), np.ascontiguousarray(cen),
+                           n, nb, mode, float(config.trim_px), used, flow, agreement, spread, centroid)
+        return n_acc, used, flow, agreement, spread, centroid
+    from robocal.rigs.flow.kernel_compiled import _aggregate_frames
+
     _aggregate_frames(bm.flow, bm.status, np.ascontiguousarray(cen), mode, float(config.trim_px), used, flow,
                       agreement, spread, centroid)
     return n_acc, used, flow, agreement, spread, centroid
@@ -347,6 +408,8 @@ def _frame_flow(bm, prev, curr, config, gyro, dt, height, focal_px) -> FrameFlow
     n = bm.flow.shape[0]
     n_acc, used, flow, agreement, spread, centroid = _aggregate(bm, config)
     if config.aggregate == "tensor" and n:
+        from robocal.rigs.flow.kernel_compiled import _tensor_combine
+
         o1 = block_origins(config)
         _tensor_combine(np.ascontiguousarray(prev), used, np.ascontiguousarray(bm.flow), np.repeat(o1, config.grid),
                         np.tile(o1, config.grid), config.block, TENSOR_REGULARISATION, flow)
@@ -356,6 +419,8 @@ def _frame_flow(bm, prev, curr, config, gyro, dt, height, focal_px) -> FrameFlow
     valid = (n_used >= config.min_blocks) & ~(spread > np.hypot(config.max_spread_px, q))
     flow = np.where(valid[:, None], flow, np.nan)
     if config.refine == "lk" and n:
+        from robocal.rigs.flow.kernel_compiled import _lk_refine
+
         o1 = block_origins(config)
         refined = np.empty_like(flow)
         _lk_refine(np.ascontiguousarray(prev), np.ascontiguousarray(curr),

@@ -1,0 +1,399 @@
+/* robocal.rigs.flow._flowc: the flow kernel's default path in C (built by setuptools at install time,
+ * optional: without a compiler the numba kernel of kernel_compiled.py runs instead).
+ *
+ * SAD block matching (Li, Guan and Chu 2017, eq. 1), the texture gate and acceptance tests, the
+ * sub-pixel fit (equiangular / parabolic through the SAD surface, or bilinear half / quarter pixel,
+ * eq. 2) and the per-frame aggregation of the blocks: the same arithmetic as the numba functions
+ * _sad8_batch/_sad_batch + _select_lanes + _refine_blocks + _refine_bilinear and _aggregate_frames,
+ * so the outputs are bit-identical (integer SADs; the fit and the aggregation in double precision,
+ * in the same order, without contraction into fused multiply-adds: numba does not contract either).
+ *
+ * Frames stay in their natural layout (N, W, W) uint8, row-major: no transpose. An 8x8 block's SAD at
+ * one offset is 4 SSE2 psadbw on two-row registers where SSE2 is present (x86-64 always), a plain C
+ * loop elsewhere. The Python side (kernel.py) checks shapes and dtypes; the functions here check that
+ * every buffer is large enough for what they read or write, and release the GIL while they compute.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#if defined(__clang__)
+#pragma STDC FP_CONTRACT OFF
+#elif defined(__GNUC__)
+#pragma GCC optimize("fp-contract=off")
+#endif
+
+#if defined(__SSE2__) || defined(_M_X64) || (defined(_M_IX86_FP) && _M_IX86_FP >= 2)
+#include <emmintrin.h>
+#define FLOWC_SSE2 1
+#define FLOWC_SIMD "sse2"
+#else
+#define FLOWC_SSE2 0
+#define FLOWC_SIMD "portable"
+#endif
+
+#define MAX_SEARCH 15                 /* FlowConfig allows search <= 15 */
+#define MAX_SIDE (2 * MAX_SEARCH + 1)
+
+typedef struct {
+    int window, block, search, nb;
+    const int64_t *ys, *xs;
+    double feat_thr, sad_thr, min_distinct;
+    int mode;                         /* 0 none, 1 half, 2 quarter, 3 parabolic, 4 equiangular */
+} params_t;
+
+/* ---- SAD of one block at every integer offset (eq. 1) ------------------------------------------ */
+
+static void sad_generic(const uint8_t *P, const uint8_t *C, const params_t *p, int y0, int x0, uint32_t *sads) {
+    int W = p->window, B = p->block, S = p->search, o = 0;
+    for (int dy = -S; dy <= S; dy++)
+        for (int dx = -S; dx <= S; dx++, o++) {
+            uint32_t acc = 0;
+            for (int r = 0; r < B; r++) {
+                const uint8_t *pr = P + (size_t)(y0 + r) * W + x0;
+                const uint8_t *cr = C + (size_t)(y0 + r + dy) * W + x0 + dx;
+                for (int c = 0; c < B; c++)
+                    acc += (uint32_t)(pr[c] > cr[c] ? pr[c] - cr[c] : cr[c] - pr[c]);
+            }
+            sads[o] = acc;
+        }
+}
+
+#if FLOWC_SSE2
+/* 8x8 blocks: for each horizontal offset the 2S + 8 rows of the search window are loaded once and
+ * paired into two-row registers (rows i, i + 1); the block's SAD at vertical offset dy is then 4
+ * psadbw of its two-row registers against pairs dy + S, dy + S + 2, ... (no reload per offset). */
+static void sad8_sse2(const uint8_t *P, const uint8_t *C, const params_t *p, int y0, int x0, uint32_t *sads) {
+    int W = p->window, S = p->search, side = 2 * S + 1, nrow = 2 * S + 8;
+    __m128i ref[4], rows[2 * MAX_SEARCH + 8], pairs[2 * MAX_SEARCH + 7];
+    for (int r = 0; r < 4; r++)
+        ref[r] = _mm_unpacklo_epi64(_mm_loadl_epi64((const __m128i *)(P + (size_t)(y0 + 2 * r) * W + x0)),
+                                    _mm_loadl_epi64((const __m128i *)(P + (size_t)(y0 + 2 * r + 1) * W + x0)));
+    for (int dx = -S; dx <= S; dx++) {
+        const uint8_t *c0 = C + (size_t)(y0 - S) * W + x0 + dx;
+        for (int i = 0; i < nrow; i++)
+            rows[i] = _mm_loadl_epi64((const __m128i *)(c0 + (size_t)i * W));
+        for (int i = 0; i < nrow - 1; i++)
+            pairs[i] = _mm_unpacklo_epi64(rows[i], rows[i + 1]);
+        for (int j = 0; j < side; j++) {  /* j = dy + S */
+            __m128i acc = _mm_add_epi32(_mm_add_epi32(_mm_sad_epu8(ref[0], pairs[j]), _mm_sad_epu8(ref[1], pairs[j + 2])),
+                                        _mm_add_epi32(_mm_sad_epu8(ref[2], pairs[j + 4]), _mm_sad_epu8(ref[3], pairs[j + 6])));
+            /* each 64-bit half holds a sum <= 4 * 8 * 255 = 8160: fits its low 16 bits */
+            sads[j * side + dx + S] = (uint32_t)(_mm_cvtsi128_si32(acc) + _mm_extract_epi16(acc, 4));
+        }
+    }
+}
+#endif
+
+/* ---- bilinear sub-pixel SAD (eq. 2) and the 8-neighbour step, as kernel_compiled._sad_frac ------ */
+
+static double sad_frac(const uint8_t *P, const uint8_t *C, int W, int y0, int x0, int B, int iy, int ix,
+                       int qy, int qx, int scale) {
+    int64_t wa = (scale - qx) * (scale - qy), wb = qx * (scale - qy), wc = (scale - qx) * qy, wd = qx * qy;
+    int64_t s2 = scale * scale, acc = 0;
+    for (int r = 0; r < B; r++) {
+        const uint8_t *pr = P + (size_t)(y0 + r) * W + x0;
+        const uint8_t *c0 = C + (size_t)(y0 + r + iy) * W + x0 + ix;
+        const uint8_t *c1 = c0 + W;
+        for (int c = 0; c < B; c++) {
+            int64_t g = wa * c0[c] + wb * c0[c + 1] + wc * c1[c] + wd * c1[c + 1];
+            int64_t d = s2 * pr[c] - g;
+            acc += d < 0 ? -d : d;
+        }
+    }
+    return (double)acc / (double)s2;
+}
+
+static int64_t floordiv(int64_t a, int64_t b) {   /* Python's //, for negative offsets */
+    int64_t q = a / b;
+    return (a % b != 0 && ((a < 0) != (b < 0))) ? q - 1 : q;
+}
+
+static void refine_step(const uint8_t *P, const uint8_t *C, int W, int y0, int x0, int B,
+                        int64_t *bx, int64_t *by, double *best, int step_q, int scale) {
+    int64_t nbx = *bx, nby = *by;
+    for (int sy = -1; sy <= 1; sy++)
+        for (int sx = -1; sx <= 1; sx++) {
+            if (sx == 0 && sy == 0) continue;
+            int64_t cx = *bx + sx * step_q, cy = *by + sy * step_q;
+            int64_t ix = floordiv(cx, scale), iy = floordiv(cy, scale);
+            double v = sad_frac(P, C, W, y0, x0, B, (int)iy, (int)ix, (int)(cy - iy * scale), (int)(cx - ix * scale), scale);
+            if (v < *best) { *best = v; nbx = cx; nby = cy; }
+        }
+    *bx = nbx;
+    *by = nby;
+}
+
+static double interp3(double sm, double s0, double sp, int mode) {
+    double den, d;
+    if (mode == 3) {
+        den = sm - 2.0 * s0 + sp;
+    } else {
+        den = (sm > sp ? sm : sp) - s0;
+    }
+    d = den > 0 ? 0.5 * (sm - sp) / den : 0.0;
+    return d > 0.5 ? 0.5 : (d < -0.5 ? -0.5 : d);
+}
+
+/* ---- one frame pair: every block's gate, SAD surface, tests and sub-pixel flow ----------------- */
+
+static void match_pair(const uint8_t *P, const uint8_t *C, const params_t *p, double *flow, int8_t *status,
+                       double *sadmin, double *distinct, double *texture) {
+    int W = p->window, B = p->block, S = p->search, side = 2 * S + 1, no = side * side;
+    int q0 = B / 4, qn = B / 2;
+    /* the numba kernels' "big" (masked / missing) value: the SAD array's dtype maximum, stored as int32 */
+    uint32_t big = B == 8 ? 65535u : 4294967295u;
+    uint32_t sads[MAX_SIDE * MAX_SIDE];
+    for (int b = 0; b < p->nb; b++) {
+        int y0 = (int)p->ys[b], x0 = (int)p->xs[b];
+#if FLOWC_SSE2
+        if (B == 8)
+            sad8_sse2(P, C, p, y0, x0, sads);
+        else
+#endif
+            sad_generic(P, C, p, y0, x0, sads);
+        /* best: the least SAD, the first in scan order on ties (the firmware's strict '<') */
+        uint32_t bv = sads[0];
+        int bo = 0;
+        for (int o = 1; o < no; o++)
+            if (sads[o] < bv) { bv = sads[o]; bo = o; }
+        int oy = bo / side, ox = bo - oy * side;
+        uint32_t nl = ox > 0 ? sads[bo - 1] : big, nr = ox < side - 1 ? sads[bo + 1] : big;
+        uint32_t nu = oy > 0 ? sads[bo - side] : big, nd = oy < side - 1 ? sads[bo + side] : big;
+        /* second: the least SAD outside the best's 3x3 neighbourhood */
+        uint32_t sec = big;
+        for (int qy = 0; qy < side; qy++) {
+            if (qy >= oy - 1 && qy <= oy + 1) {
+                for (int qx = 0; qx < side; qx++)
+                    if ((qx < ox - 1 || qx > ox + 1) && sads[qy * side + qx] < sec) sec = sads[qy * side + qx];
+            } else {
+                for (int qx = 0; qx < side; qx++)
+                    if (sads[qy * side + qx] < sec) sec = sads[qy * side + qx];
+            }
+        }
+        /* PX4FLOW compute_diff: row and column differences of the block's centre */
+        int32_t gate = 0;
+        int gy = y0 + q0, gx = x0 + q0;
+        for (int r = 0; r < qn - 1; r++)
+            for (int c = 0; c < qn; c++)
+                gate += abs((int)P[(size_t)(gy + r) * W + gx + c] - (int)P[(size_t)(gy + r + 1) * W + gx + c])
+                      + abs((int)P[(size_t)(gy + c) * W + gx + r] - (int)P[(size_t)(gy + c) * W + gx + r + 1]);
+        int32_t bvi = (int32_t)bv, svi = (int32_t)sec;   /* int32 as the numba kernel's arrays */
+        int bdy = oy - S, bdx = ox - S;
+        texture[b] = (double)gate;
+        sadmin[b] = (double)bvi;
+        distinct[b] = (double)((int64_t)svi - bvi) / (double)(bvi > 1 ? bvi : 1);
+        flow[2 * b] = NAN;
+        flow[2 * b + 1] = NAN;
+        if ((double)gate < p->feat_thr) { status[b] = 1; continue; }
+        if ((double)bvi > p->sad_thr) { status[b] = 2; continue; }
+        if ((double)svi < (1.0 + p->min_distinct) * (double)bvi || svi == bvi) { status[b] = 3; continue; }
+        status[b] = 0;
+        double fx = (double)bdx, fy = (double)bdy;
+        if (p->mode >= 3) {
+            if (abs(bdx) < S) fx += interp3((double)nl, (double)bvi, (double)nr, p->mode);
+            if (abs(bdy) < S) fy += interp3((double)nu, (double)bvi, (double)nd, p->mode);
+        } else if (p->mode == 1 || p->mode == 2) {
+            const int scale = 4;
+            int64_t qx = (int64_t)bdx * scale, qy = (int64_t)bdy * scale;
+            double fv = sad_frac(P, C, W, y0, x0, B, bdy, bdx, 0, 0, scale);
+            refine_step(P, C, W, y0, x0, B, &qx, &qy, &fv, 2, scale);
+            if (p->mode == 2) refine_step(P, C, W, y0, x0, B, &qx, &qy, &fv, 1, scale);
+            fx = (double)qx / scale;
+            fy = (double)qy / scale;
+        }
+        flow[2 * b] = fx;
+        flow[2 * b + 1] = fy;
+    }
+}
+
+static int need(Py_buffer *b, Py_ssize_t nbytes, const char *name) {
+    if (b->len < nbytes) {
+        PyErr_Format(PyExc_ValueError, "_flowc: %s holds %zd bytes, expected at least %zd", name, b->len, nbytes);
+        return 0;
+    }
+    return 1;
+}
+
+PyDoc_STRVAR(match_doc,
+"match(prev, curr, p0, c0, n, window, block, search, ys, xs, feat_thr, sad_thr, min_distinct, mode,\n"
+"      flow, status, sad_min, distinct, texture)\n\n"
+"Block matching of the pairs (prev[p0 + k], curr[c0 + k]), k < n: uint8 frames (.., window, window);\n"
+"ys, xs int64 (n_blocks,) block origins; outputs flow f64 (n, nb, 2), status int8 (n, nb), sad_min,\n"
+"distinct, texture f64 (n, nb) (see kernel.BlockMatches).");
+
+static PyObject *flowc_match(PyObject *self, PyObject *args) {
+    Py_buffer prev, curr, ys, xs, flow, status, sadmin, distinct, texture;
+    Py_ssize_t p0, c0, n;
+    params_t p;
+    if (!PyArg_ParseTuple(args, "y*y*nnniiiy*y*dddiw*w*w*w*w*", &prev, &curr, &p0, &c0, &n, &p.window, &p.block,
+                          &p.search, &ys, &xs, &p.feat_thr, &p.sad_thr, &p.min_distinct, &p.mode,
+                          &flow, &status, &sadmin, &distinct, &texture))
+        return NULL;
+    PyObject *ret = NULL;
+    p.nb = (int)(ys.len / (Py_ssize_t)sizeof(int64_t));
+    p.ys = (const int64_t *)ys.buf;
+    p.xs = (const int64_t *)xs.buf;
+    Py_ssize_t ww = (Py_ssize_t)p.window * p.window, nb = p.nb;
+    if (p.search < 1 || p.search > MAX_SEARCH || p.block < 4 || p0 < 0 || c0 < 0 || n < 0 || p.window < 1) {
+        PyErr_SetString(PyExc_ValueError, "_flowc.match: search must be 1..15, block >= 4, indices >= 0");
+        goto done;
+    }
+    if (!need(&xs, nb * 8, "xs") || !need(&prev, (p0 + n) * ww, "prev") || !need(&curr, (c0 + n) * ww, "curr")
+        || !need(&flow, n * nb * 16, "flow") || !need(&status, n * nb, "status") || !need(&sadmin, n * nb * 8, "sad_min")
+        || !need(&distinct, n * nb * 8, "distinct") || !need(&texture, n * nb * 8, "texture"))
+        goto done;
+    for (Py_ssize_t b = 0; b < nb; b++) {   /* every candidate and its bilinear neighbour inside the frame */
+        if (p.ys[b] - p.search < 0 || p.xs[b] - p.search < 0 || p.ys[b] + p.block + p.search + 1 > p.window
+            || p.xs[b] + p.block + p.search + 1 > p.window) {
+            PyErr_Format(PyExc_ValueError, "_flowc.match: block %zd at (%lld, %lld) with search %d leaves the frame",
+                         b, (long long)p.ys[b], (long long)p.xs[b], p.search);
+            goto done;
+        }
+    }
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t k = 0; k < n; k++)
+        match_pair((const uint8_t *)prev.buf + (p0 + k) * ww, (const uint8_t *)curr.buf + (c0 + k) * ww, &p,
+                   (double *)flow.buf + k * nb * 2, (int8_t *)status.buf + k * nb, (double *)sadmin.buf + k * nb,
+                   (double *)distinct.buf + k * nb, (double *)texture.buf + k * nb);
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    PyBuffer_Release(&prev); PyBuffer_Release(&curr); PyBuffer_Release(&ys); PyBuffer_Release(&xs);
+    PyBuffer_Release(&flow); PyBuffer_Release(&status); PyBuffer_Release(&sadmin);
+    PyBuffer_Release(&distinct); PyBuffer_Release(&texture);
+    return ret;
+}
+
+/* ---- per frame: the blocks' median, the trimmed set, the frame's flow, spread and centroid ------- */
+
+static double small_median(double *a, int m) {   /* insertion sort, as kernel_compiled._small_median */
+    for (int i = 1; i < m; i++) {
+        double v = a[i];
+        int j = i - 1;
+        while (j >= 0 && a[j] > v) { a[j + 1] = a[j]; j--; }
+        a[j + 1] = v;
+    }
+    int h = m / 2;
+    return m % 2 == 1 ? a[h] : 0.5 * (a[h - 1] + a[h]);
+}
+
+static void aggregate_frame(const double *flow, const int8_t *status, const double *cen, int nb, int mode,
+                            double trim, uint8_t *used, double *out_flow, double *agreement, double *spread,
+                            double *centroid, double *xs, double *ys) {
+    int m = 0;
+    for (int b = 0; b < nb; b++)
+        if (status[b] == 0) { xs[m] = flow[2 * b]; ys[m] = flow[2 * b + 1]; m++; }
+    for (int b = 0; b < nb; b++) used[b] = 0;
+    if (m == 0) {
+        out_flow[0] = out_flow[1] = NAN;
+        *agreement = 0.0;
+        *spread = NAN;
+        centroid[0] = centroid[1] = 0.0;
+        return;
+    }
+    double mx = small_median(xs, m), my = small_median(ys, m);
+    int near = 0;
+    for (int b = 0; b < nb; b++) {
+        if (status[b] == 0) {
+            double ex = flow[2 * b] - mx, ey = flow[2 * b + 1] - my;
+            double d2 = ex * ex + ey * ey;
+            if (d2 <= trim * trim) {
+                near++;
+                if (mode == 2) used[b] = 1;
+            }
+            if (mode != 2) used[b] = 1;
+        }
+    }
+    *agreement = (double)near / (double)m;
+    double sx = 0.0, sy = 0.0, cx = 0.0, cy = 0.0;
+    int cnt = 0;
+    for (int b = 0; b < nb; b++)
+        if (used[b]) { sx += flow[2 * b]; sy += flow[2 * b + 1]; cx += cen[2 * b]; cy += cen[2 * b + 1]; cnt++; }
+    if (cnt == 0) {
+        out_flow[0] = out_flow[1] = NAN;
+        *spread = NAN;
+        centroid[0] = centroid[1] = 0.0;
+        return;
+    }
+    double fx, fy;
+    if (mode == 1) { fx = mx; fy = my; }
+    else { fx = sx / cnt; fy = sy / cnt; }
+    out_flow[0] = fx;
+    out_flow[1] = fy;
+    centroid[0] = cx / cnt;
+    centroid[1] = cy / cnt;
+    double ss = 0.0;
+    for (int b = 0; b < nb; b++)
+        if (used[b]) {
+            double ex = flow[2 * b] - fx, ey = flow[2 * b + 1] - fy;
+            ss += ex * ex + ey * ey;
+        }
+    *spread = sqrt(ss / cnt);
+}
+
+PyDoc_STRVAR(aggregate_doc,
+"aggregate(flow, status, cen, n, nb, mode, trim, used, out_flow, agreement, spread, centroid)\n\n"
+"Per frame: flow f64 (n, nb, 2), status int8 (n, nb), cen f64 (nb, 2); mode 0 mean, 1 median,\n"
+"2 trimmed mean; outputs used bool (n, nb), out_flow f64 (n, 2), agreement, spread f64 (n,),\n"
+"centroid f64 (n, 2) (see kernel._aggregate).");
+
+static PyObject *flowc_aggregate(PyObject *self, PyObject *args) {
+    Py_buffer flow, status, cen, used, out_flow, agreement, spread, centroid;
+    Py_ssize_t n;
+    int nb, mode;
+    double trim;
+    if (!PyArg_ParseTuple(args, "y*y*y*niidw*w*w*w*w*", &flow, &status, &cen, &n, &nb, &mode, &trim, &used,
+                          &out_flow, &agreement, &spread, &centroid))
+        return NULL;
+    PyObject *ret = NULL;
+    double *tmp = NULL;
+    if (n < 0 || nb < 0) {
+        PyErr_SetString(PyExc_ValueError, "_flowc.aggregate: n and nb must be >= 0");
+        goto done;
+    }
+    if (!need(&flow, n * nb * 16, "flow") || !need(&status, n * nb, "status") || !need(&cen, (Py_ssize_t)nb * 16, "cen")
+        || !need(&used, n * nb, "used") || !need(&out_flow, n * 16, "out_flow") || !need(&agreement, n * 8, "agreement")
+        || !need(&spread, n * 8, "spread") || !need(&centroid, n * 16, "centroid"))
+        goto done;
+    tmp = (double *)PyMem_Malloc(sizeof(double) * 2 * (size_t)(nb > 0 ? nb : 1));
+    if (tmp == NULL) { PyErr_NoMemory(); goto done; }
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t k = 0; k < n; k++)
+        aggregate_frame((const double *)flow.buf + k * nb * 2, (const int8_t *)status.buf + k * nb,
+                        (const double *)cen.buf, nb, mode, trim, (uint8_t *)used.buf + k * nb,
+                        (double *)out_flow.buf + 2 * k, (double *)agreement.buf + k, (double *)spread.buf + k,
+                        (double *)centroid.buf + 2 * k, tmp, tmp + nb);
+    Py_END_ALLOW_THREADS
+    ret = Py_None;
+    Py_INCREF(ret);
+done:
+    PyMem_Free(tmp);
+    PyBuffer_Release(&flow); PyBuffer_Release(&status); PyBuffer_Release(&cen); PyBuffer_Release(&used);
+    PyBuffer_Release(&out_flow); PyBuffer_Release(&agreement); PyBuffer_Release(&spread); PyBuffer_Release(&centroid);
+    return ret;
+}
+
+static PyMethodDef methods[] = {
+    {"match", flowc_match, METH_VARARGS, match_doc},
+    {"aggregate", flowc_aggregate, METH_VARARGS, aggregate_doc},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_flowc",
+    "The flow kernel's default path in C (block matching, sub-pixel fit, aggregation); see kernel.py.", -1, methods,
+};
+
+PyMODINIT_FUNC PyInit__flowc(void) {
+    PyObject *m = PyModule_Create(&module);
+    if (m != NULL && PyModule_AddStringConstant(m, "SIMD", FLOWC_SIMD) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
+}
