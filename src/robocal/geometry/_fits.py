@@ -21,8 +21,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.linalg import eig
-from scipy.optimize import least_squares
 
 from robocal.diagnostics import Diagnostic
 from robocal.errors import ConvergenceError, DegenerateGeometryError, InputError, NotEnoughDataError, ShapeError
@@ -230,6 +228,8 @@ def _positive_radius(r: float, shape: str) -> None:
 def _solve(fun, jac, x0):
     # 'lm' (MINPACK) is the textbook geometric-fit solver; tight tolerances
     # because the problem is tiny and well-scaled (we normalise the points).
+    from scipy.optimize import least_squares  # here: scipy.optimize costs ~0.3 s to import (issue 16)
+
     return least_squares(fun, x0, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=400)
 
 
@@ -326,6 +326,8 @@ def _hyper_circle(q: np.ndarray) -> tuple[np.ndarray, float]:
     xm, ym = q.mean(axis=0)
     zm = z.mean()
     Nh = np.array([[8 * zm, 4 * xm, 4 * ym, 2], [4 * xm, 1, 0, 0], [4 * ym, 0, 1, 0], [2, 0, 0, 0]])
+    from scipy.linalg import eig
+
     _, V = eig(M, Nh)
     V = np.real(V)
     # Of the pencil's eigenvectors only those with A^T N A > 0 satisfy the
@@ -463,6 +465,8 @@ def fit_circle_3d(points, *, rtol: float = RTOL) -> Circle3DFit:
             J[m:, 3 + k] = -h * (uh @ dn)
         J[m:, 5] = -1.0
         return J
+
+    from scipy.optimize import least_squares
 
     ls = least_squares(fun, np.r_[0.0, 0.0, 0.0, 0.0, 0.0, c2.radius / scale], method="lm", xtol=1e-12, ftol=1e-12)
     x = ls.x

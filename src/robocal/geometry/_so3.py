@@ -13,7 +13,6 @@ Everything accepts leading batch dimensions ``(..., 3, 3)`` / ``(..., 3)``.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from robocal._deprecation import deprecated_alias
 from robocal.errors import DegenerateGeometryError, ShapeError
@@ -57,6 +56,14 @@ def _tail(a, tail: tuple, name: str) -> np.ndarray:
         want = "(..., " + ", ".join(map(str, tail)) + ")"
         raise ShapeError(f"{name} must have shape {want}, got {a.shape}")
     return a
+
+
+def _rotation():
+    """SciPy's ``Rotation``, imported on first use: scipy.spatial costs ~0.2 s, paid by every command that
+    imports robocal.geometry otherwise (issue 16: the flow rig's 2D paths never rotate in 3D)."""
+    from scipy.spatial.transform import Rotation
+
+    return Rotation
 
 
 def _batched(fn, arr: np.ndarray, tail: int) -> np.ndarray:
@@ -132,13 +139,13 @@ rotz = deprecated_alias(lambda angle: matrix_from_angle("z", angle), "rotz", cal
 def matrix_from_rotvec(rotvec) -> np.ndarray:
     """Rotation matrix from a rotation vector ``theta * k`` (rad), (..., 3) -> (..., 3, 3)."""
     r = check_array(rotvec, "rotvec", shape=(3,))
-    return _batched(lambda f: Rotation.from_rotvec(f).as_matrix(), r, 1)
+    return _batched(lambda f: _rotation().from_rotvec(f).as_matrix(), r, 1)
 
 
 def rotvec_from_matrix(R) -> np.ndarray:
     """Rotation vector (rad) from a rotation matrix, (..., 3, 3) -> (..., 3)."""
     R = check_array(R, "R", shape=(3, 3))
-    return _batched(lambda f: Rotation.from_matrix(f).as_rotvec(), R, 2)
+    return _batched(lambda f: _rotation().from_matrix(f).as_rotvec(), R, 2)
 
 
 def matrix_from_quaternion(q) -> np.ndarray:
@@ -149,7 +156,7 @@ def matrix_from_quaternion(q) -> np.ndarray:
     q = check_array(q, "quaternion", shape=(4,))
     if np.any(np.linalg.norm(q, axis=-1) < 1e-12):
         raise DegenerateGeometryError("quaternion has zero norm")
-    return _batched(lambda f: Rotation.from_quat(f).as_matrix(), q, 1)
+    return _batched(lambda f: _rotation().from_quat(f).as_matrix(), q, 1)
 
 
 def quaternion_from_matrix(R, *, canonical: bool = True) -> np.ndarray:
@@ -158,20 +165,20 @@ def quaternion_from_matrix(R, *, canonical: bool = True) -> np.ndarray:
     With ``canonical=True`` the sign is chosen so that ``w >= 0``.
     """
     R = check_array(R, "R", shape=(3, 3))
-    return _batched(lambda f: Rotation.from_matrix(f).as_quat(canonical=canonical), R, 2)
+    return _batched(lambda f: _rotation().from_matrix(f).as_quat(canonical=canonical), R, 2)
 
 
 def matrix_from_euler(seq: str, angles, *, degrees: bool = False) -> np.ndarray:
     """Rotation matrix from Euler angles; ``seq`` as in SciPy (``"xyz"`` extrinsic,
     ``"XYZ"`` intrinsic). ROS roll-pitch-yaw is ``"xyz"``."""
     a = check_array(angles, "angles", shape=(len(seq),))
-    return _batched(lambda f: Rotation.from_euler(seq, f, degrees=degrees).as_matrix(), a, 1)
+    return _batched(lambda f: _rotation().from_euler(seq, f, degrees=degrees).as_matrix(), a, 1)
 
 
 def euler_from_matrix(seq: str, R, *, degrees: bool = False) -> np.ndarray:
     """Euler angles from a rotation matrix (see :func:`matrix_from_euler`)."""
     R = check_array(R, "R", shape=(3, 3))
-    return _batched(lambda f: Rotation.from_matrix(f).as_euler(seq, degrees=degrees), R, 2)
+    return _batched(lambda f: _rotation().from_matrix(f).as_euler(seq, degrees=degrees), R, 2)
 
 
 def matrix_from_gibbs(r) -> np.ndarray:
