@@ -1,6 +1,6 @@
 """Issue 16's fast paths give the results of the paths they replace: memory-mapped uncompressed frames vs
 the compressed .npz files written before, the kernel's changes (8-bit differences, one transposed array
-per sequence) vs the outputs recorded before them, and numba's cache cannot serve stale code."""
+per sequence; the C kernel) vs the outputs recorded before them, and numba's cache cannot serve stale code."""
 
 import ast
 import shutil
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from robocal.errors import FileFormatError
-from robocal.rigs.flow import kernel_compiled, simulate
+from robocal.rigs.flow import kernel, kernel_compiled, simulate
 from robocal.rigs.flow.log import load_run, load_steps, read_frames_npz, write_frames_npz
 from robocal.rigs.flow.workflow import odometry_run
 
@@ -25,8 +25,15 @@ def frames_run():
     return spec, odometry_run(spec)
 
 
-def test_example_odometry_unchanged_by_the_speed_work(frames_run):
-    _, (od, flows, _) = frames_run
+@pytest.mark.parametrize("backend", ["c", "numba"])
+def test_example_odometry_unchanged_by_the_speed_work(backend, frames_run, monkeypatch):
+    """With either kernel (the C extension, or the numba fallback), as recorded before issue 16."""
+    if backend == "c" and kernel._flowc() is None:
+        pytest.skip("the C kernel was not built (no C compiler at install)")
+    monkeypatch.setenv(kernel.KERNEL_ENV, backend)
+    spec, _ = frames_run
+    od, flows, _ = odometry_run(spec)
+    assert od.frames["flow_kernel"].split()[0] == backend
     before = np.load(BEFORE)
     # the kernel's flow is integer SADs + the same double arithmetic (no fastmath in the fit and
     # the aggregation): bit-identical on any IEEE machine

@@ -43,6 +43,17 @@ def _se2(p):
     return T
 
 
+def _se2_inv(T):
+    """Inverse of homogeneous SE(2) matrices ``(..., 3, 3)``: ``[R^T, -R^T t]`` (a general LU inverse of
+    each 3x3 was 2/3 of the RPE's time on a 30 s, 400 Hz run)."""
+    Ri = np.swapaxes(T[..., :2, :2], -1, -2)
+    out = np.zeros_like(T)
+    out[..., :2, :2] = Ri
+    out[..., :2, 2] = -np.einsum("...ij,...j->...i", Ri, T[..., :2, 2])
+    out[..., 2, 2] = 1.0
+    return out
+
+
 def align_trajectory(est, ref):
     """Least-squares rigid 2D alignment (SE(2)) of ``est`` onto ``ref``, poses ``(N, 3)``.
 
@@ -151,9 +162,9 @@ def rpe_per_distance(est, ref, lengths=(0.5, 1.0)):
                              "note": f"no segment of {L:g} m: the reference travels {s[-1]:.3f} m"}
             continue
         j = j[ok]
-        Qrel = np.linalg.inv(Tr[i]) @ Tr[j]
-        Prel = np.linalg.inv(Te[i]) @ Te[j]
-        E = np.linalg.inv(Qrel) @ Prel
+        Qrel = _se2_inv(Tr[i]) @ Tr[j]
+        Prel = _se2_inv(Te[i]) @ Te[j]
+        E = _se2_inv(Qrel) @ Prel
         te = np.linalg.norm(E[:, :2, 2], axis=1)
         re = np.abs(np.arctan2(E[:, 1, 0], E[:, 0, 0]))
         seg = s[j] - s[i]

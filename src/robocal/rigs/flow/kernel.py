@@ -102,6 +102,12 @@ def kernel_backend() -> str:
     return "c"
 
 
+def kernel_name() -> str:
+    """:func:`kernel_backend` as a run records it: ``"c (sse2)"``, ``"c (portable)"`` (the C kernel without
+    SIMD intrinsics: not x86) or ``"numba"``."""
+    return f"c ({_flowc().SIMD})" if kernel_backend() == "c" else "numba"
+
+
 __all__ = [
     "FlowConfig",
     "FrameFlow",
@@ -119,6 +125,7 @@ __all__ = [
     "AGGREGATE_MODES",
     "SIGMA_PX",
     "kernel_backend",
+    "kernel_name",
 ]
 
 _BATCH = 256  # frame pairs per kernel call: large enough to fill SIMD lanes, small enough for L2

@@ -23,10 +23,11 @@ first-order form, available as ``method="euler"``).
 
 from __future__ import annotations
 
+import functools
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.special import chdtri
 
 from robocal.diagnostics import Diagnostic
 from robocal.errors import InputError, NotEnoughDataError
@@ -40,6 +41,54 @@ __all__ = ["SensorSteps", "Odometry", "fuse_steps", "dead_reckon", "flow_sigma",
 #: the true array it is 0.34 (equiangular, sigma 0.06 px), 2.6 for half-pixel flow weighted
 #: with 0.06 px, 1.8 with the nominal array (mounting errors of 6-9 mm and 2-3 deg).
 CHI2_RATIO_WARN = 3.0
+
+
+
+@functools.lru_cache(maxsize=256)
+def _chi2_isf_int(k: int, p: float) -> float:
+    """The chi-square quantile with ``k`` (integer >= 1) degrees of freedom exceeded with probability
+    ``p`` (SciPy's ``chdtri(k, p)``): bisection on the closed-form survival function of integer
+    degrees of freedom (Abramowitz and Stegun 26.4.4-5), to the last bit of the double interval.
+
+    Here and not SciPy's: ``scipy.special`` costs 0.4-0.6 s to import, more than the whole fixed cost
+    a ``robocal flow odometry`` call may have (issue 16), and the fusion needs only integer ``k``.
+    """
+    def sf(x: float) -> float:
+        if k % 2 == 0:
+            term = total = 1.0
+            for i in range(1, k // 2):
+                term *= 0.5 * x / i
+                total += term
+            return math.exp(-0.5 * x) * total
+        total = math.erfc(math.sqrt(0.5 * x))
+        if k > 1:
+            term = math.sqrt(2.0 * x / math.pi) * math.exp(-0.5 * x)
+            total += term
+            for i in range(1, (k - 1) // 2):
+                term *= x / (2 * i + 1)
+                total += term
+        return total
+
+    lo, hi = 0.0, float(max(k, 1))
+    while sf(hi) > p:
+        lo, hi = hi, 2.0 * hi
+    while True:
+        mid = 0.5 * (lo + hi)
+        if mid <= lo or mid >= hi:
+            return hi
+        if sf(mid) > p:
+            lo = mid
+        else:
+            hi = mid
+
+
+def chi2_isf(dof, p: float) -> np.ndarray:
+    """:func:`_chi2_isf_int` of each integer ``dof`` (array_like), as ``scipy.special.chdtri(dof, p)``."""
+    d = np.asarray(dof)
+    if not 0.0 < p < 1.0 or (d.size and (d.min() < 1 or np.any(d != np.rint(d)))):
+        raise InputError(f"chi2_isf: needs integer degrees of freedom >= 1 and 0 < p < 1, got {dof!r}, {p!r}")
+    u, inv = np.unique(d.astype(np.int64), return_inverse=True)
+    return np.array([_chi2_isf_int(int(k), float(p)) for k in u])[inv].reshape(d.shape)
 
 
 @dataclass
@@ -261,7 +310,7 @@ def fuse_steps(steps: SensorSteps, array: SensorArray, *, robust: bool = True, o
             m = used.sum(axis=1)
             dof = 2 * m - 3
             redundant = m >= 3
-            thr = np.where(redundant, chdtri(np.maximum(dof, 1), outlier_p), np.inf)
+            thr = np.where(redundant, chi2_isf(np.maximum(dof, 1), outlier_p), np.inf)
             bad = redundant & (rss > thr)
             if not np.any(bad):
                 break
@@ -328,7 +377,7 @@ def dead_reckon(steps: SensorSteps, array: SensorArray, *, pose0=(0.0, 0.0, 0.0)
     # sigma_px on rendered drives, which is conservative); far above 1, the noise is understated
     # and the covariance and the outlier test are wrong with it
     red = (dof > 0) & np.isfinite(raw_chi2)
-    chi2_ratio = float(np.median(raw_chi2[red] / chdtri(dof[red], 0.5))) if red.sum() >= 10 else float("nan")
+    chi2_ratio = float(np.median(raw_chi2[red] / chi2_isf(dof[red], 0.5))) if red.sum() >= 10 else float("nan")
     if chi2_ratio > CHI2_RATIO_WARN:
         warnings.append(Diagnostic("inconsistent_data", f"the sensors disagree {np.sqrt(chi2_ratio):.1f}x more than their "
                                    f"stated noise (median chi-square ratio {chi2_ratio:.2f}, expected <= 1): the flow "

@@ -20,14 +20,13 @@ from robocal.errors import InputError
 from robocal.io import CalibrationResult, atomic_write_text, hash_inputs
 from robocal.rigs.flow.calibrate import array_estimate, calibrate_array, interpolate_poses
 from robocal.rigs.flow.evaluate import evaluate_trajectory
-from robocal.rigs.flow.kernel import FlowConfig, compute_flow_sequence, speed_limit
+from robocal.rigs.flow.kernel import FlowConfig, compute_flow_sequence, kernel_name, speed_limit
 from robocal.rigs.flow.log import (RunSpec, load_steps, read_poses_csv, write_flow_csv, write_frames_npz,
                                    write_poses_csv)
 from robocal.rigs.flow.model import SensorArray, seed_array
 from robocal.rigs.flow.inputs import load_input  # noqa: F401 (the step, in a light module)
 from robocal.rigs.flow.odometry import Odometry, dead_reckon
 from robocal.rigs.flow.report import compare_text, display, plot_series, systematic_note  # noqa: F401 (re-exported)
-from robocal.rigs.flow.simulate import SimConfig, SimRun
 
 __all__ = ["write_simulation", "judge_run", "odometry_run", "calibration_run", "evaluation_run", "array_yaml",
            "mounted_array", "calibrate_input", "calibration_result", "odometry_result", "evaluation_result",
@@ -181,6 +180,7 @@ def odometry_run(spec: RunSpec, *, config: FlowConfig | None = None, array: Sens
     od = dead_reckon(steps, array or spec.array, robust=robust, method=method)
     od.warnings[:0] = judged
     if flows is not None:
+        od.frames["flow_kernel"] = kernel_name()      # which block matcher ran (C or the numba fallback)
         for i, ff in enumerate(flows):
             lim = config.search + 0.5
             fast = np.abs(ff.flow_px[np.isfinite(ff.flow_px[:, 0])]).max(initial=0.0)
@@ -389,6 +389,8 @@ def speed_ceiling(config: FlowConfig, height: float, rate: float, focal_px: floa
 
 def default_sim(trajectory: str = "loop", duration: float = 8.0, **kw) -> SimConfig:
     """The seed's rig with mounting errors and per-sensor height-scale errors (a sonar is never exact)."""
+    from robocal.rigs.flow.simulate import SimConfig  # here: the simulator's renderer imports numba
+
     base = dict(array_true=mounted_array(), height_scale=(0.99, 1.02, 1.04), trajectory=trajectory, duration=duration)
     base.update(kw)
     return SimConfig(**base)
