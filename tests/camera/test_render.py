@@ -79,12 +79,13 @@ def test_distorted_render_puts_dots_where_project_says():
     centers = np.array([[x, y] for x in np.linspace(-0.25, 0.25, 5) for y in np.linspace(-0.18, 0.18, 4)])
     dots = DotPattern(centers, 0.006)
     T = transform_from_rotvec([0.05, -0.05, 0], [0, 0, 0.6])
-    img = render_planar_target(cam, T, dots, background=255, black=0, white=255, supersample=2)
     truth = cam.project_points(np.column_stack([centers, np.zeros(len(centers))]), T)
-    w = 255.0 - img.astype(float)
     for u, v in truth:
         i0, j0 = int(round(v)) - 12, int(round(u)) - 12
-        patch = w[i0 : i0 + 25, j0 : j0 + 25]
+        # only the patch the centroid is taken from is drawn (its pixels are the full render's)
+        img = render_planar_target(cam, T, dots, background=255, black=0, white=255, supersample=2,
+                                   roi=(i0, i0 + 25, j0, j0 + 25))
+        patch = 255.0 - img[i0 : i0 + 25, j0 : j0 + 25].astype(float)
         jj, ii = np.meshgrid(np.arange(25) + j0, np.arange(25) + i0)
         cu, cv = (patch * jj).sum() / patch.sum(), (patch * ii).sum() / patch.sum()
         # distortion/perspective shift a disc's centroid by ~1e-3 px at this size
@@ -250,9 +251,6 @@ def test_fisheye_render_puts_dots_where_project_says():
     radius = 0.008
     dots = DotPattern(centers, radius)
     T = transform_from_rotvec([0.05, -0.05, 0], [0, 0, 0.3])
-    # 8x8 samples per pixel: at 2x2 the area sampling of a disc squeezed 2:1 shifts its centroid by 0.024 px
-    img = render_planar_target(cam, T, dots, background=255, black=0, white=255, supersample=8)
-    w = 255.0 - img.astype(float)
 
     def image_of(p2):  # plane points (..., 2) -> pixels
         return cam.project(np.concatenate([p2, np.zeros(p2.shape[:-1] + (1,))], -1) @ T[:3, :3].T + T[:3, 3])
@@ -271,8 +269,36 @@ def test_fisheye_render_puts_dots_where_project_says():
         area = np.abs(ju[:, 0] * jv[:, 1] - ju[:, 1] * jv[:, 0])
         u, v = (q * area[:, None]).sum(0) / area.sum()
         i0, j0 = int(round(v)) - 12, int(round(u)) - 12
-        patch = w[i0 : i0 + 25, j0 : j0 + 25]
+        # 8x8 samples per pixel: at 2x2 the area sampling of a disc squeezed 2:1 shifts its centroid by
+        # 0.024 px. Only the 25x25 patch the centroid is taken from is drawn (roi): its pixels are those of
+        # the whole image's render (test_roi_draws_exactly_the_full_renders_pixels), at 1/200 of the samples
+        img = render_planar_target(cam, T, dots, background=255, black=0, white=255, supersample=8,
+                                   roi=(i0, i0 + 25, j0, j0 + 25))
+        patch = 255.0 - img[i0 : i0 + 25, j0 : j0 + 25].astype(float)
         jj, ii = np.meshgrid(np.arange(25) + j0, np.arange(25) + i0)
         cu, cv = (patch * jj).sum() / patch.sum(), (patch * ii).sum() / patch.sum()
         # measured 7.8e-3 px at worst (8x8 area sampling of the squeezed disc, grey levels rounded to integers)
         assert np.hypot(cu - u, cv - v) < 0.015, (c, cu - u, cv - v)
+
+
+@pytest.mark.parametrize("fisheye", [False, True])
+def test_roi_draws_exactly_the_full_renders_pixels(fisheye):
+    from robocal.camera import FisheyeCamera
+
+    cam = (FisheyeCamera(130.0, 129.5, 160.5, 120.5, [0.05, -0.01, 0.003, -0.001], 320, 240) if fisheye
+           else CameraModel(300, 302.5, 160.6, 119.4, (-0.28, 0.11, 8e-4, -6e-4, -0.02), 320, 240))
+    T = transform_from_rotvec([0.3, -0.2, 0.1], [0.01, -0.02, 0.35])
+    board = Checkerboard(5, 6, 0.03)
+    full = render_planar_target(cam, T, board, supersample=2, background=77)
+    # a region cutting through the board, one reaching past the image's edge, one off the board
+    for roi in [(60, 130, 90, 170), (-10, 50, 250, 400), (0, 5, 0, 5)]:
+        part = render_planar_target(cam, T, board, supersample=2, background=77, roi=roi)
+        r0, r1, c0, c1 = max(roi[0], 0), min(roi[1], 240), max(roi[2], 0), min(roi[3], 320)
+        # pixel for pixel, not to a tolerance: each pixel is computed from its own samples only
+        np.testing.assert_array_equal(part[r0:r1, c0:c1], full[r0:r1, c0:c1])
+        outside = np.ones(full.shape, bool)
+        outside[r0:r1, c0:c1] = False
+        assert np.all(part[outside] == 77)
+    assert np.any(full[60:130, 90:170] != 77)  # the first region does hold board pixels
+    with pytest.raises(InputError, match="roi must be whole pixel bounds"):
+        render_planar_target(cam, T, board, roi=(10, 5, 0, 5))
