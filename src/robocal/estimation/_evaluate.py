@@ -125,10 +125,11 @@ class Evaluator:
 
         x0 = layout.x0_full[layout.free_full]
         params = layout.split(layout.full_from_free(x0))
-        infos, sigmas, self._cols = [], [], []
+        infos, sigmas, self._cols, f0 = [], [], [], []
         row = obs = 0
         for t in terms:
             r = self._term_residuals(t, params, None)
+            f0.append(r.reshape(-1))
             n_obs, dim = r.shape
             info = TermInfo(t.name, row, r.size, dim, n_obs, obs)
             infos.append(info)
@@ -142,6 +143,9 @@ class Evaluator:
         self.m = row
         self.n_obs = obs
         self.sigma = np.concatenate(sigmas)
+        #: weighted residuals at the initial values (evaluated here to learn their shape): the solver's first
+        #: evaluation, so :func:`~robocal.estimation.solve` does not repeat it
+        self.f0 = np.concatenate(f0) / self.sigma
         self.n = len(layout.free_full)
         structured = any(t.blocks is not None or t.jac_sparsity is not None for t in terms)
         # a single dense term needs no structure (and building an all-ones

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 from scipy import special
-from scipy.optimize import least_squares
+from scipy.optimize import least_squares, leastsq
 
 from robocal.diagnostics import Diagnostic
 from robocal.errors import InputError, NotEnoughDataError, RobocalError
@@ -103,14 +103,19 @@ class _Stop(Exception):
 
 
 class _Tracker:
-    """Wraps the residual and Jacobian functions given to ``least_squares``.
+    """Wraps the residual and Jacobian functions given to the solver.
 
     Every method asks for the Jacobian exactly once per accepted iterate (the
     start point and after each successful step) and always at a point whose
     residuals it has just evaluated. So the cost at each accepted iterate is
     read from the cache of recent residual evaluations when the Jacobian is
     requested; trial points that the solver rejects never reach the Jacobian
-    and never enter the history.
+    and never enter the history. A second request at the point of the last
+    Jacobian (SciPy's wrappers probe the start point before MINPACK does, and
+    ask again at MINPACK's last point) returns that Jacobian: no evaluation,
+    no second history entry. Residuals asked for again at a point in the cache
+    (the start point, evaluated when the problem was compiled) are not
+    evaluated again either.
     """
 
     def __init__(self, ev, loss, f_scale, callback, bar):
@@ -119,26 +124,40 @@ class _Tracker:
         self.cache: list[tuple[bytes, np.ndarray]] = []
         self.history: list[float] = []
         self.last_x = self.last_f = self.last_J = None
+        self.last_key = None
 
-    def lookup(self, x):
+    def seed(self, x, f):
+        """Residuals ``f`` already evaluated at ``x`` (counted as the solver's evaluation there)."""
+        self.cache.append((np.ascontiguousarray(x, dtype=float).tobytes(), f))
+        self.ev.n_fun += 1
+
+    def lookup(self, x, key=None):
         # keyed by the bytes of x: np.array_equal over the cache cost more than a small problem's residuals
-        key = np.ascontiguousarray(x, dtype=float).tobytes()
+        if key is None:
+            key = np.ascontiguousarray(x, dtype=float).tobytes()
         for kk, f in reversed(self.cache):
             if kk == key:
                 return f
         return None
 
     def fun(self, x):
-        f = self.ev.weighted(x)
-        self.cache = self.cache[-3:] + [(np.ascontiguousarray(x, dtype=float).tobytes(), f)]
+        key = np.ascontiguousarray(x, dtype=float).tobytes()
+        f = self.lookup(x, key)
+        if f is None:
+            f = self.ev.weighted(x)
+            self.cache = self.cache[-3:] + [(key, f)]
         # a copy: SciPy 1.11/1.12 scale the returned residuals in place for a robust loss, which
         # corrupted the cached ones (robust residual variance off by 1e12 at the lowest pins)
         return f.copy()
 
     def jac(self, x, *args, **kwargs):
-        f = self.lookup(x)
+        key = np.ascontiguousarray(x, dtype=float).tobytes()
+        if self.last_J is not None and key == self.last_key:
+            return self.last_J.copy()
+        f = self.lookup(x, key)
         if f is None:
-            f = self.fun(x)
+            self.fun(x)
+            f = self.lookup(x, key)
         cost = robust_cost(f, self.loss, self.f_scale)
         self.history.append(cost)
         self.last_x, self.last_f, self.last_J = np.array(x, copy=True), f, None
@@ -150,6 +169,7 @@ class _Tracker:
             if self.callback(info) is True:
                 raise _Stop
         self.last_J = self.ev.jacobian(x, f0=f)
+        self.last_key = key
         return self.last_J.copy()  # SciPy 1.11/1.12 scale it in place too (see fun)
 
 
@@ -183,6 +203,53 @@ def _clipped_variance(q, dims, m, rank, n_sigma, max_iter=20) -> float:
         if s2 <= 0:
             return 0.0
     return s2
+
+
+#: MINPACK's ``info`` -> ``least_squares``'s status, and its messages (scipy.optimize._lsq.least_squares's
+#: FROM_MINPACK_TO_COMMON and TERMINATION_MESSAGES, the same since SciPy 0.17): the direct MINPACK path
+#: reports what ``least_squares(method='lm')`` would.
+_FROM_MINPACK = {0: -1, 1: 2, 2: 3, 3: 4, 4: 1, 5: 0}
+_LSQ_MESSAGES = {
+    -1: "Improper input parameters status returned from `leastsq`",
+    0: "The maximum number of function evaluations is exceeded.",
+    1: "`gtol` termination condition is satisfied.",
+    2: "`ftol` termination condition is satisfied.",
+    3: "`xtol` termination condition is satisfied.",
+    4: "Both `ftol` and `xtol` termination conditions are satisfied.",
+}
+_EPS = np.finfo(float).eps
+
+
+def _minpack_diag(x_scale, n: int, ftol, xtol, gtol, verbose):
+    """MINPACK's ``diag`` for ``x_scale`` (None for ``'jac'``), or False when ``least_squares`` must take the
+    call: verbose output, a tolerance below machine epsilon, an invalid ``x_scale`` (it words the warnings
+    and errors)."""
+    if verbose or min(ftol, xtol, gtol) < _EPS:
+        return False
+    if isinstance(x_scale, str):
+        return None if x_scale == "jac" else False
+    try:
+        xs = np.asarray(x_scale, dtype=float)
+    except (TypeError, ValueError):
+        return False
+    if xs.ndim > 1 or (xs.ndim == 1 and xs.shape != (n,)) or not np.all(np.isfinite(xs) & (xs > 0)):
+        return False
+    return 1.0 / np.broadcast_to(xs, (n,))
+
+
+def _minpack_lm(tr, x0, diag, ftol, xtol, gtol, max_nfev):
+    """Levenberg-Marquardt by MINPACK's ``lmder`` through :func:`scipy.optimize.leastsq`.
+
+    The very call ``least_squares(method='lm')`` makes (same tolerances, step bound factor 100, ``diag =
+    1 / x_scale`` or column norms for ``'jac'``, budget ``100 n``), so the same iterates and answer, without
+    its wrappers: since SciPy 1.15 it builds a ``VectorFunction``, evaluates the residuals and the Jacobian
+    at the start point before MINPACK does and once more at the end, ~1 ms of a 90 x 12 problem's ~1.5 ms
+    (issue 16). ``leastsq`` probes the start point once (served from :class:`_Tracker`'s caches).
+    """
+    x, _, _, _, ier = leastsq(tr.fun, x0, Dfun=tr.jac, full_output=True, ftol=ftol, xtol=xtol, gtol=gtol,
+                              maxfev=int(max_nfev), factor=100.0, diag=diag)
+    status = _FROM_MINPACK.get(int(ier), -1)   # 6-8 (tolerances below epsilon) cannot occur: see _minpack_diag
+    return x, status, _LSQ_MESSAGES[status]
 
 
 def _check_options(method, loss, f_scale, outlier_sigma, rank_tol):
@@ -326,12 +393,21 @@ def solve(
 
         bar = tqdm(desc="least squares", unit="it", leave=False, disable=None)  # None: off when stderr is no terminal
     tr = _Tracker(ev, loss, f_scale, callback, bar)
+    x0 = lay.x0_full[lay.free_full]
+    tr.seed(x0, ev.f0)
+    # 'lm' goes to MINPACK directly (the call least_squares makes, without its wrappers: see _minpack_lm)
+    diag = _minpack_diag(x_scale, n, ftol, xtol, gtol, verbose) if method == "lm" and (
+        max_nfev is None or max_nfev > 0) else False
     status, message, x = None, None, None
     try:
-        res = least_squares(tr.fun, lay.x0_full[lay.free_full], jac=tr.jac, method=method, loss=loss,
-                            f_scale=f_scale, x_scale=x_scale, bounds=(lay.lower, lay.upper), ftol=ftol,
-                            xtol=xtol, gtol=gtol, max_nfev=max_nfev, verbose=verbose)
-        x, status, message = res.x, int(res.status), str(res.message)
+        if diag is not False:
+            x, status, message = _minpack_lm(tr, x0, diag, ftol, xtol, gtol, 100 * n if max_nfev is None
+                                             else max_nfev)
+        else:
+            res = least_squares(tr.fun, x0, jac=tr.jac, method=method, loss=loss, f_scale=f_scale,
+                                x_scale=x_scale, bounds=(lay.lower, lay.upper), ftol=ftol, xtol=xtol, gtol=gtol,
+                                max_nfev=max_nfev, verbose=verbose)
+            x, status, message = res.x, int(res.status), str(res.message)
     except _Stop:
         x, status, message = tr.last_x, -2, STATUS_MESSAGES[-2]
     except RobocalError:
