@@ -32,7 +32,7 @@ def test_extension_is_built_where_a_compiler_is_present():
     if not _compiler_and_headers():
         pytest.skip("no C compiler or Python headers: the install skips the extension (the numba kernel runs)")
     assert K._flowc() is not None, "a C compiler and Python.h are present, but robocal.rigs.flow._flowc was not built"
-    assert K._flowc().SIMD in ("sse2", "portable")
+    assert K._flowc().SIMD in ("avx2", "sse2", "portable")
 
 
 @pytest.fixture(scope="module")
@@ -125,3 +125,32 @@ def test_odometry_command_imports_neither_numba_nor_scipy(tmp_path):
     assert r.stdout.strip().splitlines()[-1] == "[]"
     summary = json.loads((out / "result.json").read_text())["diagnostics"]["summary"]
     assert summary["flow_kernel"] == f"c ({K._flowc().SIMD})"
+
+
+def test_the_portable_c_path_gives_the_same_flow(tmp_path, pairs):
+    """The plain C path (no SSE2: ARM, or any CPU the intrinsics do not cover) is what machines other than
+    x86 build; compiled here with -DFLOWC_PORTABLE and compared with the numba kernel, bit for bit."""
+    import importlib.machinery
+    import importlib.util
+
+    if not _compiler_and_headers():
+        pytest.skip("no C compiler or Python headers")
+    cc = (os.environ.get("CC") or sysconfig.get_config_var("CC") or "cc").split()
+    src = Path(K.__file__).with_name("flowc.c")
+    so = tmp_path / ("_flowc" + importlib.machinery.EXTENSION_SUFFIXES[0])
+    subprocess.run([*cc, "-O2", "-shared", "-fPIC", "-DFLOWC_PORTABLE", f"-I{sysconfig.get_paths()['include']}",
+                    "-o", str(so), str(src), "-lm"], check=True, capture_output=True)
+    spec = importlib.util.spec_from_file_location("_flowc", so)
+    portable = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(portable)
+    assert portable.SIMD == "portable"
+    prev, curr = pairs
+    ref = _run("numba", prev, curr, FlowConfig())
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(K, "_FLOWC", portable)
+        mp.delenv(K.KERNEL_ENV, raising=False)
+        assert K.kernel_name() == "c (portable)"
+        bm, ff = match_blocks(prev, curr), compute_flow(prev, curr)
+    for field in ("flow", "status", "sad_min", "distinctness", "texture"):
+        assert np.array_equal(getattr(bm, field), getattr(ref[0], field), equal_nan=True), field
+    assert np.array_equal(ff.flow_px, ref[1].flow_px, equal_nan=True)

@@ -9,8 +9,8 @@
  * in the same order, without contraction into fused multiply-adds: numba does not contract either).
  *
  * Frames stay in their natural layout (N, W, W) uint8, row-major: no transpose. An 8x8 block's SAD at
- * one offset is 4 SSE2 psadbw on two-row registers where SSE2 is present (x86-64 always), a plain C
- * loop elsewhere. The Python side (kernel.py) checks shapes and dtypes; the functions here check that
+ * one offset is 4 SSE2 psadbw on two-row registers where SSE2 is present (x86-64 always; compiled for
+ * AVX2 as well where GCC can dispatch at load time), a plain C loop elsewhere. The Python side (kernel.py) checks shapes and dtypes; the functions here check that
  * every buffer is large enough for what they read or write, and release the GIL while they compute.
  */
 #define PY_SSIZE_T_CLEAN
@@ -26,13 +26,26 @@
 #pragma GCC optimize("fp-contract=off")
 #endif
 
-#if defined(__SSE2__) || defined(_M_X64) || (defined(_M_IX86_FP) && _M_IX86_FP >= 2)
+/* -DFLOWC_PORTABLE: the plain C path on x86 too (tests/rigs/flow/test_flow_kernel_c.py builds it so) */
+#if !defined(FLOWC_PORTABLE) && (defined(__SSE2__) || defined(_M_X64) || (defined(_M_IX86_FP) && _M_IX86_FP >= 2))
 #include <emmintrin.h>
 #define FLOWC_SSE2 1
 #define FLOWC_SIMD "sse2"
 #else
 #define FLOWC_SSE2 0
 #define FLOWC_SIMD "portable"
+#endif
+
+/* GCC on x86-64 Linux: the pair loop is also compiled for AVX2 (3-operand VEX forms, no register copies;
+ * 1.3-1.8x on this kernel) and the loader picks the copy the CPU runs (an ifunc), so the built module stays
+ * portable to any x86-64. AVX2 brings no FMA: the arithmetic, and so the flow, is the same. */
+#if FLOWC_SSE2 && defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__) \
+    && defined(__GLIBC__)
+#define FLOWC_CLONES __attribute__((target_clones("avx2", "default")))
+#define FLOWC_INLINE static inline __attribute__((always_inline))   /* into each clone, compiled for its ISA */
+#else
+#define FLOWC_CLONES
+#define FLOWC_INLINE static inline
 #endif
 
 #define MAX_SEARCH 15                 /* FlowConfig allows search <= 15 */
@@ -47,7 +60,7 @@ typedef struct {
 
 /* ---- SAD of one block at every integer offset (eq. 1) ------------------------------------------ */
 
-static void sad_generic(const uint8_t *P, const uint8_t *C, const params_t *p, int y0, int x0, uint32_t *sads) {
+FLOWC_INLINE void sad_generic(const uint8_t *P, const uint8_t *C, const params_t *p, int y0, int x0, uint32_t *sads) {
     int W = p->window, B = p->block, S = p->search, o = 0;
     for (int dy = -S; dy <= S; dy++)
         for (int dx = -S; dx <= S; dx++, o++) {
@@ -66,8 +79,8 @@ static void sad_generic(const uint8_t *P, const uint8_t *C, const params_t *p, i
 /* 8x8 blocks: for each horizontal offset the 2S + 8 rows of the search window are loaded once and
  * paired into two-row registers (rows i, i + 1); the block's SAD at vertical offset dy is then 4
  * psadbw of its two-row registers against pairs dy + S, dy + S + 2, ... (no reload per offset). */
-static void sad8_sse2(const uint8_t *P, const uint8_t *C, const params_t *p, int y0, int x0, uint32_t *sads) {
-    int W = p->window, S = p->search, side = 2 * S + 1, nrow = 2 * S + 8;
+FLOWC_INLINE void sad8_sse2(const uint8_t *P, const uint8_t *C, int W, int S, int y0, int x0, uint32_t *sads) {
+    int side = 2 * S + 1, nrow = 2 * S + 8;
     __m128i ref[4], rows[2 * MAX_SEARCH + 8], pairs[2 * MAX_SEARCH + 7];
     for (int r = 0; r < 4; r++)
         ref[r] = _mm_unpacklo_epi64(_mm_loadl_epi64((const __m128i *)(P + (size_t)(y0 + 2 * r) * W + x0)),
@@ -90,7 +103,7 @@ static void sad8_sse2(const uint8_t *P, const uint8_t *C, const params_t *p, int
 
 /* ---- bilinear sub-pixel SAD (eq. 2) and the 8-neighbour step, as kernel_compiled._sad_frac ------ */
 
-static double sad_frac(const uint8_t *P, const uint8_t *C, int W, int y0, int x0, int B, int iy, int ix,
+FLOWC_INLINE double sad_frac(const uint8_t *P, const uint8_t *C, int W, int y0, int x0, int B, int iy, int ix,
                        int qy, int qx, int scale) {
     int64_t wa = (scale - qx) * (scale - qy), wb = qx * (scale - qy), wc = (scale - qx) * qy, wd = qx * qy;
     int64_t s2 = scale * scale, acc = 0;
@@ -127,7 +140,7 @@ static void refine_step(const uint8_t *P, const uint8_t *C, int W, int y0, int x
     *by = nby;
 }
 
-static double interp3(double sm, double s0, double sp, int mode) {
+FLOWC_INLINE double interp3(double sm, double s0, double sp, int mode) {
     double den, d;
     if (mode == 3) {
         den = sm - 2.0 * s0 + sp;
@@ -140,9 +153,11 @@ static double interp3(double sm, double s0, double sp, int mode) {
 
 /* ---- one frame pair: every block's gate, SAD surface, tests and sub-pixel flow ----------------- */
 
-static void match_pair(const uint8_t *P, const uint8_t *C, const params_t *p, double *flow, int8_t *status,
-                       double *sadmin, double *distinct, double *texture) {
-    int W = p->window, B = p->block, S = p->search, side = 2 * S + 1, no = side * side;
+/* B and S are arguments (not read from p) so that the call with the defaults' constants (8, 4) below is
+ * compiled as a specialised copy: the search window's loops unrolled, its registers not spilled */
+FLOWC_INLINE void match_pair_bs(const uint8_t *P, const uint8_t *C, const params_t *p, const int B, const int S,
+                                 double *flow, int8_t *status, double *sadmin, double *distinct, double *texture) {
+    int W = p->window, side = 2 * S + 1, no = side * side;
     int q0 = B / 4, qn = B / 2;
     /* the numba kernels' "big" (masked / missing) value: the SAD array's dtype maximum, stored as int32 */
     uint32_t big = B == 8 ? 65535u : 4294967295u;
@@ -151,7 +166,7 @@ static void match_pair(const uint8_t *P, const uint8_t *C, const params_t *p, do
         int y0 = (int)p->ys[b], x0 = (int)p->xs[b];
 #if FLOWC_SSE2
         if (B == 8)
-            sad8_sse2(P, C, p, y0, x0, sads);
+            sad8_sse2(P, C, W, S, y0, x0, sads);
         else
 #endif
             sad_generic(P, C, p, y0, x0, sads);
@@ -210,6 +225,20 @@ static void match_pair(const uint8_t *P, const uint8_t *C, const params_t *p, do
     }
 }
 
+FLOWC_CLONES
+static void match_pairs(const uint8_t *prev, const uint8_t *curr, Py_ssize_t n, const params_t *p, double *flow,
+                        int8_t *status, double *sadmin, double *distinct, double *texture) {
+    Py_ssize_t ww = (Py_ssize_t)p->window * p->window, nb = p->nb;
+    for (Py_ssize_t k = 0; k < n; k++) {
+        if (p->block == 8 && p->search == 4)      /* PX4FLOW's 8x8 blocks, +/-4 px: the default */
+            match_pair_bs(prev + k * ww, curr + k * ww, p, 8, 4, flow + k * nb * 2, status + k * nb,
+                          sadmin + k * nb, distinct + k * nb, texture + k * nb);
+        else
+            match_pair_bs(prev + k * ww, curr + k * ww, p, p->block, p->search, flow + k * nb * 2, status + k * nb,
+                          sadmin + k * nb, distinct + k * nb, texture + k * nb);
+    }
+}
+
 static int need(Py_buffer *b, Py_ssize_t nbytes, const char *name) {
     if (b->len < nbytes) {
         PyErr_Format(PyExc_ValueError, "_flowc: %s holds %zd bytes, expected at least %zd", name, b->len, nbytes);
@@ -255,10 +284,8 @@ static PyObject *flowc_match(PyObject *self, PyObject *args) {
         }
     }
     Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t k = 0; k < n; k++)
-        match_pair((const uint8_t *)prev.buf + (p0 + k) * ww, (const uint8_t *)curr.buf + (c0 + k) * ww, &p,
-                   (double *)flow.buf + k * nb * 2, (int8_t *)status.buf + k * nb, (double *)sadmin.buf + k * nb,
-                   (double *)distinct.buf + k * nb, (double *)texture.buf + k * nb);
+    match_pairs((const uint8_t *)prev.buf + p0 * ww, (const uint8_t *)curr.buf + c0 * ww, n, &p, (double *)flow.buf,
+                (int8_t *)status.buf, (double *)sadmin.buf, (double *)distinct.buf, (double *)texture.buf);
     Py_END_ALLOW_THREADS
     ret = Py_None;
     Py_INCREF(ret);
@@ -391,7 +418,13 @@ static struct PyModuleDef module = {
 
 PyMODINIT_FUNC PyInit__flowc(void) {
     PyObject *m = PyModule_Create(&module);
-    if (m != NULL && PyModule_AddStringConstant(m, "SIMD", FLOWC_SIMD) < 0) {
+    const char *simd = FLOWC_SIMD;
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__) && defined(__GLIBC__) \
+    && FLOWC_SSE2
+    __builtin_cpu_init();
+    if (__builtin_cpu_supports("avx2")) simd = "avx2";    /* the clone the loader chose */
+#endif
+    if (m != NULL && PyModule_AddStringConstant(m, "SIMD", simd) < 0) {
         Py_DECREF(m);
         return NULL;
     }

@@ -82,7 +82,8 @@ _FLOWC = False      # not yet looked for
 
 def kernel_backend() -> str:
     """Which block matcher :func:`compute_flow` and :func:`match_blocks` run: ``"c"`` (the C extension
-    ``_flowc``: SSE2 ``psadbw`` on x86, plain C elsewhere, no numba import) or ``"numba"`` (the numba
+    ``_flowc``: SSE2 ``psadbw`` on x86, with an AVX2 copy where GCC builds one; plain C elsewhere; no numba
+    import) or ``"numba"`` (the numba
     kernel of :mod:`.kernel_compiled`, when the extension was not built or ``ROBOCAL_FLOW_KERNEL=numba``).
 
     Both give bit-identical block flows, statuses and frame flows (integer SADs; the same double-precision
@@ -103,8 +104,9 @@ def kernel_backend() -> str:
 
 
 def kernel_name() -> str:
-    """:func:`kernel_backend` as a run records it: ``"c (sse2)"``, ``"c (portable)"`` (the C kernel without
-    SIMD intrinsics: not x86) or ``"numba"``."""
+    """:func:`kernel_backend` as a run records it: ``"c (avx2)"`` (x86-64 with AVX2: the loader picked the
+    kernel's AVX2 copy), ``"c (sse2)"``, ``"c (portable)"`` (the C kernel without SIMD intrinsics: not x86)
+    or ``"numba"``."""
     return f"c ({_flowc().SIMD})" if kernel_backend() == "c" else "numba"
 
 
