@@ -1,4 +1,4 @@
-"""``robocal <rig> simulate --fleet N`` -> ``robocal batch <rig> fleet.yaml`` on three real rigs.
+"""``robocal <rig> simulate --fleet N`` -> ``robocal batch <rig> fleet.yaml`` on six real rigs.
 
 The fleet report names exactly the planted robots: the faults as mechanical
 standouts, the weak recording as weak, no one else. Each rig's fleet is
@@ -15,11 +15,17 @@ from robocal.cli.main import main
 
 # per rig: the simulate options of a small, quick fleet and the seed. The humanoid's fleet is scattered by
 # --offset-scale 0.2 deg (a fleet after a factory calibration): at simulate's 0.5 deg a 4 deg slip is ~8
-# spreads, under the ~9 a report on 10 robots x 21 parameters asks for at 1 % false alarms
+# spreads, under the ~9 a report on 10 robots x 21 parameters asks for at 1 % false alarms. The mirror's
+# calibration is far less certain than its mounts' tolerances: at simulate's 0.5 px a 5 deg knock is ~5 x the
+# ~1 deg noise of 4 placements; at 0.1 px the report's t was 8.7-26 (bar 6.6) in 10 of 10 seeded fleets
+# (rigs/mirror/fleet.py). The camera's session: 6 views at 480 x 360 px
 FLEETS = {
     "projector": (["--points", "30"], 1),
     "lineprofiler": (["--poses", "8"], 1),
     "humanoid": (["--views", "3", "--offset-scale", "0.2"], 1),
+    "mirror": (["--placements", "4", "--sigma", "0.1"], 1),
+    "camera": (["--views", "6", "--width", "480", "--height", "360"], 1),
+    "handeye": ([], 1),
 }
 
 
@@ -48,8 +54,9 @@ def test_the_report_names_the_planted_robots_and_no_one_else(fleet):
     # nobody else: a weak recording may stray by its own noise (then it is called noise), a good robot not at all
     assert {s["id"] for s in report["standouts"]} <= faults | weak
     fault = truth["faults"][0]
-    if rig != "lineprofiler":  # the hand-eye fault turns X about a frame-E axis: a mix of rotvec components
-        assert any(s["parameter"] == fault["parameter"] for s in report["standouts"] if s["id"] == fault["id"])
+    # a planted turn (a knocked camera or profiler) moves a mix of the rotation vector's components: any of them
+    assert any(s["parameter"] == fault["parameter"] or s["parameter"].startswith(fault["parameter"] + ".")
+               for s in report["standouts"] if s["id"] == fault["id"]), (fault, report["standouts"])
     html = (cal / "fleet.html").read_text()
     assert f"{fault['id']}: " in html and "a mechanical cause, not noise" in html
     # the manifest is the batch's: its ids are the robots' folders, every one calibrated

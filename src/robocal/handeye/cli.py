@@ -85,6 +85,7 @@ HANDEYE = Workflow(
     to_result=f"{_HE}:to_result",
     build_report="robocal.handeye.report:build_report",
     summary=f"{_HE}:summary",
+    fleet="robocal.handeye.fleet:fleet_member",
     simulate_help="write two simulated pose lists (gripper, target) and their truth",
     simulate_options=(
         Option("--poses", type=number_at_least(int, 3, why="AX = XB needs 2 motions, i.e. 3 poses or more"),

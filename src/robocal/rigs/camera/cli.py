@@ -42,6 +42,7 @@ RIG = Workflow(
     write_outputs=f"{_WF}:write_outputs",
     summary=f"{_WF}:summary",
     demo=f"{_WF}:demo",
+    fleet="robocal.rigs.camera.fleet:fleet_member",
     simulate_help="render images of a target seen by a known camera (blur, noise, vignetting), with the truth",
     simulate_description=(
         "Writes images/view_NNN.png, target.yaml, camera_truth.yaml (the true camera, OpenCV format) and the\n"

@@ -118,7 +118,7 @@ class SimulatedSession:
 def simulate_session(out_dir, rng: np.random.Generator, *, views: int = 12, target: str = "chessboard",
                      width: int = 640, height: int = 480, blur: float = 0.7, noise: float = 2.0,
                      vignetting: float = 0.3, defects: bool = False, image_format: str = "png",
-                     lens: str = "pinhole", progress: bool = False) -> SimulatedSession:
+                     lens: str = "pinhole", camera=None, progress: bool = False) -> SimulatedSession:
     """Render ``views`` images of a target with the known :func:`default_camera`; write the session.
 
     Parameters
@@ -143,6 +143,10 @@ def simulate_session(out_dir, rng: np.random.Generator, *, views: int = 12, targ
     image_format : {"png", "jpg"}
         Lossless PNG, or JPEG of quality 90 (a quarter of the size; its
         compression adds ~0.005 px to the corner noise; the shipped examples).
+    camera : CameraModel or FisheyeCamera, optional
+        The camera to render with instead of ``lens``'s default (a robot of a
+        simulated fleet, :mod:`robocal.rigs.camera.fleet`); its size wins over
+        ``width`` / ``height``.
     """
     import cv2
     import yaml
@@ -164,7 +168,8 @@ def simulate_session(out_dir, rng: np.random.Generator, *, views: int = 12, targ
     out_dir = Path(out_dir)
     if lens not in LENSES:
         raise InputError(f"lens: must be one of {', '.join(LENSES)}, got {lens!r}")
-    cam = (default_camera if lens == "pinhole" else default_fisheye)(int(width), int(height))
+    cam = camera if camera is not None else (default_camera if lens == "pinhole" else default_fisheye)(
+        int(width), int(height))
     tgt = default_target(target)
     # distances scale with the focal length, so that the target looks the same in pixels at any image size
     scale = cam.fx / default_camera().fx

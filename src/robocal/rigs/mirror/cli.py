@@ -38,6 +38,7 @@ RIG = Workflow(
     build_report="robocal.rigs.mirror.report:build_report",
     summary=f"{_WF}:summary",
     demo=f"{_WF}:demo",
+    fleet="robocal.rigs.mirror.fleet:fleet_member",
     simulate_help="write simulated mirror observations of the patent's example (with ground truth)",
     simulate_description="The default scene reproduces the patent's published T_cm, T_cri and T_rc and distortion; "
                          "see docs/rigs/mirror.md for what had to be assumed.",
