@@ -2,7 +2,8 @@
 (one core) side by side with OpenCV's pyramidal Lucas-Kanade and a hand-written C ``psadbw``
 kernel with the same sub-pixel fit and gates (``bench_flow_psadbw.py``, compiled here when a C
 compiler is present) on the same frames, and the log-processing rate relative to real time for 3
-sensors at 400 Hz.
+sensors at 400 Hz. ``compute_flow`` runs the rig's C extension where it was built (the default) and,
+in the C-peer table, the numba fallback too (``ROBOCAL_FLOW_KERNEL``).
 
     python bench/bench_flow.py            # prints a Markdown table (about 1 min)
     python bench/bench_flow.py --command [DIR]  # what a user runs: 'robocal flow odometry' on a
@@ -158,12 +159,15 @@ def c_peer(prev, curr, sad_lanes, seq=None):
         if not (np.array_equal(np.isnan(ours), np.isnan(theirs)) and np.nanmax(np.abs(ours - theirs)) == 0):
             raise SystemExit("the C peer's flow differs from compute_flow's: the comparison would not be like for like")
     best = np.empty((n, 25), np.int32)
+    kernels = ["numba"] + (["c"] if K._flowc() is not None else [])
     fns = {"c_sad": (lambda: P.c_sad_argmin(so, prev, curr, best), n), "sad": sad_lanes,
-           "c_flow": (lambda: P.c_flow(so, prev, curr), n),
-           "flow": (lambda: compute_flow(prev, curr), n)}
+           "c_flow": (lambda: P.c_flow(so, prev, curr), n)}
+    for b in kernels:
+        fns[f"flow_{b}"] = (lambda b=b: _on(b, compute_flow, prev, curr), n)
     if seq is not None:
         fns["c_seq"] = (lambda: P.c_flow(so, sp, sc), len(sp))
-        fns["seq"] = (lambda: compute_flow_sequence(seq), len(sp))
+        for b in kernels:
+            fns[f"seq_{b}"] = (lambda b=b: _on(b, compute_flow_sequence, seq), len(sp))
     # interleaved rounds, so that both see the same neighbours on a shared machine
     rates = dict.fromkeys(fns, 0.0)
     for _ in range(5):
@@ -180,14 +184,25 @@ def c_peer(prev, curr, sad_lanes, seq=None):
         f"{rates['sad'] / rates['c_sad']:.2f} |",
         f"| C: the whole default compute_flow (gate, SAD, fit, trimmed mean, spread gate), same pairs | "
         f"{rates['c_flow']:,.0f} | |",
-        f"| ours: compute_flow(prev, curr) | {rates['flow']:,.0f} | {rates['flow'] / rates['c_flow']:.2f} |",
     ]
+    name = {"c": "C extension _flowc, the default", "numba": "numba kernel, the fallback"}
+    lines += [f"| ours: compute_flow(prev, curr), {name[b]} | {rates[f'flow_{b}']:,.0f} | "
+              f"{rates[f'flow_{b}'] / rates['c_flow']:.2f} |" for b in kernels[::-1]]
     if seq is not None:
-        lines += [
-            f"| C: the same, on the {len(sp)} consecutive pairs of one sensor of a rendered drive | {rates['c_seq']:,.0f} | |",
-            f"| ours: compute_flow_sequence(frames) on them (a log's path: each frame transposed once) | "
-            f"{rates['seq']:,.0f} | {rates['seq'] / rates['c_seq']:.2f} |"]
+        lines.append(f"| C: the same, on the {len(sp)} consecutive pairs of one sensor of a rendered drive | "
+                     f"{rates['c_seq']:,.0f} | |")
+        lines += [f"| ours: compute_flow_sequence(frames) on them (a log's path), {name[b]} | {rates[f'seq_{b}']:,.0f} | "
+                  f"{rates[f'seq_{b}'] / rates['c_seq']:.2f} |" for b in kernels[::-1]]
     return "\n".join(lines)
+
+
+def _on(backend, fn, *args):
+    """``fn(*args)`` with the flow kernel ``backend`` (``ROBOCAL_FLOW_KERNEL``, read on every call)."""
+    os.environ[K.KERNEL_ENV] = backend
+    try:
+        return fn(*args)
+    finally:
+        del os.environ[K.KERNEL_ENV]
 
 
 def _child_cpu(argv, repeats=3, **kw):
@@ -260,10 +275,15 @@ def command(duration=30.0, folder=None):
              odo(base / "compressed", "--no-report"), duration),
             (f"robocal flow odometry with report.html, {duration:g} s log", odo(run), duration),
             ("robocal flow odometry --no-report, 0.1 s of the same log (the fixed cost)", odo(base / "short", "--no-report"), 0.1),
-            ("floor: python -c 'import numpy, numba, scipy.linalg' (numba imports scipy.linalg when it loads a kernel)",
-             [_sys.executable, "-c", "import numpy, numba, scipy.linalg"], None),
+            ("the same, numba kernel (ROBOCAL_FLOW_KERNEL=numba: an install without a C compiler)",
+             odo(base / "short", "--no-report"), 0.1),
+            ("floor: python -c 'import robocal.cli.main' (Python, NumPy, PyYAML, the CLI)",
+             [_sys.executable, "-c", "import robocal.cli.main"], None),
             ("python -c pass", [_sys.executable, "-c", "pass"], None)):
-        cpu, wall = _child_cpu(argv)
+        env = dict(os.environ, **({K.KERNEL_ENV: "numba"} if "numba kernel" in label else {}))
+        if "numba kernel" in label:
+            _child_cpu(argv, repeats=1, env=env)        # warm-up: numba's cache
+        cpu, wall = _child_cpu(argv, env=env)
         rows.append((label, cpu, wall, secs))
 
     # the library, in this process (imports and numba's cache already loaded)
@@ -286,7 +306,7 @@ def command(duration=30.0, folder=None):
 
     mem = min(_cpu_of(in_memory) for _ in range(3))
     print(f"{duration:g} s log, 3 sensors x 400 Hz, 64x64 frames ({(run / 'frames.npz').stat().st_size / 1e6:.0f} MB); "
-          "CPU s = user + sys, least of 3 runs after a warm-up\n")
+          f"CPU s = user + sys, least of 3 runs after a warm-up; flow kernel: {K.kernel_name()}\n")
     print("| what | CPU s | x real time | wall s (shared machine) |")
     print("|---|---:|---:|---:|")
     for label, cpu, wall, secs in rows:
@@ -295,8 +315,8 @@ def command(duration=30.0, folder=None):
           f"{lib:.2f} | {duration / lib:.0f}x | |")
     print(f"| library in memory (steps_from_frames -> dead_reckon), in-process | {mem:.2f} | {duration / mem:.0f}x | |")
     fixed = rows[3][1]
-    print(f"\nfixed cost per call: {fixed:.2f} s CPU (0.1 s log); of it the floor (Python, NumPy, numba, "
-          f"scipy.linalg): {rows[4][1]:.2f} s")
+    print(f"\nfixed cost per call: {fixed:.2f} s CPU (0.1 s log); of it the floor (Python, NumPy, PyYAML, the CLI): "
+          f"{rows[5][1]:.2f} s; with the numba kernel {rows[4][1]:.2f} s")
     if folder is None:
         shutil.rmtree(base, ignore_errors=True)
 
