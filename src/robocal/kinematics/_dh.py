@@ -30,8 +30,6 @@ from robocal.kinematics._common import (
     check_scalar,
     normalise_joint_type,
     optional_transform,
-    origin_screws,
-    screw_column,
     transform_from_xyz_rpy,
     xyz_rpy_from_transform,
 )
@@ -382,19 +380,6 @@ class DHChain:
                 ok &= (q[..., j] >= lim[0]) & (q[..., j] <= lim[1])
         return ok
 
-    def _link_matrices(self, q: np.ndarray):
-        """Yield ``A_i`` for every link; joint links batched over ``q.shape[:-1]``."""
-        j = 0
-        for lk in self._links:
-            theta, d = lk.theta, lk.d
-            if lk.joint == "revolute":
-                theta = theta + q[..., j]
-                j += 1
-            elif lk.joint == "prismatic":
-                d = d + q[..., j]
-                j += 1
-            yield _dh_matrices(lk.alpha, lk.a, theta, d, self._convention)
-
     def link_transform(self, index: int, q=0.0) -> np.ndarray:
         """``A_(index+1)``: the transform of link ``index`` (0-based), shape (..., 4, 4).
 
@@ -418,16 +403,15 @@ class DHChain:
         """All link frames ``T_world_i``, i = 0..n_links, shape (..., n_links + 1, 4, 4).
 
         Frame 0 is ``T_base``; frame ``i`` is ``T_base @ A_1 @ ... @ A_i``.
-        ``T_tool`` is not applied (``fk(q) == fk_all(q)[..., -1, :, :] @ T_tool``).
+        ``T_tool`` is not applied (``fk(q) == fk_all(q)[..., -1, :, :] @ T_tool``). Computed on column
+        arrays, each link's motion in closed form (:mod:`._dh_frames`), not as 4x4 stacks.
         """
+        from robocal.kinematics._dh_frames import frame_columns, stack_frames
+
         q = self.check_q(q)
-        batch = q.shape[:-1]
-        T = np.broadcast_to(self.T_base, batch + (4, 4))
-        frames = [T]
-        for A in self._link_matrices(q):
-            T = T @ A
-            frames.append(T)
-        return np.stack(np.broadcast_arrays(*frames), axis=-3)
+        n = int(np.prod(q.shape[:-1], dtype=np.int64))
+        frames = frame_columns(self, q.reshape(n, q.shape[-1]) if q.shape[-1] else None)
+        return stack_frames(frames, n).reshape(q.shape[:-1] + (self.n_links + 1, 4, 4))
 
     def fk(self, q) -> np.ndarray:
         """Tool pose ``T_world_tool`` (..., 4, 4) for joint values ``q`` (..., dof)."""
@@ -509,17 +493,30 @@ class DHChain:
             return [B[:, k:k + 1] for k in range(4)]
         return cols if K_end is None else _times_constant(cols, K_end[1], want)
 
-    def _frames_and_tip(self, q):
-        frames = self.fk_all(q)
-        tip = frames[..., -1, :, :] @ self.T_tool
-        return frames, tip[..., :3, 3]
+    def _screws(self, q, params: bool):
+        """Tool origin (3, N), the batch size N and the screws (frame columns, local direction, local point,
+        revolute) of the joints (``params=False``) or of :attr:`params` (:mod:`._dh_frames`)."""
+        from robocal.kinematics._dh_frames import frame_columns, origin_local_screws, tool_origin
 
-    def _link_screws(self, i: int, frames: np.ndarray):
-        """(frame, local axis, revolute) for alpha, a, theta, d of link i (0-based)."""
-        before, after = frames[..., i, :, :], frames[..., i + 1, :, :]
-        if self._convention == "modified":
-            return [(before, _EX, True), (before, _EX, False), (after, _EZ, True), (after, _EZ, False)]
-        return [(after, _EX, True), (after, _EX, False), (before, _EZ, True), (before, _EZ, False)]
+        q = self.check_q(q)
+        n = int(np.prod(q.shape[:-1], dtype=np.int64))
+        frames = frame_columns(self, q.reshape(n, q.shape[-1]) if q.shape[-1] else None)
+        zero, modified = np.zeros(3), self._convention == "modified"
+        screws = []
+        for i, lk in enumerate(self._links):
+            # modified: alpha, a about/along x of frame i-1, theta, d about/along z of frame i; standard: swapped
+            fx, fz = (frames[i], frames[i + 1]) if modified else (frames[i + 1], frames[i])
+            link = [(fx, _EX, zero, True), (fx, _EX, zero, False), (fz, _EZ, zero, True), (fz, _EZ, zero, False)]
+            if params:
+                screws += link
+            elif lk.joint != "fixed":
+                screws.append(link[2] if lk.joint == "revolute" else link[3])
+        if params and self._base_params:
+            base = [np.eye(4)[:3, k:k + 1] for k in range(4)]
+            screws += [(base, v, r, rev) for v, r, rev in origin_local_screws(self.T_base)]
+        if params and self._tool_params:
+            screws += [(frames[-1], v, r, rev) for v, r, rev in origin_local_screws(self.T_tool)]
+        return tool_origin(self, frames[-1]), n, q.shape[:-1], screws
 
     def jacobian(self, q) -> np.ndarray:
         """Geometric Jacobian of the tool origin in the world frame, shape (..., 6, dof).
@@ -527,13 +524,10 @@ class DHChain:
         Rows ``[v; w]``: ``v = d t_world_tool / dq``, ``w`` with
         ``dR_world_tool/dq_j @ R^T = [w_j]_x``, both in the world (base) frame.
         """
-        frames, p = self._frames_and_tip(q)
-        cols = []
-        for i in self._joint_links:
-            screws = self._link_screws(i, frames)
-            G, axis, rev = screws[2] if self._links[i].joint == "revolute" else screws[3]
-            cols.append(screw_column(G, axis, rev, p))
-        return np.stack(cols, axis=-1) if cols else np.zeros(p.shape[:-1] + (6, 0))
+        from robocal.kinematics._dh_frames import twist_columns
+
+        p, n, batch, screws = self._screws(q, params=False)
+        return twist_columns(screws, p, n).reshape(batch + (6, len(screws)))
 
     def param_jacobian(self, q) -> np.ndarray:
         """Derivative of the tool pose w.r.t. :attr:`params`, shape (..., 6, n_params).
@@ -542,17 +536,10 @@ class DHChain:
         ``T_world_tool`` (same convention as :meth:`jacobian`). Exact
         (analytic), for least-squares calibration of the table, base and tool.
         """
-        frames, p = self._frames_and_tip(q)
-        cols = []
-        for i in range(self.n_links):
-            cols += [screw_column(G, ax, rev, p) for G, ax, rev in self._link_screws(i, frames)]
-        if self._base_params:
-            G0 = np.broadcast_to(np.eye(4), frames.shape[:-3] + (4, 4))
-            cols += [screw_column(G, ax, rev, p) for G, ax, rev in origin_screws(G0, xyz_rpy_from_transform(self.T_base))]
-        if self._tool_params:
-            Gn = frames[..., -1, :, :]
-            cols += [screw_column(G, ax, rev, p) for G, ax, rev in origin_screws(Gn, xyz_rpy_from_transform(self.T_tool))]
-        return np.stack(cols, axis=-1)
+        from robocal.kinematics._dh_frames import twist_columns
+
+        p, n, batch, screws = self._screws(q, params=True)
+        return twist_columns(screws, p, n).reshape(batch + (6, len(screws)))
 
     # -- conversion -------------------------------------------------------------------------
     def to_tree(self, *, name: str = "dh_chain"):
