@@ -47,6 +47,12 @@ def fleet_member(out_dir, rng: np.random.Generator, *, kind: str | None = None, 
                  **_) -> dict:
     """One robot: ``mirror_input.yaml`` as ``simulate`` writes it (point form, with its truth); returns what was
     planted (``{}`` for a healthy robot; else ``parameter`` as the result names it, ``shift`` [deg], ``text``)."""
+    if images or markerless:
+        raise InputError("--fleet: simulates the point form only (mirror markers and body points); "
+                         "leave out --images and --markerless")
+    k, sigma = int(placements), float(sigma_px)
+    if k < 1 or not np.isfinite(sigma) or sigma < 0:
+        raise InputError(f"--placements >= 1 and --sigma >= 0, got {placements} and {sigma_px}")
     import yaml
 
     from robocal.geometry import invert_transform, matrix_from_rotvec
@@ -56,12 +62,6 @@ def fleet_member(out_dir, rng: np.random.Generator, *, kind: str | None = None, 
     from robocal.rigs.mirror.simulate import _visible_placements, default_camera, simulate_observations
     from robocal.rigs.mirror.workflow import INPUT_NAME, _truth_block
 
-    if images or markerless:
-        raise InputError("--fleet: simulates the point form only (mirror markers and body points); "
-                         "leave out --images and --markerless")
-    k, sigma = int(placements), float(sigma_px)
-    if k < 1 or not np.isfinite(sigma) or sigma < 0:
-        raise InputError(f"--placements >= 1 and --sigma >= 0, got {placements} and {sigma_px}")
     published = published_scene()
     T_r_c = invert_transform(published.T_c_r)
     # the mount's tolerances, in the camera's own axes (right-multiplied) and the body's
