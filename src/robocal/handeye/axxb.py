@@ -32,7 +32,7 @@ def _quat_from_rotvec(v):
     return np.concatenate([np.cos(th / 2)[..., None], np.sin(th / 2)[..., None] * k], axis=-1)
 
 
-def _aligned_rotvecs(RA, RB):
+def _aligned_rotvecs(RA, RB, rotvecs=None):
     """Rotation vectors of A and B whose axes correspond (alpha_i ~ R_X beta_i).
 
     Near a half-turn the axis sign of a rotation vector is arbitrary, so A's
@@ -41,8 +41,11 @@ def _aligned_rotvecs(RA, RB):
     ``alpha . R0 beta < 0`` beta is replaced by the same rotation written as
     ``(theta - 2 pi) k``.
     """
-    alpha = log_so3(RA)                          # SciPy's log map costs more than the closed form here
-    beta = log_so3(RB)
+    if rotvecs is None:
+        alpha = log_so3(RA)                      # SciPy's log map costs more than the closed form here
+        beta = log_so3(RB)
+    else:
+        alpha, beta = rotvecs[0], rotvecs[1].copy()     # the caller's (the motion check's) log maps
     th = np.linalg.norm(beta, axis=-1)
     safe = th < 0.8 * np.pi
     use = safe if safe.sum() >= 2 else np.ones_like(safe)
@@ -126,9 +129,9 @@ def _translation(RA, tA, RB_tB_rot, Rx):
     return t
 
 
-def _daniilidis(A, B):
+def _daniilidis(A, B, rotvecs=None):
     """Daniilidis: dual quaternions, SVD of the 6M x 8 system, two-vector null-space combination."""
-    alpha, beta = _aligned_rotvecs(A[:, :3, :3], B[:, :3, :3])
+    alpha, beta = _aligned_rotvecs(A[:, :3, :3], B[:, :3, :3], rotvecs)
 
     def dual(T, rv):
         q = _quat_from_rotvec(rv)
@@ -214,14 +217,16 @@ def _solve_checked(A, B, m: str, *, min_rotation: float = MIN_ROTATION, min_axis
                    pairs=None, times=None) -> tuple[np.ndarray, MotionCheck]:
     """:func:`solve_ax_xb` on motions already known to be rigid (products of validated poses), ``m`` a
     checked method name: the excitation check and the closed form, without validating A and B again."""
+    # one log map of A and of B for the motion check and the closed form (issue 16)
+    rv = (log_so3(A[:, :3, :3]), log_so3(B[:, :3, :3]))
     chk = check_motions(A, B, min_rotation=min_rotation, min_axis_spread=min_axis_spread, pairs=pairs,
-                        times=times)
+                        times=times, _rotvecs=rv)
     if m == "daniilidis":
-        R, t = _daniilidis(A, B)
+        R, t = _daniilidis(A, B, rv)
     else:
         if m == "andreff":
             R = _rot_andreff(A[:, :3, :3], B[:, :3, :3])
         else:
-            R = _ROT[m](*_aligned_rotvecs(A[:, :3, :3], B[:, :3, :3]))
+            R = _ROT[m](*_aligned_rotvecs(A[:, :3, :3], B[:, :3, :3], rv))
         t = _translation(A[:, :3, :3], A[:, :3, 3], B[:, :3, 3], R)
     return transform_from(R, t), chk

@@ -124,12 +124,14 @@ def relative_motions(T_base_gripper, T_cam_target, *, pairs: str = "auto"):
     return _motions(Tg, Tc, *pair_indices(Tg, pairs))
 
 
-def _axes_angles(R: np.ndarray):
+def _axes_angles(R: np.ndarray, rv: np.ndarray | None = None):
     # motions are products of validated poses: the NumPy log map (~20 us) rather than SciPy's Rotation,
-    # whose validation and re-orthogonalisation cost ~0.2 ms a call, twice per calibration (issue 16)
-    from robocal.handeye._lie import log_so3
+    # whose validation and re-orthogonalisation cost ~0.2 ms a call, twice per calibration (issue 16);
+    # ``rv``: the rotation vectors when the caller has them already (the closed forms need them too)
+    if rv is None:
+        from robocal.handeye._lie import log_so3
 
-    rv = log_so3(R)
+        rv = log_so3(R)
     ang = np.linalg.norm(rv, axis=-1)
     axes = rv / np.maximum(ang, 1e-300)[..., None]
     return axes, ang
@@ -171,7 +173,7 @@ def name_outliers(warnings, times=None, *, what: str) -> list:
 
 
 def check_motions(A, B=None, *, min_rotation: float = MIN_ROTATION, min_axis_spread: float = MIN_AXIS_SPREAD,
-                  what: str = "X", pairs=None, times=None) -> MotionCheck:
+                  what: str = "X", pairs=None, times=None, _rotvecs=None) -> MotionCheck:
     """Check that relative motions determine a hand-eye transform.
 
     ``pairs`` (two index arrays ``(i, j)``, :func:`pair_indices`) and ``times`` (s, per pose) let the
@@ -197,7 +199,8 @@ def check_motions(A, B=None, *, min_rotation: float = MIN_ROTATION, min_axis_spr
         timestamps, or units); its ``indices`` are the poses to blame.
     """
     A = np.asarray(A, float)
-    all_axes, ang = _axes_angles(A[:, :3, :3])
+    rvA, rvB = _rotvecs if _rotvecs is not None else (None, None)   # private: the log maps of A and B
+    all_axes, ang = _axes_angles(A[:, :3, :3], rvA)
     warns = []
     if ang.max() < min_rotation:
         raise DegenerateGeometryError(
@@ -225,7 +228,7 @@ def check_motions(A, B=None, *, min_rotation: float = MIN_ROTATION, min_axis_spr
                                 f"rotation axes span only {np.rad2deg(spread):.3g} deg: {what} is weakly determined",
                                 params=("rx", "ry", "rz", "tx", "ty", "tz")))
     if B is not None:
-        _, angB = _axes_angles(np.asarray(B, float)[:, :3, :3])
+        _, angB = _axes_angles(np.asarray(B, float)[:, :3, :3], rvB)
         diff = np.abs(ang - angB)
         bad = diff > max(np.deg2rad(1.0), 10 * np.median(diff))
         if bad.any():

@@ -12,6 +12,7 @@ import numpy as np
 
 from robocal.errors import DegenerateGeometryError
 from robocal.geometry import invert_transform, project_to_rotation, rotvec_from_matrix, transform_from
+from robocal.handeye._lie import log_so3
 from robocal.handeye.axxb import _check_method, _solve_checked
 from robocal.handeye.motions import _check_poses, _motions, _pose_residual, pair_indices, relative_motions
 
@@ -62,19 +63,21 @@ def _closure_residuals(Tg, Tc, A, B, m: str, pairs: str):
         # consecutive motions about one axis can still span several with more pairs
         X, _ = _solve_checked(*_motions(Tg, Tc, *pair_indices(Tg, "auto")), m)
     Yall = Tg @ X @ Tc
-    Y = transform_from(project_to_rotation(np.mean(Yall[:, :3, :3], axis=0)), Yall[:, :3, 3].mean(axis=0))
-    r = _pose_residual(Yall, Y[None])
-    return float(np.sqrt(np.mean(r[:, :3] ** 2))), float(np.sqrt(np.mean(r[:, 3:] ** 2))), X
+    Ry, ty = project_to_rotation(np.mean(Yall[:, :3, :3], axis=0)), Yall[:, :3, 3].mean(axis=0)
+    # _pose_residual's figures with the NumPy log map: products of validated poses need none of SciPy
+    # Rotation's validation (~0.15 ms a call, once per slip tried)
+    r_rot = log_so3(Yall[:, :3, :3] @ Ry.T)
+    return float(np.sqrt(np.mean(r_rot ** 2))), float(np.sqrt(np.mean((Yall[:, :3, 3] - ty) ** 2))), X
 
 
-def _translations_plausible(Tg, Tc, rot_rms, trans_rms, X) -> tuple[bool, str]:
+def _translations_plausible(Tg, Tc, rot_rms, trans_rms, X, floor: float = TRANS_FLOOR) -> tuple[bool, str]:
     lever = float(np.sqrt(np.mean(np.sum(Tc[:, :3, 3] ** 2, axis=1)))) + float(np.linalg.norm(X[:3, 3]))
     reach = max(float(np.max(np.linalg.norm(Tg[:, :3, 3], axis=1))), 0.2)
     tx = float(np.linalg.norm(X[:3, 3]))
     if tx > max(2.0, REACH_FACTOR * reach):
         return False, (f"the camera comes out {tx:.3g} m from the gripper, more than {REACH_FACTOR:g} x the "
                        f"gripper's largest distance from the base ({reach:.3g} m)")
-    if trans_rms > TRANS_FLOOR and trans_rms > TRANS_ROT_RATIO_MAX * rot_rms * lever:
+    if trans_rms > floor and trans_rms > TRANS_ROT_RATIO_MAX * rot_rms * lever:
         return False, (f"the translation residual {1e3 * trans_rms:.3g} mm is {trans_rms / max(rot_rms * lever, 1e-300):.3g} x "
                        f"what the rotation residual {1e3 * rot_rms:.3g} mrad gives over the {lever:.3g} m lever "
                        f"(consistent poses: about 1, plausible <= {TRANS_ROT_RATIO_MAX:g})")
@@ -169,10 +172,33 @@ def judge_poses(T_base_gripper, T_cam_target, *, names=("T_base_gripper", "T_cam
     list of Diagnostic
         Empty when plausible; one ``implausible_input`` warning when accepted.
     """
+    Tg, Tc = _check_poses(T_base_gripper, names[0]), _check_poses(T_cam_target, names[1])
+    return _judge_checked(Tg, Tc, names=names, method=_check_method(method), accept=accept, source=source,
+                          times=times)
+
+
+def _judge_checked(Tg, Tc, *, names=("T_base_gripper", "T_cam_target"), method: str = "tsai", accept: bool = False,
+                   source: str | None = None, times=None, closed_form=None) -> list:
+    """:func:`judge_poses` on poses already validated (:func:`~.motions._check_poses`) and a checked method
+    name: :func:`~robocal.handeye.calibrate_hand_eye` validates the lists once for both (issue 16).
+
+    ``closed_form``: ``(rot_rms, trans_rms, X)`` of the caller's closed form on more pose pairs, its closure
+    figures as :func:`closure_residuals` defines them. When they pass both tests outright (rotation residual
+    below :data:`ROT_TRY`; translation residual within :data:`TRANS_ROT_RATIO_MAX` of the rotation's over the
+    lever *without* the :data:`TRANS_FLOOR` allowance, X within reach) the lists are plausible without a
+    closed form of their own (~20 % of a 15-pose calibration, issue 16): an X exists that makes them one
+    consistent set-up, which is what the tests ask. The floor is not granted here because it is an
+    allowance for noise, not evidence: a target list in m read as mm gives 5.6 mm on all pairs of the
+    example (below the floor) but 13 mm on consecutive ones, and is named. Otherwise the lists are judged as
+    :func:`judge_poses` does (its own closed form on consecutive pairs, the slips tried against it).
+    """
     from robocal.plausibility import Slip, check_slips
 
-    Tg, Tc = _check_poses(T_base_gripper, names[0]), _check_poses(T_cam_target, names[1])
-    m = _check_method(method)
+    if closed_form is not None:
+        rot0, trans0, X0 = closed_form
+        if rot0 <= ROT_TRY and _translations_plausible(Tg, Tc, rot0, trans0, X0, floor=0.0)[0]:
+            return []
+    m = method
 
     def closure_residuals(a, b, _method=None):
         # the lists are validated once above; every slip tried is a rigid transform of them (inverted,

@@ -22,7 +22,7 @@ from robocal.handeye._lie import exp_so3, left_jacobian, left_jacobian_inverse, 
 from robocal.handeye.axxb import _check_method, _solve_checked
 from robocal.handeye.motions import (_LABELS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses, _motions, _sigmas,
                                      name_outliers, pair_indices)
-from robocal.handeye.plausibility import judge_poses
+from robocal.handeye.plausibility import _judge_checked
 from robocal.validation import check_array, check_transform
 
 __all__ = ["SETUPS", "HandEyeResult", "calibrate_hand_eye", "invert_with_covariance"]
@@ -223,13 +223,16 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
     X0, chk = _solve_checked(A, B, m, min_rotation=min_rotation, min_axis_spread=min_axis_spread, pairs=ij,
                              times=times)
     del A, B                                    # the refinement works on the poses
-    warnings = judge_poses(Tg, Tc, names=names, accept=accept_implausible, times=times) + list(chk.warnings)
     Yall = Tg @ X0 @ Tc
     Y0 = transform_from(project_to_rotation(np.mean(Yall[:, :3, :3], axis=0)), Yall[:, :3, 3].mean(axis=0))
     _, r0 = _closure(Tg, Tc, X0, Y0)
-    out = HandEyeResult(X=X0, method=m, Y=Y0, rot_rms=float(np.sqrt(np.mean(r0[:, :3] ** 2))),
-                        trans_rms=float(np.sqrt(np.mean(r0[:, 3:] ** 2))), n_motions=len(ij[0]), warnings=warnings,
-                        setup=setup)
+    rot0, trans0 = float(np.sqrt(np.mean(r0[:, :3] ** 2))), float(np.sqrt(np.mean(r0[:, 3:] ** 2)))
+    # the lists are validated above: the plausibility check (judge_poses) takes them as they are, and this
+    # closed form's closure figures (plausible ones need no closed form of the check's own)
+    warnings = _judge_checked(Tg, Tc, names=names, accept=accept_implausible, times=times,
+                              closed_form=(rot0, trans0, X0)) + list(chk.warnings)
+    out = HandEyeResult(X=X0, method=m, Y=Y0, rot_rms=rot0, trans_rms=trans0, n_motions=len(ij[0]),
+                        warnings=warnings, setup=setup)
     if not refine:
         return out
     sr, st = _sigmas(r0)
