@@ -204,11 +204,21 @@ def analyze_jacobian(
         Jm = sp.csc_array(J, dtype=float)
         if Jm.ndim != 2:
             raise ShapeError(f"J must have shape (m, n), got {Jm.shape}")
-        d = np.sqrt(np.asarray(Jm.multiply(Jm).sum(axis=0)).ravel())
     else:
         Jm = check_array(J, "J")
         if Jm.ndim != 2:
             raise ShapeError(f"J must have shape (m, n), got {tuple(Jm.shape)}")
+    return _analyze_checked(Jm, labels, residual_variance=residual_variance, rank_tol=rank_tol, null_tol=null_tol,
+                            weak_vif=weak_vif, n_correlations=n_correlations)
+
+
+def _analyze_checked(Jm, labels=None, *, residual_variance: float = 1.0, rank_tol: float = 1e-6,
+                     null_tol: float = 0.1, weak_vif: float = 1e4, n_correlations: int = 10) -> Identifiability:
+    """:func:`analyze_jacobian` on a 2-D float ndarray or CSC array known to be finite: the solver's own
+    Jacobian, checked by the evaluator as it was built (issue 16: not validated a second time)."""
+    if sp.issparse(Jm):
+        d = np.sqrt(np.asarray(Jm.multiply(Jm).sum(axis=0)).ravel())
+    else:
         d = np.linalg.norm(Jm, axis=0)
     m, n = Jm.shape
     labels = tuple(labels) if labels is not None else tuple(f"p[{j}]" for j in range(n))

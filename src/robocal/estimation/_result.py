@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, fields
 
@@ -51,8 +52,14 @@ def outlier_sigma(n_obs: int, family_p: float = OUTLIER_FAMILY_P) -> float:
 
 def outlier_threshold(n_sigma: float, dim: int) -> float:
     """Chi-square (``dim`` dof) quantile with the two-sided Gaussian tail of ``n_sigma``."""
+    return _threshold(float(n_sigma), int(dim))
+
+
+@functools.lru_cache(maxsize=256)
+def _threshold(n_sigma: float, dim: int) -> float:
     # scipy.special, not scipy.stats: the same functions (norm.sf = erfc/2, chi2.isf =
-    # chdtri) without the 0.5 s import of scipy.stats on every CLI start
+    # chdtri) without the 0.5 s import of scipy.stats on every CLI start; cached: every solve asks for
+    # the same few (n_sigma, dim) pairs, at ~10 us a pair
     tail = special.erfc(n_sigma / np.sqrt(2.0))
     return float(special.chdtri(dim, tail))
 

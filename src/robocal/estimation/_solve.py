@@ -18,7 +18,7 @@ from scipy.optimize import least_squares, leastsq
 
 from robocal.diagnostics import Diagnostic
 from robocal.errors import InputError, NotEnoughDataError, RobocalError
-from robocal.estimation._identifiability import analyze_jacobian
+from robocal.estimation._identifiability import _analyze_checked
 from robocal.estimation._problem import Problem
 from robocal.estimation._result import STATUS_MESSAGES, LSQResult, outlier_threshold
 from robocal.estimation._result import outlier_sigma as bonferroni_sigma
@@ -173,7 +173,7 @@ class _Tracker:
         return self.last_J.copy()  # SciPy 1.11/1.12 scale it in place too (see fun)
 
 
-def _clipped_variance(q, dims, m, rank, n_sigma, max_iter=20) -> float:
+def _clipped_variance(q, dims, m, rank, n_sigma, max_iter=20, unique=None) -> float:
     """Residual variance by iterative n-sigma clipping of whole observations.
 
     Starts from ``sum(q) / (m - rank)`` and re-estimates from the observations
@@ -187,7 +187,7 @@ def _clipped_variance(q, dims, m, rank, n_sigma, max_iter=20) -> float:
     s2 = float(np.sum(q)) / max(m - rank, 1)
     if s2 <= 0:
         return 0.0
-    udims, which = np.unique(dims, return_inverse=True)
+    udims, which = np.unique(dims, return_inverse=True) if unique is None else unique
     t_u = np.array([outlier_threshold(n_sigma, int(d)) for d in udims])
     c_u = special.chdtr(udims + 2, t_u) / special.chdtr(udims, t_u)  # chi2.cdf, without scipy.stats
     t, c = t_u[which], c_u[which]
@@ -438,10 +438,15 @@ def _analyse(problem, ev, x, f, J, history, status, message, *, method, loss, f_
     m = ev.m
     labels = lay.labels
     free_labels = lay.free_labels
-    _, w = _rho((f / f_scale) ** 2, loss)
-    sw = np.sqrt(w)
-    J_eff = (sp.diags_array(sw) @ J) if sp.issparse(J) else J * sw[:, None]
-    ident = analyze_jacobian(J_eff, free_labels, rank_tol=rank_tol, weak_vif=weak_vif)
+    if loss == "linear":
+        J_eff = J                                       # unit weights: the Jacobian as it is
+    else:
+        _, w = _rho((f / f_scale) ** 2, loss)
+        sw = np.sqrt(w)
+        J_eff = sp.csc_array(sp.diags_array(sw) @ J) if sp.issparse(J) else J * sw[:, None]
+    # the evaluator checked J's shape and finiteness as it built it
+    ident = _analyze_checked(sp.csc_array(J_eff) if sp.issparse(J_eff) else np.asarray(J_eff, dtype=float),
+                             free_labels, rank_tol=rank_tol, weak_vif=weak_vif)
     dof = m - ident.rank
     warnings: list[Diagnostic] = []
 
@@ -455,7 +460,8 @@ def _analyse(problem, ev, x, f, J, history, status, message, *, method, loss, f_
     clip_sigma = 3.0 if outlier_sigma is None else outlier_sigma
     if outlier_sigma is None:
         outlier_sigma = bonferroni_sigma(ev.n_obs)
-    clipped = _clipped_variance(q, dims, m, ident.rank, clip_sigma) if dof > 0 else float("nan")
+    unique = np.unique(dims, return_inverse=True)
+    clipped = _clipped_variance(q, dims, m, ident.rank, clip_sigma, unique=unique) if dof > 0 else float("nan")
     if absolute_sigma:
         s2 = 1.0
     elif dof <= 0:
@@ -486,7 +492,7 @@ def _analyse(problem, ev, x, f, J, history, status, message, *, method, loss, f_
         scores = np.where(q > 0, q / scale2, 0.0) if scale2 > 0 else np.where(q > 0, np.inf, 0.0)
     # one chi2 quantile per distinct observation size, not per observation
     # (scipy's ppf costs ~0.3 ms a call: seconds on a few thousand observations)
-    udims, which = np.unique(dims, return_inverse=True)
+    udims, which = unique
     thr = np.array([outlier_threshold(outlier_sigma, int(d)) for d in udims])[which]
     outliers = np.flatnonzero(scores > thr).tolist()
     scale = float(np.sqrt(scale2))
