@@ -15,7 +15,10 @@ measured in one run on the same joint configurations:
 * ``pure Python`` -- lists and ``math.sin``/``math.cos``, the 4x4 products
   written out in Python loops.
 
-All four are checked to agree to 1e-12 before timing. Per-configuration
+All four are checked to agree to 1e-12 before timing. Then ``fk_all``, ``jacobian`` and
+``param_jacobian`` (base and tool parameters on) against the previous implementation, written out here:
+one (N, 4, 4) stack of link matrices per link chained with batched ``@``, twist columns from
+``screw_column`` on those frames (checked to agree to 1e-12 first). Per-configuration
 loops are timed on a subset and reported per configuration. Ratios > 1 mean
 the vectorised call is faster.
 
@@ -36,6 +39,7 @@ import numpy as np
 import robocal
 from robocal.geometry import matrix_from_rotvec, transform_from
 from robocal.kinematics import DHChain
+from robocal.kinematics._common import origin_screws, screw_column, xyz_rpy_from_transform
 
 # alpha_{i-1}, a_{i-1}, theta_i, d_i (m, rad): PUMA 560 in Craig's modified convention.
 PUMA = [
@@ -68,6 +72,33 @@ def numpy_links(alpha, a, theta, d):
     A[:, 3, 3] = 1.0
     return A
 
+
+def stacked_frames(chain, q):
+    """The previous ``fk_all``: ``T_base @ A_1 @ ... @ A_i`` as (N, 4, 4) stacks, (N, n + 1, 4, 4)."""
+    T = np.broadcast_to(chain.T_base, q.shape[:-1] + (4, 4))
+    frames = [T]
+    for (alpha, a, theta, d), qi in zip(chain.table, q.T):
+        T = T @ numpy_links(alpha, a, theta + qi, d)
+        frames.append(T)
+    return np.stack(np.broadcast_arrays(*frames), axis=-3)
+
+
+def stacked_jacobian(chain, q, params: bool):
+    """The previous ``jacobian`` (``params=False``) or ``param_jacobian`` of a revolute modified chain:
+    ``screw_column`` on the stacked frames."""
+    ex, ez = np.eye(3)[0], np.eye(3)[2]
+    frames = stacked_frames(chain, q)
+    p = (frames[:, -1] @ chain.T_tool)[:, :3, 3]
+    cols = []
+    for i in range(chain.n_links):
+        b, a = frames[:, i], frames[:, i + 1]
+        screws = [(b, ex, True), (b, ex, False), (a, ez, True), (a, ez, False)] if params else [(a, ez, True)]
+        cols += [screw_column(G, ax, rev, p) for G, ax, rev in screws]
+    if params:
+        G0, Gn = np.broadcast_to(np.eye(4), (len(q), 4, 4)), frames[:, -1]
+        for G_parent, T in ((G0, chain.T_base), (Gn, chain.T_tool)):
+            cols += [screw_column(G, ax, r, p) for G, ax, r in origin_screws(G_parent, xyz_rpy_from_transform(T))]
+    return np.stack(cols, axis=-1)
 
 def numpy_fk_batch(table, T_base, T_tool, q):
     T = T_base
@@ -156,6 +187,23 @@ def main(argv=None) -> int:
     for name, r in rates.items():
         print(f"{name:<20} | {r:>14,.0f} | {rates['robocal vectorised'] / r:>22.1f}")
     print(f"\nrobocal vectorised / numpy vectorised (same N): {t_npv / t_vec:.2f}x (issue 16 goal >= 0.9)")
+
+    # frames and Jacobians (calibration's inner loop) against the previous stacked implementation
+    pchain = DHChain.from_table(PUMA, convention="modified", T_base=T_base, T_tool=T_tool, base_params=True,
+                                tool_params=True)
+    print(f"\n{'method (base + tool params)':<28} | {'configs/s':>12} | {'previous (4x4 stacks)':>21} | "
+          f"{'speed-up':>8}")
+    print("-" * 80)
+    # unit rotations and lever arms <= ~1.5 m: round-off of a few ulps; 1e-12 leaves ~1000 ulps
+    assert np.abs(pchain.fk_all(q) - stacked_frames(pchain, q)).max() < 1e-12
+    assert np.abs(pchain.jacobian(q) - stacked_jacobian(pchain, q, False)).max() < 1e-12
+    assert np.abs(pchain.param_jacobian(q) - stacked_jacobian(pchain, q, True)).max() < 1e-12
+    for name, new, old in (("fk_all", lambda: pchain.fk_all(q), lambda: stacked_frames(pchain, q)),
+                           ("jacobian", lambda: pchain.jacobian(q), lambda: stacked_jacobian(pchain, q, False)),
+                           ("param_jacobian", lambda: pchain.param_jacobian(q),
+                            lambda: stacked_jacobian(pchain, q, True))):
+        t_new, t_old = best_time(new, repeats), best_time(old, repeats)
+        print(f"{name:<28} | {args.n / t_new:>12,.0f} | {args.n / t_old:>21,.0f} | {t_old / t_new:>7.1f}x")
     return 0
 
 

@@ -318,9 +318,9 @@ class ProjectorModel(InverseKinematics):
         rho = np.tan(a2)
         rho *= self.H - self.d1
         out = np.empty(theta.shape[:-1] + (3,))
+        out.fill(-self.H)  # z; one contiguous fill is cheaper than a strided column write
         np.multiply(rho, np.sin(a1), out=out[..., 0])
         np.multiply(rho, np.cos(a1), out=out[..., 1])
-        out[..., 2] = -self.H
         return out
 
     def spot_from_chain(self, theta) -> np.ndarray:
