@@ -180,7 +180,7 @@ def c_peer(prev, curr, sad_lanes, seq=None):
         "| kernel | frame pairs / s | ours / C |",
         "|---|---:|---:|",
         f"| C: SAD + argmin (eq. 1), {n} gravel pairs | {rates['c_sad']:,.0f} | |",
-        f"| ours: SAD kernel alone (pairs in SIMD lanes, transposed beforehand) | {rates['sad']:,.0f} | "
+        f"| ours: numba SAD kernel alone (pairs in SIMD lanes, transposed beforehand) | {rates['sad']:,.0f} | "
         f"{rates['sad'] / rates['c_sad']:.2f} |",
         f"| C: the whole default compute_flow (gate, SAD, fit, trimmed mean, spread gate), same pairs | "
         f"{rates['c_flow']:,.0f} | |",
