@@ -16,7 +16,7 @@ noise). Planted:
   good to ~0.03 deg);
 * ``weak`` -- a hurried recording: a third of the poses (at least 4) and
   ``WEAK_NOISE_FACTOR`` = 5x the pose noise (a blurred, distant target):
-  reported stds ~12x the fleet's from 16 poses (the report's bar is 3).
+  reported stds ~9-12x the fleet's from 16 poses (the report's bar is 3).
 
 Only the eye-in-hand set-up: ``robocal batch handeye`` calibrates a fleet's
 manifest with ``calibrate``'s default ``--setup eye-in-hand`` (the manifest

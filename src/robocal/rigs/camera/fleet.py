@@ -14,8 +14,14 @@ session (:func:`robocal.rigs.camera.simulate.simulate_session`). Planted:
   off (~17 x the fleet's spread), or the lens **decentred** (a drop), the
   principal point ``CENTRE_FAULT_PX`` = 30 px off along x or y (~16 x);
 * ``weak`` -- a hurried session: half the views (at least 3), blurred
-  (``WEAK_BLUR_FACTOR`` x the blur) and ``WEAK_NOISE_FACTOR`` x the image
-  noise (a dim room).
+  (``WEAK_BLUR_FACTOR`` = 2.5 x the blur) and ``WEAK_NOISE_FACTOR`` = 5 x
+  the image noise (a dim room): from 6 views at 480 x 360 px the reported
+  stds 4-15 x the fleet's (3x the noise gave 3.1 x once, at the report's bar of 3).
+
+The faults' figures are for ``--views 6 --width 480 --height 360``; in
+fleets of 10 the report named the faulty lens in every one of 7 seeded
+fleets (``t`` 12-37 against a bar of 7), in 4 of 6 fleets of 8
+(``bench/bench_fleet_sizes.py``).
 """
 
 from __future__ import annotations
@@ -36,7 +42,7 @@ DIST_SCATTER = (0.004, 0.004, 1e-4, 1e-4, 0.002)
 #: the planted faults: the focal length's relative error, the principal point's shift [px, at 640 px wide]
 FOCAL_FAULT, CENTRE_FAULT_PX = 0.05, 30.0
 #: the weak session's blur and image noise, as multiples of the fleet's (and half the views)
-WEAK_BLUR_FACTOR, WEAK_NOISE_FACTOR = 2.5, 3.0
+WEAK_BLUR_FACTOR, WEAK_NOISE_FACTOR = 2.5, 5.0
 
 
 def fleet_member(out_dir, rng: np.random.Generator, *, kind: str | None = None, progress: bool = False,
