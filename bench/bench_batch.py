@@ -18,6 +18,9 @@
    calibrated by :func:`robocal.batch.run_batch` serially and on the
    cluster (per-robot reports included, as ``robocal batch`` writes them).
    The fleet report's named robots are compared with the planted ones.
+   ``--no-reports``: the same without the per-robot ``report.html``. The
+   workers' CPU seconds are printed beside their wall time (a worker busy
+   less than its wall time waited: disk, the scheduler, other processes).
 
 Printed: wall times, speed-up, speed-up per core (the issue's goal: >= 0.85
 on 2 cores), overhead. BLAS runs on one thread everywhere (the workers'
@@ -98,6 +101,15 @@ def study(args, client, cores):
             "overhead_ms": 1e3 * overhead, "batch_for_5pct": b, "identical": same}
 
 
+def _workers_cpu(client) -> float:
+    """The cluster's worker processes' CPU seconds so far (user + system; children included)."""
+    def cpu():
+        t = os.times()
+        return t.user + t.system + t.children_user + t.children_system
+
+    return float(sum(client.run(cpu).values()))
+
+
 def fleet(args, client, cores):
     from robocal.batch import load_manifest, run_batch, simulate_fleet
     from robocal.cli._rig import discover_rigs
@@ -111,12 +123,15 @@ def fleet(args, client, cores):
                              views=args.views, offset_scale=args.offset_scale)
         print(f"simulated on {cores} workers in {time.perf_counter() - t0:.1f} s; {sim.summary()}")
         entries = load_manifest(sim.manifest, rig="humanoid")
+        reports = not args.no_reports
+        t0, c0 = time.perf_counter(), time.process_time()
+        a = run_batch(wf, entries, tmp / "serial", fleet=False, reports=reports)
+        ts, cs = time.perf_counter() - t0, time.process_time() - c0
+        w0 = _workers_cpu(client)
         t0 = time.perf_counter()
-        a = run_batch(wf, entries, tmp / "serial", fleet=False)
-        ts = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        b = run_batch(wf, entries, tmp / "cluster", executor=client, fleet=False)
+        b = run_batch(wf, entries, tmp / "cluster", executor=client, fleet=False, reports=reports)
         tp = time.perf_counter() - t0
+        cw = _workers_cpu(client) - w0
         t0 = time.perf_counter()
         from robocal.batch import write_fleet
 
@@ -129,7 +144,11 @@ def fleet(args, client, cores):
     print(f"calibrated: serial {ts:.1f} s ({ts / args.fleet:.2f} s a robot), {cores} workers {tp:.1f} s; speed-up "
           f"{ts / tp:.2f}x, {ts / tp / cores:.2f} per core; failed {len(a.failed)} / {len(b.failed)}; "
           f"fleet report {tf:.1f} s; named {named or 'none'}, planted {sorted(sim.planted) or 'none'}")
-    return {"robots": args.fleet, "serial_s": ts, "parallel_s": tp, "fleet_report_s": tf,
+    # CPU beside wall: a worker busy less than its wall time waited (disk, the scheduler, the neighbours)
+    print(f"CPU: serial {cs:.1f} s ({100 * cs / ts:.0f} % of its wall time); workers {cw:.1f} s "
+          f"({100 * cw / (cores * tp):.0f} % of {cores} x wall); per-robot reports {'on' if reports else 'off'}")
+    return {"robots": args.fleet, "serial_s": ts, "parallel_s": tp, "serial_cpu_s": cs, "workers_cpu_s": cw,
+            "reports": reports, "fleet_report_s": tf,
             "named_is_planted": named == sorted(sim.planted)}
 
 
@@ -141,6 +160,7 @@ def main() -> None:
     ap.add_argument("--offset-scale", type=float, default=0.5, help="the fleet's scatter of offsets [deg]")
     ap.add_argument("--workers", type=int, default=None)
     ap.add_argument("--seed", type=int, default=2026)
+    ap.add_argument("--no-reports", action="store_true", help="the fleet's run_batch without per-robot report.html")
     args = ap.parse_args()
     from robocal.batch import available_cores, open_executor
 
