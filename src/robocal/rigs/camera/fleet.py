@@ -16,7 +16,8 @@ session (:func:`robocal.rigs.camera.simulate.simulate_session`). Planted:
 * ``weak`` -- a hurried session: half the views (at least 3), blurred
   (``WEAK_BLUR_FACTOR`` = 2.5 x the blur) and ``WEAK_NOISE_FACTOR`` = 5 x
   the image noise (a dim room): from 6 views at 480 x 360 px the reported
-  stds 4-15 x the fleet's (3x the noise gave 3.1 x once, at the report's bar of 3).
+  stds 5-17 x the fleet's in 7 fleets (3x the noise gave 3.1 x once, at
+  the report's bar of 3).
 
 The faults' figures are for ``--views 6 --width 480 --height 360``; in
 fleets of 10 the report named the faulty lens in every one of 7 seeded
