@@ -1,4 +1,4 @@
-"""``robocal camera simulate --fleet``'s cameras: what each plants is its true camera (:mod:`robocal.rigs.camera.fleet`).
+"""``robocal camera simulate --fleet``: what each camera plants is its true camera (:mod:`robocal.rigs.camera.fleet`).
 
 The fleet report naming them is ``tests/batch/test_batch_rig_fleets.py``'s; here, fast, the camera each
 robot's session is rendered with (``simulate_session`` replaced by a stub that keeps its arguments), one

@@ -1,4 +1,4 @@
-"""``robocal mirror simulate --fleet``'s robots: what each plants is in its input's truth (:mod:`robocal.rigs.mirror.fleet`).
+"""``robocal mirror simulate --fleet``: what each robot plants is in its truth (:mod:`robocal.rigs.mirror.fleet`).
 
 The fleet report naming them is ``tests/batch/test_batch_rig_fleets.py``'s; here, fast, the truth of
 one robot of each kind against the published robot, and the forms a fleet cannot simulate.

@@ -83,6 +83,7 @@ def fleet_member(out_dir, rng: np.random.Generator, *, kind: str | None = None, 
     atomic_write_text(out / "truth.yaml", (
         "# robocal handeye simulate --fleet: one cell of a simulated fleet; ground truth (m), not an input\n"
         f"setup: eye-in-hand\nT_gripper_cam: {pose(sim.X)}\nT_base_target: {pose(sim.Y)}\n"
-        f"# T_gripper_cam rotation vector [deg] = {np.round(np.degrees(rotvec_from_matrix(sim.X[:3, :3])), 4).tolist()}\n"
+        f"# T_gripper_cam rotation vector [deg] = "
+        f"{np.round(np.degrees(rotvec_from_matrix(sim.X[:3, :3])), 4).tolist()}\n"
         f"noise: {{rotation_rad: {sim.sigma_rotation}, translation_m: {sim.sigma_translation}}}\n"))
     return planted
