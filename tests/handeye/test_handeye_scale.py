@@ -1,9 +1,9 @@
 """Long pose lists (issue 13): pair selection, memory linear in the number of poses, the command at 2,000 poses."""
 
 import json
+import os
 import subprocess
 import sys
-import time
 import tracemalloc
 
 import numpy as np
@@ -67,14 +67,17 @@ def test_the_command_takes_2000_poses_in_bounded_memory(tmp_path):
     code = ("import re, sys; from robocal.cli.main import main; rc = main(sys.argv[1:]); "
             "hwm = re.search(r'VmHWM:\\s*(\\d+)', open('/proc/self/status').read()); "
             "print('MAXRSS', hwm.group(1) if hwm else 0); sys.exit(rc)")
-    t0 = time.perf_counter()
+    # the child's CPU seconds, not wall time: under a loaded machine's scheduling the wall time measures
+    # the neighbours (a 120 s wall bound failed once at load 16); the CPU time does not
+    c0 = os.times()
     out = subprocess.run([sys.executable, "-c", code, "handeye", "calibrate", str(g), str(c),
-                          "--out", str(tmp_path / "cal")], capture_output=True, text=True, timeout=300)
-    wall = time.perf_counter() - t0
+                          "--out", str(tmp_path / "cal")], capture_output=True, text=True, timeout=600)
+    c1 = os.times()
+    cpu = (c1.children_user - c0.children_user) + (c1.children_system - c0.children_system)
     assert out.returncode == 0, out.stderr
     rss_kb = int(out.stdout.split("MAXRSS")[1].split()[0])
     assert rss_kb < 400_000, f"peak RSS {rss_kb / 1e3:.0f} MB"
-    assert wall < 120, f"{wall:.1f} s"   # 8-12 s on 2 loaded shared cores (most of it imports and the report)
+    assert cpu < 60, f"{cpu:.1f} CPU-s"   # ~4-6 CPU-s (most of it imports and the report): a runaway, not a speed test
     result = json.loads((tmp_path / "cal" / "result.json").read_text())
     assert result["diagnostics"]["pairs"] == "auto" and result["diagnostics"]["n_poses"] == 2000
     assert result["diagnostics"]["n_motions"] <= 1999 + MAX_LONG_PAIRS
