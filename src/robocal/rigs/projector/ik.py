@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from functools import cached_property
 
 import numpy as np
 
@@ -30,8 +31,6 @@ __all__: list[str] = []
 
 class InverseKinematics:
     """:meth:`ik`, :meth:`ik_world`, :meth:`reachable` of :class:`~robocal.rigs.projector.model.ProjectorModel`."""
-
-    __slots__ = ()
 
     def ik(self, points, *, theta1_at_nadir: float = 0.0, on_nadir: str = "warn", check_reach: bool = True,
            floor_tol: float = 1e-6) -> np.ndarray:
@@ -98,7 +97,7 @@ class InverseKinematics:
         p = points
         if not (type(p) is np.ndarray and p.dtype is _F8 and p.ndim and p.size and p.shape[-1] in (2, 3)):
             return None
-        H, h = self.H, self.H - self.d1
+        H, h, r_nadir, r_reach, o1, o2 = self._ik_constants
         f = p if p.ndim == 2 else p.reshape(-1, p.shape[-1])
         x, y = f[:, 0], f[:, 1]
         if f.shape[1] == 3:
@@ -112,10 +111,8 @@ class InverseKinematics:
         # the min and max of r decide the nadir (r > NADIR_TOL h) and the reach (r <= h tan(tilt_limit), so the
         # tilt atan(r / h) is within the limit to round-off, well inside its 1e-12 rad margin); a NaN fails
         # every comparison, an infinite coordinate the upper one
-        top = h * math.tan(self.tilt_limit) if check_reach else math.inf
-        o1, o2 = self.offsets
-        if not (r[r.argmin()] > NADIR_TOL * h and r[r.argmax()] < top and abs(o1) < math.pi):
-            return None
+        if not (r[r.argmin()] > r_nadir and r[r.argmax()] < (r_reach if check_reach else math.inf)):
+            return None  # (r_nadir is inf when |o1| >= pi: the one-shift wrap below would not do)
         out = np.empty(p.shape[:-1] + (2,))
         o = out if out.ndim == 2 else out.reshape(-1, 2)
         a1, a2 = o[:, 0], o[:, 1]
@@ -132,6 +129,14 @@ class InverseKinematics:
         if o1 < 0 and a1[a1.argmax()] > math.pi:
             np.subtract(a1, 2 * math.pi, out=a1, where=a1 > math.pi)
         return out
+
+    @cached_property
+    def _ik_constants(self) -> tuple:
+        """``(H, h, NADIR_TOL h, h tan(tilt_limit), o1, o2)`` for :meth:`_ik_fast`, once per (frozen) model;
+        the nadir radius is inf when ``|o1| >= pi`` (the fast path's pan wrap assumes less)."""
+        h = self.H - self.d1
+        o1, o2 = self.offsets
+        return (self.H, h, NADIR_TOL * h if abs(o1) < math.pi else math.inf, h * math.tan(self.tilt_limit), o1, o2)
 
     def _floor_xy(self, points, name: str, floor_tol: float) -> np.ndarray:
         p = check_array(points, name)

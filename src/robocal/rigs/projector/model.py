@@ -293,21 +293,22 @@ class ProjectorModel(InverseKinematics):
         SingularConfigurationError
             Where the beam is horizontal or points upwards (no floor hit).
         """
-        o1, o2 = self.offsets
+        o1, o2, lim, h, z = self._spot_constants
         t = theta
         if type(t) is np.ndarray and t.dtype is _F8 and t.ndim and t.shape[-1] == 2 and t.size:
             # the checks inline (issue 16; see _fast_theta): every tilt within the limit (min and max; a NaN
-            # fails the comparisons), the pan finite, the limit clear of the horizon
+            # fails the comparisons), the pan finite, the limit clear of the horizon (lim None: it is not)
             a1, a2 = t[..., 0] + o1, t[..., 1] + o2
-            lim = self.tilt_limit + 1e-12
-            if a1.ndim == 1:  # argmin / argmax inline (see lo_hi): the calls around them cost as much
-                ok = (a2[a2.argmin()] >= -lim and a2[a2.argmax()] <= lim and a1[a1.argmin()] > -math.inf
-                      and a1[a1.argmax()] < math.inf)
+            if lim is None:
+                t = None
+            elif a1.ndim == 1:  # argmin / argmax inline (see lo_hi): the calls around them cost as much
+                if not (a2[a2.argmin()] >= -lim and a2[a2.argmax()] <= lim and a1[a1.argmin()] > -math.inf
+                        and a1[a1.argmax()] < math.inf):
+                    t = None
             else:
                 lo, hi = _lo_hi(a2)
-                ok = lo >= -lim and hi <= lim and _finite(a1)
-            if not (ok and math.cos(lim) > HORIZON_TOL):
-                t = None
+                if not (lo >= -lim and hi <= lim and _finite(a1)):
+                    t = None
         else:
             t = None
         if t is None:
@@ -316,12 +317,21 @@ class ProjectorModel(InverseKinematics):
         # h s2 / c2 as h tan(a2): one transcendental call instead of two (equal to round-off); the
         # products are written straight into the output columns (no temporaries to copy). Issue 16.
         rho = np.tan(a2)
-        rho *= self.H - self.d1
+        rho *= h
         out = np.empty(theta.shape[:-1] + (3,))
-        out.fill(-self.H)  # z; one contiguous fill is cheaper than a strided column write
+        out.fill(z)  # z = -H; one contiguous fill is cheaper than a strided column write
         np.multiply(rho, np.sin(a1), out=out[..., 0])
         np.multiply(rho, np.cos(a1), out=out[..., 1])
         return out
+
+    @cached_property
+    def _spot_constants(self) -> tuple:
+        """``(o1, o2, tilt limit + 1e-12 or None, h, -H)`` for :meth:`spot`, once per (frozen) model.
+
+        None: the limit is within 1e-9 of the horizon, the fast path cannot decide (per-element checks).
+        """
+        lim = self.tilt_limit + 1e-12
+        return (*self.offsets, lim if math.cos(lim) > HORIZON_TOL else None, self.H - self.d1, -self.H)
 
     def spot_from_chain(self, theta) -> np.ndarray:
         """The spot as the intersection of the chain's beam ``z_E`` with ``z_0 = -H``.
