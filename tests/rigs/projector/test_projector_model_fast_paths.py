@@ -93,3 +93,20 @@ def test_every_check_still_fires_on_float64_arrays():
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # the common case warns of nothing
         m.spot(th), m.ik(p), m.spot_from_chain(th)
+
+
+def test_per_model_constants_follow_the_model():
+    # spot / ik keep their constants per (frozen) model: a copy with other offsets, height or limit must not
+    # reuse the first model's; |o1| >= pi (the fast path's pan wrap does not apply) takes the checked path
+    rng = np.random.default_rng(116)
+    th = np.column_stack([rng.uniform(-math.pi, math.pi, 50), rng.uniform(0.05, 1.0, 50)])
+    m = ProjectorModel(H=3.0, d1=0.1, offsets=(0.01, 0.02), tilt_limit=math.radians(70))
+    m.spot(th), m.ik(m.spot(th))  # fill the first model's constants
+    for other in (m.with_(offsets=(-0.3, 0.04)), m.with_(H=4.0), m.with_(offsets=(3.5, 0.0))):
+        f = other.spot(th)
+        assert np.abs(f - reference_spot(other, th)).max() < 1e-12  # as in the test above
+        d = other.ik(f) - reference_ik(other, f)
+        d[..., 0] = wrap_angle(d[..., 0])
+        assert np.abs(d).max() < 1e-13
+    with pytest.warns(NearSingularityWarning, match="beyond the tilt limit"):
+        m.with_(tilt_limit=math.radians(50)).spot(th * [1.0, 0.0] + [0.0, math.radians(60)])
