@@ -17,6 +17,7 @@ Plot functions are pure: they take ``ax=None`` and return the axes.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -96,7 +97,15 @@ def plot_view_rms(names, feet, rms, ax=None):
     step = max(1, -(-len(rms) // 40))
     ticks = np.arange(0, len(rms), step)
     ax.set_xticks(ticks)
-    ax.set_xticklabels([names[i] for i in ticks], rotation=90, fontsize=7)
+    labels = [str(names[i]) for i in ticks]
+    # frames from a recording are named topic@stamp: the shared topic says nothing per bar, and labels
+    # that long, rotated, left the axes no height (matplotlib's "axes sizes collapsed to zero")
+    shared = os.path.commonprefix(labels) if len(labels) > 1 else ""
+    cut = max(shared.rfind("@"), shared.rfind("/")) + 1
+    if cut > 0:
+        labels = [lb[cut:] for lb in labels]
+        ax.set_xlabel(f"view ({shared[:cut]}...)", fontsize=8)
+    ax.set_xticklabels([lb if len(lb) <= 24 else "..." + lb[-21:] for lb in labels], rotation=90, fontsize=7)
     ax.set_ylabel("RMS [px]")
     ax.set_title("per-view residual RMS (blue: left board, orange: right board)")
     return ax
