@@ -8,19 +8,12 @@ import pytest
 from robocal.errors import NonFiniteError
 from robocal.geometry import matrix_from_rotvec, transform_from
 from robocal.kinematics import DHChain
-from robocal.kinematics._dh import _dh_matrices
+from dh_reference import stacked_frames
 
 
 def product_fk(chain, q):
     """The previous implementation: T_base @ A_1(q) @ ... @ A_n(q) @ T_tool with every A_i a full matrix."""
-    T, j = chain.T_base, 0
-    for lk in chain.links:
-        theta, d = lk.theta, lk.d
-        if lk.joint != "fixed":
-            theta, d = (theta + q[..., j], d) if lk.joint == "revolute" else (theta, d + q[..., j])
-            j += 1
-        T = T @ _dh_matrices(lk.alpha, lk.a, theta, d, chain.convention)
-    return np.broadcast_to(T @ chain.T_tool, q.shape[:-1] + (4, 4))
+    return np.broadcast_to(stacked_frames(chain, q)[-1] @ chain.T_tool, q.shape[:-1] + (4, 4))
 
 
 def random_chain(rng, k):

@@ -5,7 +5,7 @@ import numpy as np
 
 from robocal.kinematics import DHChain
 from robocal.kinematics._common import origin_screws, screw_column, xyz_rpy_from_transform
-from robocal.kinematics._dh import _dh_matrices
+from dh_reference import stacked_frames
 from tests.kinematics.test_dh_fk_fast import random_chain
 
 _EX, _EZ = np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])
@@ -13,16 +13,7 @@ _EX, _EZ = np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])
 
 def stack_fk_all(chain, q):
     """The previous fk_all: T_base @ A_1 @ ... @ A_i as (..., 4, 4) stacks."""
-    T, j, frames = np.broadcast_to(chain.T_base, q.shape[:-1] + (4, 4)), 0, []
-    frames.append(T)
-    for lk in chain.links:
-        theta, d = lk.theta, lk.d
-        if lk.joint != "fixed":
-            theta, d = (theta + q[..., j], d) if lk.joint == "revolute" else (theta, d + q[..., j])
-            j += 1
-        T = T @ _dh_matrices(lk.alpha, lk.a, theta, d, chain.convention)
-        frames.append(T)
-    return np.stack(np.broadcast_arrays(*frames), axis=-3)
+    return np.stack(stacked_frames(chain, q), axis=-3)
 
 
 def stack_param_jacobian(chain, q, joints_only=False):
