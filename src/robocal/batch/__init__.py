@@ -28,7 +28,7 @@ _EXPORTS = {
     **dict.fromkeys(("BatchEntry", "load_manifest"), "_manifest"),
     **dict.fromkeys(("BatchOutcome", "run_batch", "dataset_complete"), "_run"),
     **dict.fromkeys(("fleet_summary", "build_fleet_report", "write_fleet"), "_fleet"),
-    **dict.fromkeys(("simulate_fleet", "SimulatedFleet"), "_simulate_fleet"),
+    **dict.fromkeys(("simulate_fleet", "SimulatedFleet", "scattered_mount", "knocked"), "_simulate_fleet"),
     **dict.fromkeys(("fleet_demo",), "_demo"),
 }
 

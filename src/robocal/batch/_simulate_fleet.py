@@ -28,7 +28,8 @@ import numpy as np
 
 from robocal.errors import InputError
 
-__all__ = ["SimulatedFleet", "simulate_fleet", "planted_counts", "robot_ids", "FLEET_MANIFEST", "FLEET_TRUTH"]
+__all__ = ["SimulatedFleet", "simulate_fleet", "planted_counts", "robot_ids", "scattered_mount", "knocked",
+           "FLEET_MANIFEST", "FLEET_TRUTH"]
 
 FLEET_MANIFEST = "fleet.yaml"
 FLEET_TRUTH = "fleet_truth.json"
@@ -49,6 +50,38 @@ def planted_counts(n: int) -> tuple[int, int]:
 
     faults = 0 if n < MIN_FLEET else max(1, int(round(FAULT_SHARE * n)))
     return faults, (1 if n >= WEAK_FROM else 0)
+
+
+def scattered_mount(T, rng: np.random.Generator, mm: float, deg: float, *, own_axes: bool = False) -> np.ndarray:
+    """A copy of the mount ``T`` (4x4, m) as one robot of a fleet has it: turned by ``N(0, deg)`` [deg] about
+    each axis, then shifted by ``N(0, mm)`` [mm] along each (a bracket's tolerances).
+
+    ``own_axes``: the turn about the mounted part's own axes (right-multiplied), else about its parent's.
+    Draws 3 + 3 normals from ``rng`` in that order (the rigs' fleets are reproducible from their seeds).
+    """
+    from robocal.geometry import matrix_from_rotvec
+
+    T = np.array(T, dtype=float)
+    R = matrix_from_rotvec(np.radians(deg) * rng.standard_normal(3))
+    T[:3, :3] = T[:3, :3] @ R if own_axes else R @ T[:3, :3]
+    T[:3, 3] += 1e-3 * mm * rng.standard_normal(3)
+    return T
+
+
+def knocked(T, rng: np.random.Generator, deg: float, *, axes: int = 2, own_axes: bool = True):
+    """A planted fault: the mount ``T`` (4x4) turned by ``+-deg`` about one of its first ``axes`` axes (drawn,
+    then the sign) -- a camera or sensor knocked in its bracket, its origin where it was.
+
+    ``own_axes`` as in :func:`scattered_mount`. Returns ``(T_knocked, shift [deg, signed], axis)``.
+    """
+    from robocal.geometry import matrix_from_rotvec
+
+    axis = int(rng.integers(axes))
+    shift = float(rng.choice([-1.0, 1.0])) * deg
+    R = matrix_from_rotvec(np.radians(shift) * np.eye(3)[axis])
+    T = np.array(T, dtype=float)
+    T[:3, :3] = T[:3, :3] @ R if own_axes else R @ T[:3, :3]
+    return T, shift, axis
 
 
 def robot_ids(n: int) -> list[str]:

@@ -48,7 +48,8 @@ def fleet_member(out_dir, rng: np.random.Generator, *, kind: str | None = None, 
     Returns what was planted (``{}`` for a healthy cell; else ``parameter``
     as the result names it, ``shift`` [deg], ``text``).
     """
-    from robocal.geometry import matrix_from_rotvec, rotvec_from_matrix
+    from robocal.batch import knocked, scattered_mount
+    from robocal.geometry import rotvec_from_matrix
     from robocal.handeye.simulate import default_hand_eye, simulate_eye_in_hand
     from robocal.io import atomic_write_text, write_poses
 
@@ -56,16 +57,12 @@ def fleet_member(out_dir, rng: np.random.Generator, *, kind: str | None = None, 
         raise InputError(f"--fleet: simulates eye-in-hand cells only (the fleet's manifest calibrates with the "
                          f"default --setup), got --setup {setup}")
     n = int(poses)
-    X = default_hand_eye()
-    X[:3, :3] = matrix_from_rotvec(np.radians(MOUNT_DEG) * rng.standard_normal(3)) @ X[:3, :3]
-    X[:3, 3] += 1e-3 * MOUNT_MM * rng.standard_normal(3)
+    X = scattered_mount(default_hand_eye(), rng, MOUNT_MM, MOUNT_DEG)
     sr, st = 1e-3, 0.2e-3  # simulate_eye_in_hand's defaults: a calibrated camera on a target ~0.4 m away
     planted = {}
     if kind == "fault":
-        axis = int(rng.integers(2))
-        shift = float(rng.choice([-1.0, 1.0])) * FAULT_DEG
-        # about the camera's own axis (right-multiplied): the lens turned, its centre where it was
-        X[:3, :3] = X[:3, :3] @ matrix_from_rotvec(np.radians(shift) * np.eye(3)[axis])
+        # about the camera's own x or y axis: the lens turned, its centre where it was
+        X, shift, axis = knocked(X, rng, FAULT_DEG)
         planted = {"parameter": "T_gripper_cam.rotvec", "shift": shift, "unit": "deg",
                    "text": f"camera knocked on its mount: turned {shift:+g} deg about its {'xy'[axis]} axis"}
     elif kind == "weak":

@@ -33,21 +33,18 @@ WEAK_NOISE_FACTOR = 5.0
 def fleet_member(out_dir, rng: np.random.Generator, *, kind: str | None = None, progress: bool = False,
                  poses: int = 16, noise_free: bool = False, seed=None, **_) -> dict:
     """One robot: ``fpdp_input.yaml`` + ``fpdp_profiles.csv`` as ``simulate`` writes them; returns what was planted."""
-    from robocal.geometry import matrix_from_rotvec, rotvec_from_matrix
+    from robocal.batch import knocked, scattered_mount
+    from robocal.geometry import rotvec_from_matrix
     from robocal.io import atomic_write_text
     from robocal.rigs.lineprofiler.io import write_profiles_csv
     from robocal.rigs.lineprofiler.model import LineProfilerRig, ProfilerModel, default_hand_eye
     from robocal.rigs.lineprofiler.simulate import simulate_fpdp
 
-    X = default_hand_eye()
-    X[:3, :3] = matrix_from_rotvec(np.radians(MOUNT_DEG) * rng.standard_normal(3)) @ X[:3, :3]
-    X[:3, 3] += 1e-3 * MOUNT_MM * rng.standard_normal(3)
+    X = scattered_mount(default_hand_eye(), rng, MOUNT_MM, MOUNT_DEG)
     profiler = ProfilerModel()
     planted = {}
     if kind == "fault":
-        axis = int(rng.integers(3))
-        shift = float(rng.choice([-1.0, 1.0])) * FAULT_DEG
-        X[:3, :3] = matrix_from_rotvec(np.radians(shift) * np.eye(3)[axis]) @ X[:3, :3]
+        X, shift, axis = knocked(X, rng, FAULT_DEG, axes=3, own_axes=False)
         # the result's rotation vector of X: a turn about E's axis moves a mix of its components
         planted = {"parameter": "T_E_L.rotvec", "shift": shift, "unit": "deg",
                    "text": f"profiler knocked in its bracket: X turned {shift:+g} deg about its {'xyz'[axis]} axis"}

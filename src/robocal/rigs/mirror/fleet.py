@@ -55,7 +55,8 @@ def fleet_member(out_dir, rng: np.random.Generator, *, kind: str | None = None, 
         raise InputError(f"--placements >= 1 and --sigma >= 0, got {placements} and {sigma_px}")
     import yaml
 
-    from robocal.geometry import invert_transform, matrix_from_rotvec
+    from robocal.batch import knocked, scattered_mount
+    from robocal.geometry import invert_transform
     from robocal.rigs.mirror.files import write_input
     from robocal.rigs.mirror.model import MirrorScene
     from robocal.rigs.mirror.scene import published_scene
@@ -63,15 +64,11 @@ def fleet_member(out_dir, rng: np.random.Generator, *, kind: str | None = None, 
     from robocal.rigs.mirror.workflow import INPUT_NAME, _truth_block
 
     published = published_scene()
-    T_r_c = invert_transform(published.T_c_r)
-    # the mount's tolerances, in the camera's own axes (right-multiplied) and the body's
-    T_r_c[:3, :3] = T_r_c[:3, :3] @ matrix_from_rotvec(np.radians(MOUNT_DEG) * rng.standard_normal(3))
-    T_r_c[:3, 3] += 1e-3 * MOUNT_MM * rng.standard_normal(3)
+    # the mount's tolerances, in the camera's own axes and the body's
+    T_r_c = scattered_mount(invert_transform(published.T_c_r), rng, MOUNT_MM, MOUNT_DEG, own_axes=True)
     planted = {}
     if kind == "fault":
-        axis = int(rng.integers(2))
-        shift = float(rng.choice([-1.0, 1.0])) * FAULT_DEG
-        T_r_c[:3, :3] = T_r_c[:3, :3] @ matrix_from_rotvec(np.radians(shift) * np.eye(3)[axis])
+        T_r_c, shift, axis = knocked(T_r_c, rng, FAULT_DEG)
         planted = {"parameter": "T_r_c.rotvec", "shift": shift, "unit": "deg",
                    "text": f"camera knocked in its mount: turned {shift:+g} deg about its {'xy'[axis]} axis "
                            f"({'pitch' if axis == 0 else 'pan'})"}
