@@ -23,8 +23,6 @@ from robocal.kinematics._common import origin_screws, xyz_rpy_from_transform
 
 __all__: list[str] = []
 
-_EYE34 = np.eye(4)[:3]
-
 
 def _frames_plan(chain):
     """Per-link constants, built once per chain: (kind, joint index, theta0, d0, K before, K after)."""

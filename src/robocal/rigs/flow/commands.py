@@ -118,12 +118,11 @@ def simulate_files(out_dir, rng, *, progress: bool = True, trajectory: str = "lo
 def run_odometry(args) -> int:
     """``robocal flow odometry RUN --out DIR``: trajectory.csv, result.json, report.html (not with ``--no-report``:
     ``robocal flow report DIR/result.json`` draws it from the result later)."""
-    from robocal.rigs.flow.log import load_run, write_poses_csv
+    from robocal.rigs.flow.log import write_poses_csv
     from robocal.rigs.flow.report import build_report
     from robocal.rigs.flow.workflow import (check_kernel_options, evaluation_run, flow_config, frames_table,
-                                            odometry_result, odometry_run, read_reference, trajectory_curves)
-
-    from robocal.rigs.flow.workflow import load_input
+                                            load_input, odometry_result, odometry_run, read_reference,
+                                            trajectory_curves)
 
     spec = load_input(args.input, bag=args.bag, map=args.map)  # run.yaml, or a recording (issue 15)
     out = _out(args, "flow-odometry")
