@@ -13,8 +13,7 @@ import numpy as np
 
 from robocal.diagnostics import Diagnostic
 from robocal.errors import DegenerateGeometryError, InputError, NotEnoughDataError, ShapeError
-from robocal.geometry import (PoseWithCovariance, invert_transform, matrix_from_rotvec, rotvec_from_matrix,
-                              transform_from)
+from robocal.geometry import PoseWithCovariance, matrix_from_rotvec, rotvec_from_matrix, transform_from
 from robocal.validation import check_transform
 
 __all__ = ["MIN_ROTATION", "MIN_AXIS_SPREAD", "WEAK_AXIS_SPREAD", "MAX_ALL_PAIRS", "MAX_LONG_PAIRS",
@@ -40,8 +39,27 @@ class MotionCheck:
 
 
 # ----------------------------------------------------------------------------- helpers
+#: Tolerance of the pose check (orthonormality and last row).
+_POSE_ATOL = 1e-5
+
+
 def _check_poses(T, name: str) -> np.ndarray:
-    T = check_transform(T, name, atol=1e-5)
+    """``T`` as (N, 4, 4) rigid transforms, checked as :func:`robocal.validation.check_transform` does.
+
+    A float64 (N, 4, 4) array is checked here in a few vectorised operations (finite, ``R^T R = I`` to
+    :data:`_POSE_ATOL`, det R >= 0, last row) — the generic check costs ~0.13 ms a list, a tenth of a 15-pose
+    OpenCV hand-eye call (issue 16); anything else, or a failure, goes to the generic check, which words
+    the error."""
+    if isinstance(T, np.ndarray) and T.dtype == np.float64 and T.ndim == 3 and T.shape[1:] == (4, 4):
+        R = T[:, :3, :3]
+        err = np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)).max(initial=0.0)
+        last = np.abs(T[:, 3, :] - (0.0, 0.0, 0.0, 1.0)).max(initial=0.0)
+        # err / last are NaN-propagating maxima: a NaN anywhere in R or the last row fails the comparisons;
+        # the translations' finiteness is its own check
+        if err <= _POSE_ATOL and last <= _POSE_ATOL and np.isfinite(T[:, :3, 3]).all() and (
+                np.linalg.det(R) >= 0).all():
+            return T
+    T = check_transform(T, name, atol=_POSE_ATOL)
     if T.ndim != 3:
         raise ShapeError(f"{name} must have shape (N, 4, 4), got {T.shape}")
     return T
@@ -60,6 +78,9 @@ PAIR_MODES = ("auto", "consecutive", "all")
 #: Working memory of the closed forms per motion (bytes): A, B and their temporaries (tracemalloc peaks on
 #: 2e4 motions: 600 B Tsai/Park, 950 B Daniilidis, 1.6 KB Andreff; x2.5 for margin).
 BYTES_PER_MOTION = 4096
+#: Working memory (bytes) below which the pairs are not checked against the free memory: reading
+#: /proc/meminfo costs more than a 15-pose closed form's pairing (issue 16), and a few MB always fit.
+_MEMORY_CHECK_FLOOR = 16 * 2**20
 
 
 def pair_indices(T_base_gripper, pairs: str = "auto") -> tuple[np.ndarray, np.ndarray]:
@@ -81,11 +102,12 @@ def pair_indices(T_base_gripper, pairs: str = "auto") -> tuple[np.ndarray, np.nd
     if pairs not in PAIR_MODES:
         raise InputError(f"pairs must be one of {', '.join(PAIR_MODES)}, got {pairs!r}")
     if pairs == "all" or (pairs == "auto" and n * (n - 1) // 2 <= MAX_ALL_PAIRS):
-        from robocal.resources import require_memory
-
         m = n * (n - 1) // 2
-        require_memory(m * (BYTES_PER_MOTION + 16), f"the relative motions of all {m} pairs of {n} poses "
-                       "(--pairs all)")
+        if m * (BYTES_PER_MOTION + 16) > _MEMORY_CHECK_FLOOR:
+            from robocal.resources import require_memory
+
+            require_memory(m * (BYTES_PER_MOTION + 16), f"the relative motions of all {m} pairs of {n} "
+                           "poses (--pairs all)")
         i, j = np.triu_indices(n, 1)
         return i, j
     cons = np.arange(n - 1)
@@ -104,9 +126,20 @@ def pair_indices(T_base_gripper, pairs: str = "auto") -> tuple[np.ndarray, np.nd
     return np.concatenate([cons, li[keep]]), np.concatenate([cons + 1, lj[keep]])
 
 
+def _inverse(T):
+    """Inverses of validated rigid transforms (N, 4, 4): ``[R^T | -R^T t]`` without re-validation."""
+    Rt = np.swapaxes(T[:, :3, :3], 1, 2)
+    out = np.zeros_like(T)
+    out[:, :3, :3] = Rt
+    out[:, :3, 3] = -(Rt @ T[:, :3, 3:])[..., 0]
+    out[:, 3, 3] = 1.0
+    return out
+
+
 def _motions(Tg, Tc, i, j):
-    """``A = Tg[j]^-1 Tg[i]``, ``B = Tc[j] Tc[i]^-1`` for index arrays ``i``, ``j``."""
-    return invert_transform(Tg[j]) @ Tg[i], Tc[j] @ invert_transform(Tc[i])
+    """``A = Tg[j]^-1 Tg[i]``, ``B = Tc[j] Tc[i]^-1`` for index arrays ``i``, ``j`` (validated poses)."""
+    # each pose inverted once, not once per pair it is in (105 pairs of 15 poses)
+    return _inverse(Tg)[j] @ Tg[i], Tc[j] @ _inverse(Tc)[i]
 
 
 def relative_motions(T_base_gripper, T_cam_target, *, pairs: str = "auto"):
