@@ -6,13 +6,15 @@ each rig builds on the core and registers its CLI through the
 ``robocal.rigs`` entry-point group.
 """
 
-from importlib.metadata import PackageNotFoundError, version as _version
-
 from robocal.errors import RobocalError
 
-try:
-    __version__ = _version("robocal")
-except PackageNotFoundError:  # running from a source tree without install
-    __version__ = "0.0.0+unknown"
-
 __all__ = ["RobocalError", "__version__"]
+
+
+def __getattr__(name):
+    # the version is read when asked for (robocal._metadata: cached), not on every import
+    if name == "__version__":
+        from robocal._metadata import version
+
+        return version()
+    raise AttributeError(f"module 'robocal' has no attribute {name!r}")
