@@ -131,10 +131,11 @@ def run_odometry(args) -> int:
     show = not args.no_progress
     tick = _stages("flow odometry: read, judge, fuse; report", 2, show)
     tick()
-    reference = read_reference(spec)
+    # the reference (and the wheel log, the inputs' hashes) are read beside the kernel (workflow.odometry_run)
     od, flows, steps = odometry_run(spec, config=flow_config(opts, spec), allow_missing=args.allow_missing,
                                     robust=not args.no_robust, method=args.integration, progress=_progress(show),
-                                    accept_implausible=args.accept_implausible, reference=reference)
+                                    accept_implausible=args.accept_implausible)
+    reference = read_reference(spec)
     od.warnings.extend(getattr(spec, "warnings", ()))  # a recording's clock_mismatch
     tick()
     write_poses_csv(out / "trajectory.csv", od.t, od.poses, comment=f"flow odometry of {spec.path.name}")
@@ -180,9 +181,9 @@ def run_evaluate(args) -> int:
     show = not args.no_progress
     tick = _stages("flow evaluate: read, judge, fuse; evaluate, report", 2, show)
     tick()
-    reference = read_reference(spec)
     od, _, steps = odometry_run(spec, config=flow_config(opts, spec), progress=_progress(show),
-                                accept_implausible=args.accept_implausible, reference=reference)
+                                accept_implausible=args.accept_implausible)
+    reference = read_reference(spec)      # read beside the kernel
     cal_od = None
     if args.array is not None:
         arr = SensorArray.from_document(load_document(args.array))

@@ -35,23 +35,15 @@ RPE_HEADLINE = 0.5
 RPE_FRACTIONS = (0.1, 0.25, 0.5)
 
 
-def _se2(p):
-    c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
-    T = np.zeros(p.shape[:-1] + (3, 3))
-    T[..., 0, 0], T[..., 0, 1], T[..., 1, 0], T[..., 1, 1] = c, -s, s, c
-    T[..., 0, 2], T[..., 1, 2], T[..., 2, 2] = p[..., 0], p[..., 1], 1.0
-    return T
+def _relative(p, c, s, i, j):
+    """Relative motions ``P_i^-1 P_j`` of planar poses ``p (N, 3)`` (``c, s``: cos, sin of their headings):
+    the translation in frame ``i`` ``(K, 2)`` and the rotation ``(K,)``, rad (not wrapped).
 
-
-def _se2_inv(T):
-    """Inverse of homogeneous SE(2) matrices ``(..., 3, 3)``: ``[R^T, -R^T t]`` (a general LU inverse of
-    each 3x3 was 2/3 of the RPE's time on a 30 s, 400 Hz run)."""
-    Ri = np.swapaxes(T[..., :2, :2], -1, -2)
-    out = np.zeros_like(T)
-    out[..., :2, :2] = Ri
-    out[..., :2, 2] = -np.einsum("...ij,...j->...i", Ri, T[..., :2, 2])
-    out[..., 2, 2] = 1.0
-    return out
+    In closed form, ``R(-theta_i) (t_j - t_i)`` and ``theta_j - theta_i``, instead of products of 3x3
+    homogeneous matrices: 6x less time on a 30 s, 400 Hz run and equal to rounding."""
+    d = p[j, :2] - p[i, :2]
+    ci, si = c[i], s[i]
+    return np.stack([ci * d[:, 0] + si * d[:, 1], ci * d[:, 1] - si * d[:, 0]], axis=1), p[j, 2] - p[i, 2]
 
 
 def align_trajectory(est, ref):
@@ -151,7 +143,7 @@ def rpe_per_distance(est, ref, lengths=(0.5, 1.0)):
     est = np.asarray(est, float)
     ref = np.asarray(ref, float)
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(ref[:, :2], axis=0), axis=1))])
-    Te, Tr = _se2(est), _se2(ref)
+    ce, se, cr, sr = np.cos(est[:, 2]), np.sin(est[:, 2]), np.cos(ref[:, 2]), np.sin(ref[:, 2])
     out = {}
     for L in lengths:
         j = np.searchsorted(s, s + L)
@@ -162,11 +154,12 @@ def rpe_per_distance(est, ref, lengths=(0.5, 1.0)):
                              "note": f"no segment of {L:g} m: the reference travels {s[-1]:.3f} m"}
             continue
         j = j[ok]
-        Qrel = _se2_inv(Tr[i]) @ Tr[j]
-        Prel = _se2_inv(Te[i]) @ Te[j]
-        E = _se2_inv(Qrel) @ Prel
-        te = np.linalg.norm(E[:, :2, 2], axis=1)
-        re = np.abs(np.arctan2(E[:, 1, 0], E[:, 0, 0]))
+        dq, aq = _relative(ref, cr, sr, i, j)
+        dp, ap = _relative(est, ce, se, i, j)
+        # E = Q_rel^-1 P_rel: its translation R(-aq) (dp - dq) has the norm of dp - dq; its rotation ap - aq
+        te = np.hypot(dp[:, 0] - dq[:, 0], dp[:, 1] - dq[:, 1])
+        da = ap - aq
+        re = np.abs(np.arctan2(np.sin(da), np.cos(da)))
         seg = s[j] - s[i]
         out[float(L)] = {
             "trans_rmse": float(np.sqrt(np.mean(te**2))),

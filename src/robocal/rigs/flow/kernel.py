@@ -55,6 +55,14 @@ _COMPILED = ("_aggregate_frames", "_interp3", "_lk_refine", "_refine_bilinear", 
 #: ``c`` (the C extension; an error when it was not built) or ``numba``
 KERNEL_ENV = "ROBOCAL_FLOW_KERNEL"
 
+#: environment variable capping the C kernel's threads (a positive integer; ``1``: the calling thread only).
+#: Unset: one thread per CPU this process may run on (``os.sched_getaffinity``)
+THREADS_ENV = "ROBOCAL_FLOW_THREADS"
+
+#: fewest frame pairs a thread of the C kernel gets (~2 ms of work at ~140k pairs/s a core): below that,
+#: handing work to another thread costs more than it saves, so a single pair never leaves the caller's thread
+MIN_PAIRS_PER_THREAD = 256
+
 
 def __getattr__(name):
     if name in _COMPILED:
@@ -103,6 +111,56 @@ def kernel_backend() -> str:
     return "c"
 
 
+def kernel_threads() -> int:
+    """How many threads the C kernel may use: ``$ROBOCAL_FLOW_THREADS`` when set, else the CPUs this process
+    may run on (its affinity mask, which a container or ``taskset`` narrows; ``os.cpu_count()`` where the
+    system has no such mask). The numba fallback runs in the caller's thread."""
+    v = os.environ.get(THREADS_ENV, "").strip()
+    if v:
+        try:
+            n = int(v)
+        except ValueError:
+            n = 0
+        if n < 1:
+            raise InputError(f"${THREADS_ENV} must be a positive integer (1: no extra threads), got {v!r}")
+        return n
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):      # not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+_POOL = None            # (workers, ThreadPoolExecutor), made on first use
+
+
+def _chunked(n: int, run) -> None:
+    """``run(start, stop)`` over ``0 .. n`` in contiguous chunks, on up to :func:`kernel_threads` threads.
+
+    Every frame pair (and every frame's aggregation) is computed alone, from its own inputs into its own
+    output rows, so the chunks give the same bits as one call (tests/rigs/flow/test_flow_threads.py).
+    ``run`` must release the GIL (the C kernel's loops do, ``Py_BEGIN_ALLOW_THREADS``): the caller's
+    thread takes the first chunk, a shared pool the others.
+    """
+    global _POOL
+    k = min(kernel_threads(), -(-n // MIN_PAIRS_PER_THREAD))
+    if k <= 1:
+        run(0, n)
+        return
+    if _POOL is None or _POOL[0] < k - 1:
+        from concurrent.futures import ThreadPoolExecutor
+
+        if _POOL is not None:
+            _POOL[1].shutdown(wait=False)
+        _POOL = (k - 1, ThreadPoolExecutor(max_workers=k - 1, thread_name_prefix="robocal-flow"))
+    edges = [n * i // k for i in range(k + 1)]
+    futures = [_POOL[1].submit(run, edges[i], edges[i + 1]) for i in range(1, k)]
+    try:
+        run(edges[0], edges[1])
+    finally:
+        for f in futures:
+            f.result()
+
+
 def kernel_name() -> str:
     """:func:`kernel_backend` as a run records it: ``"c (avx2)"`` (x86-64 with AVX2: the loader picked the
     kernel's AVX2 copy), ``"c (sse2)"``, ``"c (portable)"`` (the C kernel without SIMD intrinsics: not x86)
@@ -128,6 +186,7 @@ __all__ = [
     "SIGMA_PX",
     "kernel_backend",
     "kernel_name",
+    "kernel_threads",
 ]
 
 _BATCH = 256  # frame pairs per kernel call: large enough to fill SIMD lanes, small enough for L2
@@ -234,11 +293,17 @@ def _match_indexed(prev, curr, pidx, cidx, config: FlowConfig) -> BlockMatches:
     centres = (np.stack([xs, ys], axis=1) + (config.block - 1) / 2.0).astype(float)
     if kernel_backend() == "c":
         # natural layout, no batches: the C kernel reads each pair where it lies (a memory map too)
+        match, p0, c0 = _flowc().match, int(pidx[0]) if n else 0, int(cidx[0]) if n else 0
+        ys64, xs64 = ys.astype(np.int64), xs.astype(np.int64)
+        args = (config.window, config.block, config.search, ys64, xs64, float(config.feature_threshold),
+                float(config.sad_limit), float(config.min_distinctness), mode)
+
+        def run(s, e):
+            match(prev, curr, p0 + s, c0 + s, e - s, *args, flow[s:e], status[s:e], sad_min[s:e], distinct[s:e],
+                  texture[s:e])
+
         if n:
-            _flowc().match(prev, curr, int(pidx[0]), int(cidx[0]), n, config.window, config.block, config.search,
-                           ys.astype(np.int64), xs.astype(np.int64), float(config.feature_threshold),
-                           float(config.sad_limit), float(config.min_distinctness), mode,
-                           flow, status, sad_min, distinct, texture)
+            _chunked(n, run)
         return BlockMatches(flow, status, sad_min, distinct, centres, texture)
     import cv2
 
@@ -360,8 +425,15 @@ def _aggregate(bm: BlockMatches, config: FlowConfig):
     cen = bm.centres - (config.window - 1) / 2.0
     mode = {"mean": 0, "median": 1, "trimmed": 2, "tensor": 2}[config.aggregate]
     if kernel_backend() == "c":
-        _flowc().aggregate(np.ascontiguousarray(bm.flow), np.ascontiguousarray(bm.status), np.ascontiguousarray(cen),
-                           n, nb, mode, float(config.trim_px), used, flow, agreement, spread, centroid)
+        bflow, status, cen = np.ascontiguousarray(bm.flow), np.ascontiguousarray(bm.status), np.ascontiguousarray(cen)
+        aggregate, trim = _flowc().aggregate, float(config.trim_px)
+
+        def run(s, e):
+            aggregate(bflow[s:e], status[s:e], cen, e - s, nb, mode, trim, used[s:e], flow[s:e], agreement[s:e],
+                      spread[s:e], centroid[s:e])
+
+        if n:
+            _chunked(n, run)
         return n_acc, used, flow, agreement, spread, centroid
     from robocal.rigs.flow.kernel_compiled import _aggregate_frames
 

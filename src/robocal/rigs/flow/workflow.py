@@ -17,7 +17,8 @@ import yaml
 
 from robocal.diagnostics import Diagnostic
 from robocal.errors import InputError
-from robocal.io import CalibrationResult, atomic_write_text, hash_inputs
+from robocal.io import CalibrationResult, atomic_write_text
+from robocal.rigs.flow import background
 from robocal.rigs.flow.calibrate import array_estimate, calibrate_array, interpolate_poses
 from robocal.rigs.flow.evaluate import evaluate_trajectory
 from robocal.rigs.flow.kernel import FlowConfig, compute_flow_sequence, kernel_name, speed_limit
@@ -30,7 +31,7 @@ from robocal.rigs.flow.report import compare_text, display, plot_series, systema
 
 __all__ = ["write_simulation", "judge_run", "odometry_run", "calibration_run", "evaluation_run", "array_yaml",
            "mounted_array", "calibrate_input", "calibration_result", "odometry_result", "evaluation_result",
-           "summary", "trajectory_curves", "frames_table", "read_reference", "load_input", "KERNEL_OPTIONS", "flow_config",
+           "summary", "trajectory_curves", "frames_table", "read_reference", "read_wheel", "load_input", "KERNEL_OPTIONS", "flow_config",
            "check_kernel_options"]
 
 #: The kernel's options (``--subpixel`` ...): they act on raw frames only.
@@ -58,10 +59,18 @@ def check_kernel_options(options: dict, spec: RunSpec) -> None:
 
 def read_reference(spec: RunSpec):
     """The run's reference trajectory ``(t, poses)``, or None when it names none (read once per command:
-    1.5 s per 10^5 rows in the core CSV loader)."""
+    0.2 s per 10^5 rows in the core CSV loader; read beside the kernel when :func:`odometry_run` or
+    :func:`calibration_run` started it, :mod:`robocal.rigs.flow.background`)."""
     if getattr(spec, "reference_data", None) is not None:  # a recording's reference topic (robocal.rigs.flow.bag)
         return spec.reference_data
-    return None if spec.reference is None else read_poses_csv(spec.reference)
+    if spec.reference is None:
+        return None
+    return background.collect(spec, "reference", lambda: read_poses_csv(spec.reference))
+
+
+def read_wheel(spec: RunSpec):
+    """The run's wheel odometry ``(t, poses)`` (the run must name one), read beside the kernel when started."""
+    return background.collect(spec, "wheel", lambda: read_poses_csv(spec.wheel))
 
 
 def mounted_array() -> SensorArray:
@@ -174,6 +183,8 @@ def odometry_run(spec: RunSpec, *, config: FlowConfig | None = None, array: Sens
     ``reference``: the run's ``(t, poses)`` when already read.
     """
     config = config or FlowConfig(window=spec.window)
+    # the inputs' hashes and the trajectories are read while the kernel runs (they do not depend on it)
+    background.start(spec, background.JOBS if reference is None else ("inputs", "wheel"))
     steps, flows = load_steps(spec, config, allow_missing=allow_missing, progress=progress)
     judged = judge_run(spec, steps, config, allow_missing=allow_missing, accept_implausible=accept_implausible,
                        reference=reference)
@@ -217,7 +228,7 @@ def evaluation_run(spec: RunSpec, od: Odometry, *, calibrated: Odometry | None =
         curves["flow odometry (calibrated)"] = calibrated.poses
         errors["flow odometry (calibrated)"] = evaluate_trajectory(calibrated.poses, ref)
     if spec.wheel is not None:
-        t_w, p_w = read_poses_csv(spec.wheel)
+        t_w, p_w = read_wheel(spec)
         wheel = _interp(spec.wheel, t_w, p_w, od.t)
         curves["wheel odometry"] = wheel
         errors["wheel odometry"] = evaluate_trajectory(wheel, ref)
@@ -228,7 +239,7 @@ def trajectory_curves(spec: RunSpec, od: Odometry) -> dict:
     """The trajectories of a run without a reference: flow odometry, and wheel odometry when logged."""
     curves = {"flow odometry": od.poses}
     if spec.wheel is not None:
-        t_w, p_w = read_poses_csv(spec.wheel)
+        t_w, p_w = read_wheel(spec)
         curves["wheel odometry"] = _interp(spec.wheel, t_w, p_w, od.t)
     return curves
 
@@ -240,6 +251,7 @@ def calibration_run(spec: RunSpec, *, config: FlowConfig | None = None, window: 
         raise InputError(f"{spec.path}: calibration needs a 'reference' trajectory file (t, x, y, theta)")
     config = config or FlowConfig(window=spec.window)
     nominal = spec.array.copy(scale=np.ones(spec.array.n))
+    background.start(spec, ("inputs", "reference"))
     steps, flows = load_steps(spec, config, progress=progress)
     reference = t_ref, p_ref = read_reference(spec)
     _interp(spec.reference, t_ref, p_ref, steps.t)          # coverage, with the file named
@@ -314,7 +326,7 @@ def calibration_result(cal, spec: RunSpec | None = None, *, method: str = "windo
         std={k: cal.std.get(k) for k in keys}, units=cal.units(),
         residual_rms=cal.residual_rms, residual_unit="m",
         warnings=list(cal.warnings) + list(getattr(spec, "warnings", ())),  # a recording's clock_mismatch
-        inputs=hash_inputs(spec.inputs()) if spec is not None else {}, diagnostics=diag)
+        inputs=background.inputs_hash(spec) if spec is not None else {}, diagnostics=diag)
 
 
 def summary(result: CalibrationResult) -> str:
@@ -370,7 +382,7 @@ def odometry_result(od: Odometry, spec: RunSpec, errors: dict | None = None, *, 
     diag["plots"] = plot_series(od, steps, spec.array.names, curves)
     return CalibrationResult(rig="flow", method="multi-sensor-lsq", estimate=est, units=units,
                              std={"final_pose": None}, warnings=list(od.warnings),
-                             inputs=hash_inputs(spec.inputs()), diagnostics=diag)
+                             inputs=background.inputs_hash(spec), diagnostics=diag)
 
 
 def evaluation_result(od: Odometry, spec: RunSpec, curves: dict, errors: dict,
@@ -380,7 +392,7 @@ def evaluation_result(od: Odometry, spec: RunSpec, curves: dict, errors: dict,
     diag = {"evaluation": {k: v.to_dict() for k, v in errors.items()}, "plots": plot_series(curves=curves)}
     return CalibrationResult(rig="flow", method="ate-rpe", estimate={f"{k} ATE": v.ate_rmse for k, v in errors.items()},
                              units={f"{k} ATE": "m" for k in errors}, warnings=warnings,
-                             inputs=hash_inputs(spec.inputs()), diagnostics=diag)
+                             inputs=background.inputs_hash(spec), diagnostics=diag)
 
 
 def speed_ceiling(config: FlowConfig, height: float, rate: float, focal_px: float) -> float:
