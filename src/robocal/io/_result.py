@@ -49,7 +49,7 @@ from robocal.errors import FileFormatError
 from robocal.io._atomic import atomic_write_text, sha256_file
 
 __all__ = ["SCHEMA", "READABLE_SCHEMAS", "CalibrationResult", "PoseEstimate", "to_jsonable", "write_result",
-           "load_result", "hash_inputs", "set_command_line"]
+           "load_result", "hash_inputs", "set_command_line", "json_text"]
 
 SCHEMA = "robocal.result/2"
 #: Older schemas :func:`load_result` still reads.
@@ -266,8 +266,73 @@ def write_result(path, result: CalibrationResult) -> Path:
     if path.suffix.lower() in (".yaml", ".yml"):
         text = yaml.safe_dump(d, sort_keys=False, allow_unicode=True)
     else:
-        text = json.dumps(d, indent=2, allow_nan=False) + "\n"
+        text = json_text(d)
     return atomic_write_text(path, text)
+
+
+_SCALARS = (str, int, float, bool, type(None))
+_NUMBERS = (int, float, bool, type(None))
+_ENCODER = json.JSONEncoder(allow_nan=False)  # one encoder: json.dumps(..., allow_nan=False) builds one per call
+
+
+def _key_text(k) -> str:
+    """A dict key as :func:`json.dumps` writes it (non-string keys become strings the same way)."""
+    if not isinstance(k, str):
+        k = _ENCODER.encode(k) if isinstance(k, _NUMBERS) else k
+        if not isinstance(k, str):
+            raise TypeError(f"keys must be str, int, float, bool or None, not {type(k).__name__}")
+    return _ENCODER.encode(k)
+
+
+def json_text(obj, *, indent: int = 2) -> str:
+    """``obj`` as JSON text: objects indented, a list of scalars on one line, a matrix one row a line.
+
+    ``json.dumps(obj, indent=2)`` puts every number of an array on its own
+    line and, with ``indent``, runs CPython's pure-Python encoder: a flow
+    result's plotted series (half a megabyte) took ~30 ms and read as a
+    column of numbers. Here each flat list, and each matrix of numbers, is
+    handed to the C encoder whole, so the text is half as long, written
+    several times faster, and ``json.loads`` gives back exactly what
+    ``json.dumps`` would (numbers keep ``repr``'s shortest round-trip digits;
+    NaN and infinity are refused as before: ``ValueError``).
+    """
+    parts: list[str] = []
+    _emit(obj, 0, indent, parts)
+    return "".join(parts) + "\n"
+
+
+def _emit(obj, level: int, indent: int, out: list) -> None:
+    pad = " " * (indent * (level + 1))
+    if isinstance(obj, dict):
+        if not obj:
+            out.append("{}")
+            return
+        out.append("{")
+        sep = "\n"
+        for k, v in obj.items():
+            out.append(sep + pad + _key_text(k) + ": ")
+            sep = ",\n"
+            _emit(v, level + 1, indent, out)
+        out.append("\n" + " " * (indent * level) + "}")
+    elif isinstance(obj, (list, tuple)):
+        if all(isinstance(x, _SCALARS) for x in obj):
+            out.append(_ENCODER.encode(obj))  # [] too
+        elif all(isinstance(r, (list, tuple)) and all(isinstance(x, _NUMBERS) for x in r) for r in obj):
+            # rows of numbers: "], [" occurs only between rows (no strings inside), so the
+            # whole matrix goes through the C encoder once and is then cut into lines
+            text = _ENCODER.encode(obj)
+            out.append("[\n" + pad + text[1:-1].replace("], [", "],\n" + pad + "[")
+                       + "\n" + " " * (indent * level) + "]")
+        else:
+            out.append("[")
+            sep = "\n"
+            for v in obj:
+                out.append(sep + pad)
+                sep = ",\n"
+                _emit(v, level + 1, indent, out)
+            out.append("\n" + " " * (indent * level) + "]")
+    else:
+        out.append(_ENCODER.encode(obj))
 
 
 def load_result(path, *, allow_incomplete: bool = False) -> CalibrationResult:
