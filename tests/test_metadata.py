@@ -66,6 +66,17 @@ def test_the_cache_is_used_while_its_key_holds_and_rebuilt_when_it_changes(cache
     assert json.loads(path.read_text())["version"] == _truth()[1]  # rewritten
 
 
+def test_files_written_in_the_current_folder_do_not_invalidate_the_cache(tmp_path, monkeypatch):
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    monkeypatch.setattr(sys, "path", [str(work), *sys.path])  # what `python -m robocal` puts first
+    before = md._key([])
+    (work / "out").mkdir()  # a command's --out folder
+    assert md._key([]) == before
+    assert str(work) not in json.dumps(before)
+
+
 @pytest.mark.parametrize("text", ["", "{not json", "[]", '{"schema": "robocal.metadata-cache/1"}',
                                   '{"schema": "robocal.metadata-cache/1", "version": 3, "rigs": [], "files": [], "key": []}'])
 def test_a_corrupt_cache_is_rebuilt(cache_dir, text):

@@ -9,9 +9,10 @@ flow command's start-up budget (issue 16: < 0.3 s). So the answer is kept in
 a small JSON cache beside the user's other caches and reused while nothing it
 was read from has changed.
 
-The cache's key is the modification time of every ``sys.path`` entry (pip
-installing or removing any distribution creates or deletes a ``*.dist-info``
-folder there, which changes the folder's time) and of each providing
+The cache's key is the modification time of every ``sys.path`` folder but
+the current one (pip installing or removing any distribution creates or
+deletes a ``*.dist-info`` folder there, which changes the folder's time) and
+of each providing
 distribution's ``entry_points.txt``. A missing, unreadable, corrupt or stale
 cache is rebuilt from ``importlib.metadata``; a cache folder that cannot be
 written is ignored. Set ``ROBOCAL_CACHE_DIR`` to move it, or
@@ -77,8 +78,19 @@ def _mtime(path: str) -> int | None:
 
 
 def _key(files) -> list:
-    """What the answer was read from, with modification times: equal keys, equal answers."""
-    return [[p, _mtime(p)] for p in (*sys.path, *files)]
+    """What the answer was read from, with modification times: equal keys, equal answers.
+
+    The current folder, which ``python -m``/``-c`` put first on ``sys.path``,
+    is left out: its time changes with every ``--out`` folder a command makes
+    there (each ``python -m robocal`` run would rebuild the cache), and a rig
+    is registered by installing it, never by a ``*.dist-info`` in the folder
+    a command is run from.
+    """
+    try:
+        here = os.getcwd() if sys.path[:1] != [""] else ""
+    except OSError:  # the current folder was deleted
+        here = ""
+    return [[p, _mtime(p)] for p in (*sys.path, *files) if p != here]
 
 
 def _read_metadata() -> dict:

@@ -76,8 +76,25 @@ def to_jsonable(obj: Any) -> Any:
     if isinstance(obj, dict):
         return {str(k): to_jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
+        # a flat list of Python numbers (a plotted series) in C loops, not a call per number: when
+        # its sum is finite every term is (a finite sum that overflowed takes the general path)
+        if obj and all(type(v) is float or type(v) is int for v in obj):
+            try:
+                if math.isfinite(sum(obj)):
+                    return list(obj)
+            except OverflowError:  # an int beyond any float beside a float
+                pass
         return [to_jsonable(v) for v in obj]
     if isinstance(obj, np.ndarray):
+        if obj.dtype.kind in "iub":
+            return obj.tolist()
+        if obj.dtype.kind == "f":
+            finite = np.isfinite(obj)
+            if finite.all():
+                return obj.tolist()
+            out = obj.astype(object)
+            out[~finite] = None
+            return out.tolist()
         return to_jsonable(obj.tolist())
     if isinstance(obj, (np.floating, float)):
         val = float(obj)
