@@ -10,7 +10,7 @@ a small JSON cache beside the user's other caches and reused while nothing it
 was read from has changed.
 
 The cache's key is the modification time of every ``sys.path`` folder but
-the current one (pip installing or removing any distribution creates or
+the script's or current one (pip installing or removing any distribution creates or
 deletes a ``*.dist-info`` folder there, which changes the folder's time) and
 of each providing
 distribution's ``entry_points.txt``. A missing, unreadable, corrupt or stale
@@ -57,8 +57,8 @@ _memo: dict | None = None  # this process's answer: read once
 def cache_path() -> Path | None:
     """Where the cache lives (None when ``ROBOCAL_NO_CACHE`` is set).
 
-    One file per interpreter (``sys.prefix`` + executable): two virtual
-    environments never share an answer.
+    One file per environment and Python (``sys.prefix`` + ``sys.version``):
+    two virtual environments never share an answer.
     """
     if os.environ.get("ROBOCAL_NO_CACHE", "").strip() not in ("", "0"):
         return None
@@ -66,7 +66,8 @@ def cache_path() -> Path | None:
         os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "robocal")
     import zlib  # a stable name across runs (``hash`` is salted per process)
 
-    tag = zlib.crc32(f"{sys.prefix}\0{sys.executable}\0{sys.version}".encode("utf-8", "surrogateescape"))
+    # not sys.executable: the launcher's shebang names bin/python3.11 where a shell says bin/python
+    tag = zlib.crc32(f"{sys.prefix}\0{sys.version}".encode("utf-8", "surrogateescape"))
     return Path(root) / f"metadata-{tag:08x}.json"
 
 
@@ -80,17 +81,16 @@ def _mtime(path: str) -> int | None:
 def _key(files) -> list:
     """What the answer was read from, with modification times: equal keys, equal answers.
 
-    The current folder, which ``python -m``/``-c`` put first on ``sys.path``,
-    is left out: its time changes with every ``--out`` folder a command makes
-    there (each ``python -m robocal`` run would rebuild the cache), and a rig
-    is registered by installing it, never by a ``*.dist-info`` in the folder
-    a command is run from.
+    ``sys.path[0]`` is left out: Python puts there the folder of the script
+    that runs (the ``robocal`` launcher's ``bin/``) or the current folder
+    (``python -m``/``-c``), which differ between two ways of running the same
+    install (each would rebuild the cache for the other), and the current
+    folder's time changes with every ``--out`` folder a command makes there.
+    A rig is registered by installing it into an environment, never by a
+    ``*.dist-info`` beside a script or in the folder a command is run from.
     """
-    try:
-        here = os.getcwd() if sys.path[:1] != [""] else ""
-    except OSError:  # the current folder was deleted
-        here = ""
-    return [[p, _mtime(p)] for p in (*sys.path, *files) if p != here]
+    paths = sys.path if getattr(sys.flags, "safe_path", False) else sys.path[1:]
+    return [[p, _mtime(p)] for p in (*paths, *files)]
 
 
 def _read_metadata() -> dict:
