@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import os
 import threading
-from concurrent.futures import Future
 
 from robocal.io import hash_inputs
 
@@ -27,23 +26,33 @@ __all__ = ["start", "collect", "inputs_hash", "JOBS"]
 #: what :func:`start` starts by default: the inputs' hashes, the reference and the wheel trajectories
 JOBS = ("inputs", "reference", "wheel")
 
-_ATTR = "_robocal_background"       # where a spec keeps its jobs: {name: (stamp, Future)}
+_ATTR = "_robocal_background"       # where a spec keeps its jobs: {name: (stamp, _Job)}
 
 
-def _in_thread(fn, arg) -> Future:
-    """``fn(arg)`` in a daemon thread (an error exit does not wait for a hash nobody will read)."""
-    fut: Future = Future()
+class _Job:
+    """``fn(arg)`` in a daemon thread (an error exit does not wait for a hash nobody will read); ``result()``
+    waits for it and returns its value or raises its exception. (Not :mod:`concurrent.futures`: importing
+    it is 7 ms of the command's fixed cost, for the three lines used here.)"""
 
-    def work():
-        if not fut.set_running_or_notify_cancel():
-            return
-        try:
-            fut.set_result(fn(arg))
-        except BaseException as exc:  # handed to whoever collects it
-            fut.set_exception(exc)
+    def __init__(self, fn, arg):
+        self._done = threading.Event()
+        self._value = self._error = None
 
-    threading.Thread(target=work, name=f"robocal-flow-{getattr(fn, '__name__', 'job')}", daemon=True).start()
-    return fut
+        def work():
+            try:
+                self._value = fn(arg)
+            except BaseException as exc:  # handed to whoever collects it
+                self._error = exc
+            finally:
+                self._done.set()
+
+        threading.Thread(target=work, name=f"robocal-flow-{getattr(fn, '__name__', 'job')}", daemon=True).start()
+
+    def result(self):
+        self._done.wait()
+        if self._error is not None:
+            raise self._error
+        return self._value
 
 
 def _stamp(paths) -> tuple:
@@ -85,7 +94,7 @@ def start(spec, jobs=JOBS) -> None:
         stamp = _stamp(paths)
         if name in store and store[name][0] == stamp:
             continue
-        store[name] = (stamp, _in_thread(fn, arg))
+        store[name] = (stamp, _Job(fn, arg))
 
 
 def collect(spec, name, compute):
