@@ -30,7 +30,6 @@ from robocal.cli._batch import add_batch_command
 from robocal.cli._workflow import add_report_command, add_workflow_commands
 from robocal.errors import InputError, RobocalError
 from robocal.io import CommandRun, preflight, set_command_line, write_result
-from robocal.report import Report
 from robocal.workflow import seed_value
 
 __all__ = ["main", "build_parser", "run_demo"]
@@ -117,6 +116,8 @@ def run_demo(args, rigs) -> int:
     # after the rigs, a small fleet of the cheapest one through robocal batch (robocal.batch._demo)
     from robocal.batch._demo import fleet_demo_workflows
     chosen = chosen + fleet_demo_workflows(chosen)
+    from robocal.report import Report  # the demo's page; no other command needs it at start-up
+
     out = prepare_out_dir(args.out, "demo")
     report = Report("robocal demo", subtitle=f"seed {args.seed}; rigs: {', '.join(r.name for r in chosen) or 'none'}")
     overview = report.section("Summary")
