@@ -271,7 +271,8 @@ def command(duration=30.0, folder=None):
         return exe + ["flow", "odometry", str(folder / "run.yaml"), "--no-progress", *extra,
                       "--out", str(base / f"out{next(outs)}")]
 
-    _child_cpu(odo(run, "--no-report"), repeats=1)                 # warm-up: page cache, numba's cache
+    _child_cpu(odo(run, "--no-report"), repeats=1,                 # warm-up: page cache, .pyc files
+               env={k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"})
     one = {K.THREADS_ENV: "1"}
     rows = []
     for label, argv, secs, extra in (
@@ -288,7 +289,9 @@ def command(duration=30.0, folder=None):
             ("floor: python -c 'import robocal.cli.main' (Python, NumPy, PyYAML, the CLI)",
              [_sys.executable, "-c", "import robocal.cli.main"], None, {}),
             ("python -c pass", [_sys.executable, "-c", "pass"], None, {})):
-        env = {k: v for k, v in os.environ.items() if k not in (K.THREADS_ENV, K.KERNEL_ENV)}
+        # PYTHONDONTWRITEBYTECODE (set in some sandboxes) would recompile every changed module in every run: an
+        # install has its .pyc files (the warm-up writes them here)
+        env = {k: v for k, v in os.environ.items() if k not in (K.THREADS_ENV, K.KERNEL_ENV, "PYTHONDONTWRITEBYTECODE")}
         env.update(extra)
         if K.KERNEL_ENV in extra:
             _child_cpu(argv, repeats=1, env=env)        # warm-up: numba's cache
