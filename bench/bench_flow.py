@@ -18,7 +18,7 @@ in the C-peer table, the numba fallback too (``ROBOCAL_FLOW_KERNEL``).
 The kernel tables are per core: CPU seconds of this process (``time.process_time``, best of several
 repeats) with the C kernel on one thread (``ROBOCAL_FLOW_THREADS=1``), as OpenCV and numba here. The
 ``--command`` table gives what the user waits, wall seconds (the kernel on its threads, the hashing
-and reading beside it), and the CPU seconds beside them; each the least of 3 runs.
+and reading beside it), and the CPU seconds beside them; each the least of 5 runs.
 """
 
 from __future__ import annotations
@@ -225,13 +225,17 @@ def _child_cpu(argv, repeats=3, **kw):
     return min(cpus), min(walls)
 
 
+#: runs of each --command figure (the least is kept: the machine is shared)
+REPEATS = 5
+
+
 def command(duration=30.0, folder=None):
     """``robocal flow odometry`` on a ``duration`` s, 3-sensor, 400 Hz frames log (the simulator's, written
     in ``folder`` or a temporary one): CPU seconds of the command and real-time factors, the same log
     compressed (the pre-0.2 format), the fixed cost (the same command on 0.1 s of that log), the
     floor under it (Python + NumPy + PyYAML + the CLI), and the library from files and from memory, with
     the kernel on its threads and on one. Every figure is the least wall time and the least CPU time
-    (user + sys, all threads) of 3 runs after a warm-up; the real-time factor is ``duration / wall s``
+    (user + sys, all threads) of :data:`REPEATS` runs after a warm-up; the real-time factor is ``duration / wall s``
     (what the user waits), by CPU beside it."""
     import shutil
     import sys as _sys
@@ -295,7 +299,7 @@ def command(duration=30.0, folder=None):
         env.update(extra)
         if K.KERNEL_ENV in extra:
             _child_cpu(argv, repeats=1, env=env)        # warm-up: numba's cache
-        cpu, wall = _child_cpu(argv, env=env)
+        cpu, wall = _child_cpu(argv, repeats=REPEATS, env=env)
         rows.append((label, cpu, wall, secs))
 
     # the library, in this process (imports and numba's cache already loaded); a fresh RunSpec each run:
@@ -321,10 +325,10 @@ def command(duration=30.0, folder=None):
         else:
             os.environ.pop(K.THREADS_ENV, None)
         from_files()
-        lib[threads] = (_times(from_files), _times(in_memory))
+        lib[threads] = (_times(from_files, REPEATS), _times(in_memory, REPEATS))
     os.environ.pop(K.THREADS_ENV, None)
     print(f"{duration:g} s log, 3 sensors x 400 Hz, 64x64 frames ({(run / 'frames.npz').stat().st_size / 1e6:.0f} MB); "
-          f"least of 3 runs after a warm-up (wall and CPU separately; CPU = user + sys of all threads); flow kernel: "
+          f"least of {REPEATS} runs after a warm-up (wall and CPU separately; CPU = user + sys of all threads); flow kernel: "
           f"{K.kernel_name()} on {K.kernel_threads()} thread(s)\n")
     print("| what | wall s | x real time | CPU s | x real time by CPU |")
     print("|---|---:|---:|---:|---:|")
