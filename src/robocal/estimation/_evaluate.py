@@ -157,6 +157,11 @@ class Evaluator:
         if jac != "analytic" and density < 0.5:
             self._fd_sparsity = (self.structure, group_columns(self.structure))
         self.density = density
+        # one term over every block in order, no ties: its Jacobian is the full one as it is (no zero-filled
+        # assembly, no fold; issue 16: a small problem's evaluation is mostly that overhead)
+        self._single = (len(terms) == 1 and not layout.tied
+                        and (terms[0].blocks is None or list(terms[0].blocks) == list(self._blocks)))
+        self._all_free = len(layout.free_full) == layout.n_full
         self.stage = "during the solve"
 
     # ----------------------------------------------------------- residuals
@@ -212,6 +217,8 @@ class Evaluator:
         """Stacked residuals divided by sigma, shape (m,)."""
         self.n_fun += 1
         params = self.params(x)
+        if len(self.terms) == 1:
+            return self._term_residuals(self.terms[0], params, self.term_info[0]).reshape(-1) / self.sigma
         parts = [self._term_residuals(t, params, info).reshape(-1) for t, info in zip(self.terms, self.term_info)]
         return np.concatenate(parts) / self.sigma
 
@@ -258,6 +265,19 @@ class Evaluator:
     def _analytic(self, x: np.ndarray):
         params = self.params(x)
         N = self.layout.n_full
+        if self._single and not self.sparse:
+            t, info = self.terms[0], self.term_info[0]
+            out = t.jacobian(params)
+            if not isinstance(out, Mapping) and not sp.issparse(out):
+                J = self._term_block(t, info, out, N, "(full matrix over its blocks)") / self.sigma[:, None]
+                if not np.isfinite(J).all():
+                    # the general path below words the error (term, residual, parameter)
+                    return self._analytic_general(params, N, t, out)
+                return J if self._all_free else J[:, self.layout.free_full]
+            return self._analytic_general(params, N, t, out)
+        return self._analytic_general(params, N)
+
+    def _analytic_general(self, params, N, first=None, first_out=None):
         dense = None if self.sparse else np.zeros((self.m, N))
         rows, cols, data = [], [], []
 
@@ -279,7 +299,7 @@ class Evaluator:
                 data.append(block[rr, cc])
 
         for t, info, tcols in zip(self.terms, self.term_info, self._cols):
-            out = t.jacobian(params)
+            out = first_out if t is first else t.jacobian(params)
             if isinstance(out, Mapping):
                 for name, val in out.items():
                     b = self._blocks.get(name)

@@ -9,8 +9,10 @@ not see, whatever the units.
 
 from __future__ import annotations
 
+import copy
+import functools
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -79,7 +81,13 @@ class Identifiability:
     def with_variance(self, residual_variance: float) -> "Identifiability":
         """Return a copy whose covariance is scaled to ``residual_variance``."""
         k = float(residual_variance) / self.residual_variance if self.residual_variance else np.nan
-        return replace(self, cov=self.cov * k, std=self.std * np.sqrt(k), residual_variance=float(residual_variance))
+        # a shallow copy with three fields set: dataclasses.replace re-runs __init__ over every field, a
+        # tenth of a small problem's analysis (issue 16)
+        new = copy.copy(self)
+        object.__setattr__(new, "cov", self.cov * k)
+        object.__setattr__(new, "std", self.std * np.sqrt(k))
+        object.__setattr__(new, "residual_variance", float(residual_variance))
+        return new
 
     def null_directions(self, *, min_component: float = 0.1, max_vectors: int = 3) -> list[str]:
         """Human-readable null-space directions, e.g. ``'+0.71 a -0.71 b'``.
@@ -125,6 +133,14 @@ class Identifiability:
                 )
             )
         return out
+
+
+@functools.lru_cache(maxsize=64)
+def _triu(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.triu_indices(n, 1)``, cached (read-only): every solve of one problem size asks for the same."""
+    iu, ju = np.triu_indices(n, 1)
+    iu.flags.writeable = ju.flags.writeable = False
+    return iu, ju
 
 
 def _svd_of(Js) -> tuple[np.ndarray, np.ndarray]:
@@ -235,36 +251,50 @@ def _analyze_checked(Jm, labels=None, *, residual_variance: float = 1.0, rank_to
     Js = Jm @ sp.diags_array(1.0 / d_safe) if sp.issparse(Jm) else Jm / d_safe
     s, V = _svd_of(Js)
     smax = s[0] if s.size else 0.0
-    rank = int(np.sum(s > rank_tol * smax)) if smax > 0 else 0
+    rank = int(np.count_nonzero(s > rank_tol * smax)) if smax > 0 else 0
     cond = float(smax / s[-1]) if s[-1] > 0 else float("inf")
 
     Vr, sr = V[:, :rank], s[:rank]
     cov_scaled = (Vr / sr**2) @ Vr.T
     V0 = V[:, rank:]
-    leverage = np.sum(V0**2, axis=1)
+    leverage = np.einsum("ij,ij->i", V0, V0)
     bad = leverage >= null_tol**2
     cov = residual_variance * cov_scaled / np.outer(d_safe, d_safe)
     vif = np.diag(cov_scaled).copy()
-    cov[bad, :] = np.nan
-    cov[:, bad] = np.nan
-    vif[bad] = np.nan
+    any_bad = bool(bad.any())
+    # (issue 16) the masks and sub-matrix copies only where a parameter is unidentifiable: on a small
+    # problem each of these NumPy calls costs as much as the SVD's share of a row
+    if any_bad:
+        cov[bad, :] = np.nan
+        cov[:, bad] = np.nan
+        vif[bad] = np.nan
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    std[bad] = np.nan
-    corr = np.full((n, n), np.nan)
-    g = np.flatnonzero(~bad)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cg = cov[np.ix_(g, g)] / np.outer(std[g], std[g])
-    # a parameter with zero variance (exact fit) is uncorrelated with the rest
-    cg = np.where(np.isfinite(cg), np.clip(cg, -1.0, 1.0), 0.0)
-    np.fill_diagonal(cg, 1.0)
-    corr[np.ix_(g, g)] = cg
+    if any_bad:
+        std[bad] = np.nan
+        g = np.flatnonzero(~bad)
+        covg, stdg = cov[np.ix_(g, g)], std[g]
+    else:
+        g, covg, stdg = np.arange(n), cov, std
+    if stdg.size and 0.0 < stdg.min() and stdg.max() < np.inf:          # NaN fails the first comparison
+        cg = np.minimum(np.maximum(covg / np.outer(stdg, stdg), -1.0), 1.0)
+    else:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cg = covg / np.outer(stdg, stdg)
+        # a parameter with zero variance (exact fit) is uncorrelated with the rest
+        cg = np.where(np.isfinite(cg), np.clip(cg, -1.0, 1.0), 0.0)
+    np.einsum("ii->i", cg)[:] = 1.0               # the diagonal (a view; np.fill_diagonal's checks cost more)
+    if any_bad:
+        corr = np.full((n, n), np.nan)
+        corr[np.ix_(g, g)] = cg
+    else:
+        corr = cg
 
-    iu, ju = np.triu_indices(len(g), 1)
+    iu, ju = _triu(len(g))
     vals = cg[iu, ju]
     top = np.argsort(-np.abs(vals), kind="stable")[:n_correlations]
-    pairs = [(labels[g[iu[k]]], labels[g[ju[k]]], float(vals[k])) for k in top]
+    pairs = [(labels[g[iu[k]]], labels[g[ju[k]]], float(vals[k])) for k in top.tolist()]
 
-    weak = tuple(labels[j] for j in range(n) if not bad[j] and vif[j] > weak_vif)
+    weak = tuple(labels[j] for j in np.flatnonzero(~bad & (vif > weak_vif)).tolist())
     return Identifiability(
         labels=labels,
         cov=cov,
@@ -273,7 +303,7 @@ def _analyze_checked(Jm, labels=None, *, residual_variance: float = 1.0, rank_to
         rank=rank,
         singular_values=s,
         condition_number=cond,
-        unidentifiable=tuple(labels[j] for j in np.flatnonzero(bad)),
+        unidentifiable=tuple(labels[j] for j in np.flatnonzero(bad).tolist()),
         null_space=V0,
         vif=vif,
         weakly_determined=weak,

@@ -47,7 +47,13 @@ def outlier_sigma(n_obs: int, family_p: float = OUTLIER_FAMILY_P) -> float:
     """
     if not (0.0 < family_p < 1.0):
         raise ValueError(f"family_p must be in (0, 1), got {family_p}")
-    return max(3.0, float(np.sqrt(2.0) * special.erfcinv(family_p / max(int(n_obs), 1))))
+    return _outlier_sigma(max(int(n_obs), 1), float(family_p))
+
+
+@functools.lru_cache(maxsize=256)
+def _outlier_sigma(n_obs: int, family_p: float) -> float:
+    # cached: a calibration's solves ask for the same few sizes (issue 16: ~5 us a call on small problems)
+    return max(3.0, float(np.sqrt(2.0) * special.erfcinv(family_p / n_obs)))
 
 
 def outlier_threshold(n_sigma: float, dim: int) -> float:

@@ -8,6 +8,8 @@ deficient, parameters named in every warning, and outliers by observation.
 
 from __future__ import annotations
 
+import functools
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -173,6 +175,14 @@ class _Tracker:
         return self.last_J.copy()  # SciPy 1.11/1.12 scale it in place too (see fun)
 
 
+@functools.lru_cache(maxsize=256)
+def _clip_constants(n_sigma: float, dim: int) -> tuple[float, float]:
+    """The clipping threshold ``t`` (chi-square(dim) quantile of the ``n_sigma`` tail) and the truncation
+    factor ``F_{d+2}(t) / F_d(t)`` (chi2.cdf, without scipy.stats); cached: every solve asks for the same few."""
+    t = outlier_threshold(n_sigma, dim)
+    return t, float(special.chdtr(dim + 2, t) / special.chdtr(dim, t))
+
+
 def _clipped_variance(q, dims, m, rank, n_sigma, max_iter=20, unique=None) -> float:
     """Residual variance by iterative n-sigma clipping of whole observations.
 
@@ -188,9 +198,8 @@ def _clipped_variance(q, dims, m, rank, n_sigma, max_iter=20, unique=None) -> fl
     if s2 <= 0:
         return 0.0
     udims, which = np.unique(dims, return_inverse=True) if unique is None else unique
-    t_u = np.array([outlier_threshold(n_sigma, int(d)) for d in udims])
-    c_u = special.chdtr(udims + 2, t_u) / special.chdtr(udims, t_u)  # chi2.cdf, without scipy.stats
-    t, c = t_u[which], c_u[which]
+    tc = np.array([_clip_constants(float(n_sigma), int(d)) for d in udims.tolist()])
+    t, c = tc[which, 0], tc[which, 1]
     inl = None
     for _ in range(max_iter):
         new = q <= t * s2
@@ -452,15 +461,21 @@ def _analyse(problem, ev, x, f, J, history, status, message, *, method, loss, f_
 
     # A scale the outliers themselves do not inflate, for naming outliers and
     # (with a robust loss) for the covariance.
-    q = np.concatenate([np.sum(f[i.rows].reshape(i.n_obs, i.dim) ** 2, axis=1) for i in ev.term_info])
-    dims = np.concatenate([np.full(i.n_obs, i.dim) for i in ev.term_info])
+    if len(ev.term_info) == 1:       # one term: no per-term pieces to stack (issue 16: small problems)
+        info0 = ev.term_info[0]
+        q = np.sum(f.reshape(info0.n_obs, info0.dim) ** 2, axis=1)
+        dims = np.full(info0.n_obs, info0.dim)
+        unique = (np.array([info0.dim]), np.zeros(info0.n_obs, dtype=np.intp))
+    else:
+        q = np.concatenate([np.sum(f[i.rows].reshape(i.n_obs, i.dim) ** 2, axis=1) for i in ev.term_info])
+        dims = np.concatenate([np.full(i.n_obs, i.dim) for i in ev.term_info])
+        unique = np.unique(dims, return_inverse=True)
     # Clipping estimates the noise level (3 sigma keeps ~99.7 % of clean data);
     # naming outliers is a test over every observation, so its default threshold
     # grows with their number (see outlier_sigma).
     clip_sigma = 3.0 if outlier_sigma is None else outlier_sigma
     if outlier_sigma is None:
         outlier_sigma = bonferroni_sigma(ev.n_obs)
-    unique = np.unique(dims, return_inverse=True)
     clipped = _clipped_variance(q, dims, m, ident.rank, clip_sigma, unique=unique) if dof > 0 else float("nan")
     if absolute_sigma:
         s2 = 1.0
@@ -488,20 +503,22 @@ def _analyse(problem, ev, x, f, J, history, status, message, *, method, loss, f_
     warnings.extend(ident.diagnostics())
 
     scale2 = 1.0 if absolute_sigma else (clipped if np.isfinite(clipped) else s**2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        scores = np.where(q > 0, q / scale2, 0.0) if scale2 > 0 else np.where(q > 0, np.inf, 0.0)
+    # scale2 is finite (the clipped variance, else s^2 with s = 1 where s2 is not a positive number)
+    scores = np.where(q > 0, q / scale2, 0.0) if scale2 > 0 else np.where(q > 0, np.inf, 0.0)
     # one chi2 quantile per distinct observation size, not per observation
     # (scipy's ppf costs ~0.3 ms a call: seconds on a few thousand observations)
     udims, which = unique
-    thr = np.array([outlier_threshold(outlier_sigma, int(d)) for d in udims])[which]
+    thr = np.array([outlier_threshold(outlier_sigma, int(d)) for d in udims.tolist()])[which]
     outliers = np.flatnonzero(scores > thr).tolist()
     scale = float(np.sqrt(scale2))
     rms_term, rms_comp = {}, {}
     raw = f * ev.sigma
+    raw2 = raw * raw
+    # sums / counts: np.mean's own arithmetic (add.reduce, then a division) without its wrapper (issue 16)
     for info in ev.term_info:
-        rr = raw[info.rows].reshape(info.n_obs, info.dim)
-        rms_term[info.name] = float(np.sqrt(np.mean(rr**2)))
-        rms_comp[info.name] = np.sqrt(np.mean(rr**2, axis=0))
+        rr = raw2[info.rows].reshape(info.n_obs, info.dim)
+        rms_term[info.name] = math.sqrt(float(rr.sum()) / rr.size)
+        rms_comp[info.name] = np.sqrt(rr.sum(axis=0) / info.n_obs)
     if outliers:
         parts = []
         for info in ev.term_info:
@@ -519,7 +536,7 @@ def _analyse(problem, ev, x, f, J, history, status, message, *, method, loss, f_
                if len(ev.term_info) > 1 else ""),
             indices=tuple(outliers)))
 
-    std = {lab: (None if not np.isfinite(v) else float(v)) for lab, v in zip(free_labels, ident.std)}
+    std = {lab: (float(v) if math.isfinite(v) else None) for lab, v in zip(free_labels, ident.std.tolist())}
     tied = {}
     for kt, (kr, factor) in lay.tied.items():
         tied[labels[kt]] = (labels[kr], factor)
@@ -534,7 +551,7 @@ def _analyse(problem, ev, x, f, J, history, status, message, *, method, loss, f_
         params=ev.params(x), x=np.array(x, dtype=float), free_labels=free_labels, labels=list(labels),
         fixed_labels=fixed_labels, tied=tied, units=dict(lay.units), cost=robust_cost(f, loss, f_scale),
         cost_history=np.array(history), residuals=raw, weighted_residuals=f.copy(),
-        normalized_residuals=f / s, terms=list(ev.term_info), rms=float(np.sqrt(np.mean(raw**2))),
+        normalized_residuals=f / s, terms=list(ev.term_info), rms=math.sqrt(float(raw2.sum()) / raw2.size),
         rms_per_term=rms_term, rms_per_component=rms_comp, residual_variance=s2, dof=int(dof),
         cov=ident.cov, std=std, corr=ident.corr, correlations=ident.correlations,
         unidentifiable=list(ident.unidentifiable), weakly_determined=list(ident.weakly_determined),

@@ -36,10 +36,17 @@ def _coefficients1(w) -> tuple[np.ndarray, float, float, float]:
 
 def skew3(v: np.ndarray) -> np.ndarray:
     """``[v]_x`` (..., 3, 3) of v (..., 3), without validation (internal callers pass float arrays)."""
-    S = np.zeros(v.shape + (3,))
-    S[..., 0, 1], S[..., 0, 2], S[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    S[..., 1, 0], S[..., 2, 0], S[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
-    return S
+    # one gather and one product (a 0 sign on the diagonal) instead of a zero fill and six assignments
+    return (v[..., _SKEW_SRC] * _SKEW_SIGN).reshape(v.shape + (3,))
+
+
+# [v]x row-major: 0, -v2, v1 / v2, 0, -v0 / -v1, v0, 0 (the diagonal's source is arbitrary, its sign 0)
+_SKEW_SRC = np.array([0, 2, 1, 2, 0, 0, 1, 0, 0])
+_SKEW_SIGN = np.array([0.0, -1.0, 1.0, 1.0, 0.0, -1.0, -1.0, 1.0, 0.0])
+
+
+# the axis of a rotation matrix flattened row-major: R21 - R12, R02 - R20, R10 - R01
+_VEE_A, _VEE_B = np.array([7, 2, 3]), np.array([5, 6, 1])
 
 
 def log_so3(R: np.ndarray) -> np.ndarray:
@@ -51,13 +58,15 @@ def log_so3(R: np.ndarray) -> np.ndarray:
     direction; at exactly pi both are valid).
     """
     R = np.asarray(R, dtype=float)
-    v = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], -1)
-    s2 = np.linalg.norm(v, axis=-1)                        # 2 sin t
-    c2 = R[..., 0, 0] + R[..., 1, 1] + R[..., 2, 2] - 1.0  # 2 cos t
+    # (issue 16) few NumPy calls: on the 15-105 matrices of a hand-eye call their count is the cost
+    Rf = R.reshape(R.shape[:-2] + (9,))
+    v = Rf[..., _VEE_A] - Rf[..., _VEE_B]
+    s2 = np.sqrt(np.einsum("...i,...i->...", v, v))        # 2 sin t
+    c2 = Rf[..., 0] + Rf[..., 4] + Rf[..., 8] - 1.0         # 2 cos t
     th = np.arctan2(s2, c2)
     small = th < 1e-4
     # theta / (2 sin theta), its series below 1e-4 rad (error < 1e-17)
-    f = np.where(small, 0.5 + th * th / 12.0, th / np.where(small, 1.0, s2))
+    f = np.where(small, 0.5 + th * th / 12.0, th / np.where(small, 1.0, s2)) if small.any() else th / s2
     out = f[..., None] * v
     big = th > 0.75 * np.pi
     if np.any(big):
@@ -110,9 +119,17 @@ def left_jacobian_inverse(w: np.ndarray) -> np.ndarray:
     """``J_l(w)^-1`` (..., 3, 3): ``I - [w]x / 2 + (1/t^2 - (1 + cos t) / (2 t sin t)) [w]x^2`` (Sola et al.
     eq. 146; the coefficient's series 1/12 + t^2/720 below 1e-3 rad). ``J_r(w)^-1 = J_l(w)^-T``."""
     w = np.asarray(w, dtype=float)
-    th = np.linalg.norm(w, axis=-1)[..., None, None]
+    th2 = np.einsum("...i,...i->...", w, w)[..., None, None]
+    th = np.sqrt(th2)
     K = skew3(w)
     small = th < 1e-3
-    ths = np.where(small, 1.0, th)
-    c = np.where(small, 1.0 / 12.0 + th * th / 720.0, 1.0 / ths**2 - (1.0 + np.cos(ths)) / (2.0 * ths * np.sin(ths)))
+    # one branch when every angle is on one side of the series' cut (a calibration's residuals usually are)
+    if small.all():
+        c = 1.0 / 12.0 + th * th / 720.0
+    elif not small.any():
+        c = 1.0 / th**2 - (1.0 + np.cos(th)) / (2.0 * th * np.sin(th))
+    else:
+        ths = np.where(small, 1.0, th)
+        c = np.where(small, 1.0 / 12.0 + th * th / 720.0,
+                     1.0 / ths**2 - (1.0 + np.cos(ths)) / (2.0 * ths * np.sin(ths)))
     return np.eye(3) - 0.5 * K + c * (K @ K)

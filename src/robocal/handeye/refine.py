@@ -17,9 +17,9 @@ import numpy as np
 
 from robocal.errors import InputError, NotEnoughDataError, ShapeError
 from robocal.estimation import Problem, solve
-from robocal.geometry import PoseWithCovariance, invert_transform, project_to_rotation, transform_from
+from robocal.geometry import PoseWithCovariance, invert_transform
 from robocal.handeye._lie import exp_so3, left_jacobian, left_jacobian_inverse, log_so3, skew3
-from robocal.handeye.axxb import _check_method, _solve_checked
+from robocal.handeye.axxb import _check_method, _nearest_rotation, _solve_checked
 from robocal.handeye.motions import (_LABELS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses, _motions, _sigmas,
                                      name_outliers, pair_indices)
 from robocal.handeye.plausibility import _judge_checked
@@ -101,11 +101,18 @@ def _closure(Tg, Tc, X, Y):
     """Per-pose closure of ``Tg X Tc = Y``: ``C = Tg X Tc`` (N, 4, 4) and its residual (N, 6) against Y:
     ``e = log(R_C R_Y^T)`` (rad) and ``t_C - t_Y`` (m), :func:`~.motions._pose_residual`'s convention."""
     C = Tg @ X @ Tc
-    E = C[:, :3, :3] @ Y[:3, :3].T
-    return C, np.concatenate([log_so3(E), C[:, :3, 3] - Y[:3, 3]], axis=1)
+    return C, _closure_residual(C, Y)
 
 
-def _closure_jacobian(Tg, Tc, X, e, wx, wy):
+def _closure_residual(C, Y):
+    """:func:`_closure`'s residual (N, 6) of the products ``C`` (N, 4, 4) against ``Y``."""
+    r = np.empty((len(C), 6))
+    r[:, :3] = log_so3(C[:, :3, :3] @ Y[:3, :3].T)
+    r[:, 3:] = C[:, :3, 3] - Y[:3, 3]
+    return r
+
+
+def _closure_jacobian(Tg, Tc, X, e, wx, wy, _const=None):
     """d(closure residual)/d(X's and Y's parameters), (N, 6, 12): columns X's then Y's (rx, ry, rz, tx, ty, tz).
 
     With ``R_X = exp(w_X) R_X0`` and ``R_Y = exp(w_Y) R_Y0`` (:func:`_perturb`), ``E = R_g R_X R_c R_Y^T``
@@ -113,47 +120,73 @@ def _closure_jacobian(Tg, Tc, X, e, wx, wy):
     and to ``E exp(-J_l(w_Y) d)``, so ``de/dw_X = J_l(e)^-1 R_g J_l(w_X)`` and
     ``de/dw_Y = -J_l(e)^-T J_l(w_Y)``; the translation ``t_C = R_g (R_X t_c + t_X) + t_g`` gives
     ``dt/dw_X = -R_g [R_X t_c]x J_l(w_X)``, ``dt/dt_X = R_g``, ``dt/dt_Y = -I``.
+
+    ``_const``: ``(R_g, t_c, J0)`` precomputed by :func:`_closure_constants` (the refinement evaluates
+    this at every step on the same poses).
     """
-    Rg = Tg[:, :3, :3]
+    Rg, tc, J0 = _closure_constants(Tg, Tc) if _const is None else _const
     Jinv = left_jacobian_inverse(e)
-    J = np.zeros((len(Tg), 6, 12))
+    J = J0.copy()                          # the constant blocks dt/dt_X = R_g and dt/dt_Y = -I in place
     JlX = left_jacobian(wx)
-    J[:, :3, :3] = Jinv @ (Rg @ JlX)
-    J[:, 3:, :3] = -Rg @ (skew3(Tc[:, :3, 3] @ X[:3, :3].T) @ JlX)
-    J[:, 3:, 3:6] = Rg
+    RgJ = Rg @ JlX
+    J[:, :3, :3] = Jinv @ RgJ
+    # R_g [u]x = [R_g u]x R_g: the rotation block's R_g J_l(w_X) serves the translation block too
+    J[:, 3:, :3] = -skew3(np.einsum("nij,nj->ni", Rg, tc @ X[:3, :3].T)) @ RgJ
     J[:, :3, 6:9] = -np.swapaxes(Jinv, 1, 2) @ left_jacobian(wy)
-    J[:, 3:, 9:] = -np.eye(3)
     return J
 
 
-def _refine_closure(Tg, Tc, X0, Y0, w, sr: float, st: float, *, jac: str = "analytic"):
+def _closure_constants(Tg, Tc):
+    """What :func:`_closure_jacobian` takes from the poses alone: ``R_g`` and ``t_c`` (contiguous) and the
+    Jacobian's constant part (N, 6, 12)."""
+    Rg = np.ascontiguousarray(Tg[:, :3, :3])
+    J0 = np.zeros((len(Tg), 6, 12))
+    J0[:, 3:, 3:6] = Rg
+    J0[:, 3:, 9:] = -np.eye(3)
+    return Rg, np.ascontiguousarray(Tc[:, :3, 3]), J0
+
+
+_X_LABELS, _Y_LABELS = tuple(f"X.{k}" for k in _LABELS), tuple(f"Y.{k}" for k in _LABELS)
+_UNITS = ("rad",) * 3 + ("m",) * 3
+
+
+def _refine_closure(Tg, Tc, X0, Y0, w, sr: float, st: float, *, jac: str = "analytic", r0=None):
     """Least squares on the closure ``Tg[i] X Tc[i] = Y`` from the closed form ``(X0, Y0)``: the LSQResult.
 
     Blocks ``X`` and ``Y``: ``(w, t)``, the left rotation vector from ``X0`` / ``Y0`` (rad) and the translation
     (m), so the start (the warm start: ``(0, t0)``) is the closed form itself. Residuals per pose times ``w``
     (N, 6), weighted by ``sigma = (sr, sr, sr, st, st, st)``. ``jac="analytic"`` (:func:`_closure_jacobian`)
     or ``"2-point"`` (finite differences, the path before the analytic Jacobian; kept for the tests).
+    ``r0``: the closure residual (N, 6) at the start, when the caller has it (the solver's first evaluation).
     """
     cache = {}
     wj = w[:, :, None]
+    const = _closure_constants(Tg, Tc)
+    unit = bool(np.all(w == 1.0))          # unit weights (no pose_sigmas): the products by w are identities
+    x0X, x0Y = np.r_[0, 0, 0, X0[:3, 3]], np.r_[0, 0, 0, Y0[:3, 3]]
+    if r0 is not None:
+        # the start is the closed form itself, whose closure the caller has: the Problem's first evaluation
+        # (and the Jacobian there) reuse it instead of a second product and log map of every pose
+        cache["key"], cache["X"], cache["e"], cache["r"] = (x0X.tobytes(), x0Y.tobytes()), X0, r0[:, :3], r0
 
     def fun(p):
-        X, Y = _perturb(X0, p["X"]), _perturb(Y0, p["Y"])
-        _, r = _closure(Tg, Tc, X, Y)
-        cache["key"], cache["X"], cache["e"] = (p["X"].tobytes(), p["Y"].tobytes()), X, r[:, :3]
-        return r * w
+        key = (p["X"].tobytes(), p["Y"].tobytes())
+        if cache.get("key") != key:
+            X, Y = _perturb(X0, p["X"]), _perturb(Y0, p["Y"])
+            _, r = _closure(Tg, Tc, X, Y)
+            cache["key"], cache["X"], cache["e"], cache["r"] = key, X, r[:, :3], r
+        return cache["r"].copy() if unit else cache["r"] * w
 
     def jacobian(p):
         # the solver asks for the Jacobian right after the residuals at the same point: reuse X and e
         if cache.get("key") != (p["X"].tobytes(), p["Y"].tobytes()):
             fun(p)
-        return _closure_jacobian(Tg, Tc, cache["X"], cache["e"], p["X"][:3], p["Y"][:3]) * wj
+        J = _closure_jacobian(Tg, Tc, cache["X"], cache["e"], p["X"][:3], p["Y"][:3], const)
+        return J if unit else J * wj
 
     prob = Problem()
-    prob.add_block("X", np.r_[0, 0, 0, X0[:3, 3]], labels=[f"X.{k}" for k in _LABELS],
-                   unit=["rad"] * 3 + ["m"] * 3)
-    prob.add_block("Y", np.r_[0, 0, 0, Y0[:3, 3]], labels=[f"Y.{k}" for k in _LABELS],
-                   unit=["rad"] * 3 + ["m"] * 3)
+    prob.add_block("X", x0X, labels=_X_LABELS, unit=_UNITS)
+    prob.add_block("Y", x0Y, labels=_Y_LABELS, unit=_UNITS)
     prob.add_residuals(fun, name="closure", residual_dim=6, sigma=[sr] * 3 + [st] * 3,
                        jacobian=jacobian if jac == "analytic" else None)
     return prob, solve(prob, method="lm", jac=jac)
@@ -224,8 +257,9 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
                              times=times)
     del A, B                                    # the refinement works on the poses
     Yall = Tg @ X0 @ Tc
-    Y0 = transform_from(project_to_rotation(np.mean(Yall[:, :3, :3], axis=0)), Yall[:, :3, 3].mean(axis=0))
-    _, r0 = _closure(Tg, Tc, X0, Y0)
+    Y0 = np.eye(4)
+    Y0[:3, :3], Y0[:3, 3] = _nearest_rotation(Yall[:, :3, :3].mean(axis=0)), Yall[:, :3, 3].mean(axis=0)
+    r0 = _closure_residual(Yall, Y0)
     rot0, trans0 = float(np.sqrt(np.mean(r0[:, :3] ** 2))), float(np.sqrt(np.mean(r0[:, 3:] ** 2)))
     # the lists are validated above: the plausibility check (judge_poses) takes them as they are, and this
     # closed form's closure figures (plausible ones need no closed form of the check's own)
@@ -248,9 +282,10 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
         w[:, :3] = (np.median(s_rot) / s_rot)[:, None]
         w[:, 3:] = (np.median(s_t) / s_t)[:, None]
 
-    _, res = _refine_closure(Tg, Tc, X0, Y0, w, sr, st)
+    _, res = _refine_closure(Tg, Tc, X0, Y0, w, sr, st, r0=r0)
     X, Y = _perturb(X0, res.params["X"]), _perturb(Y0, res.params["Y"])
-    _, r = _closure(Tg, Tc, X, Y)
+    # the closure at the solution: the solver's raw residuals (r * w) without the weights
+    r = res.residuals.reshape(-1, 6) / w
     idx = [res.free_labels.index(f"X.{k}") for k in _LABELS]
     return HandEyeResult(X=X, method=f"{m}+refine", Y=Y, cov=res.cov[np.ix_(idx, idx)], std=_std_dict(res, "X"),
                          rot_rms=float(np.sqrt(np.mean(r[:, :3] ** 2))),
