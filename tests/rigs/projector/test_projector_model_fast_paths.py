@@ -6,6 +6,7 @@ import warnings
 
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
 
 from robocal.errors import InputError, NonFiniteError, SingularConfigurationError
 from robocal.geometry import wrap_angle
@@ -110,3 +111,105 @@ def test_per_model_constants_follow_the_model():
         assert np.abs(d).max() < 1e-13
     with pytest.warns(NearSingularityWarning, match="beyond the tilt limit"):
         m.with_(tilt_limit=math.radians(50)).spot(th * [1.0, 0.0] + [0.0, math.radians(60)])
+
+
+# ---------------------------------------------------------------- the fused checks against the elementwise ones
+# spot / ik decide "every check passes" by a few argmin / argmax passes and otherwise run the per-element
+# checks, which name the element. A list input always takes the per-element path (the fast paths want a
+# float64 ndarray), so comparing an array call with the same values as a list compares the two decisions:
+# the fast path must never accept what the elementwise checks would refuse or warn about, and where it
+# accepts it must give the same numbers.
+
+def _outcome(fn, *args, **kw):
+    """('raised', type, message) or ('ok', result, [(warning category, message)]), every warning recorded."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            out = fn(*args, **kw)
+        except Exception as e:  # noqa: BLE001 - the type and message are what is compared
+            return ("raised", type(e), str(e))
+    return ("ok", out, [(w.category, str(w.message)) for w in caught])
+
+
+_MODELS = [ProjectorModel(H=2.78, d1=0.02, offsets=(0.004, 0.005), tilt_limit=math.radians(75)),
+           ProjectorModel(H=3.0, offsets=(-0.03, -0.02), tilt_limit=math.radians(60)),
+           ProjectorModel(H=4.0, d1=0.1, offsets=(0.0, 0.0), tilt_limit=math.radians(89.9))]
+
+
+def _edges(m):
+    """Values where a check flips: the tilt limit +- an ulp (with its 1e-12 margin and the offset), the
+    horizon, the nadir, NaN, +-inf, huge finite values (a sum or a square of them would overflow)."""
+    lim = m.tilt_limit + 1e-12
+    o2 = m.offsets[1]
+    vals = [math.nan, math.inf, -math.inf, 1e308, -1.7e308, 1e154, 0.0, -0.0, math.pi / 2 - o2, -math.pi / 2 - o2,
+            math.pi, -math.pi, 3 * math.pi / 2]
+    for b in (lim - o2, -lim - o2):
+        vals += [b, math.nextafter(b, math.inf), math.nextafter(b, -math.inf)]
+    return vals
+
+
+@st.composite
+def _theta_case(draw):
+    m = draw(st.sampled_from(_MODELS))
+    shape = draw(st.sampled_from([(1, 2), (5, 2), (17, 2), (2,), (3, 4, 2)]))
+    size = math.prod(shape)
+    # mostly ordinary angles (the fast path's case), sometimes an edge value in either column
+    ordinary = st.floats(-1.2, 1.2, allow_nan=False)
+    vals = draw(st.lists(st.one_of(ordinary, ordinary, ordinary, st.sampled_from(_edges(m))),
+                         min_size=size, max_size=size))
+    return m, np.array(vals, dtype=float).reshape(shape)
+
+
+@settings(max_examples=200, deadline=None)
+@given(_theta_case())
+def test_spot_fused_checks_decide_as_the_elementwise_checks(case):
+    m, th = case
+    fast, ref = _outcome(m.spot, th), _outcome(m.spot, th.tolist())
+    assert fast[0] == ref[0]
+    if fast[0] == "raised":
+        assert fast[1:] == ref[1:]  # same error, same message (naming the element)
+    else:
+        assert fast[2] == ref[2]  # same warnings (none of NumPy's RuntimeWarnings either)
+        assert np.array_equal(fast[1], ref[1])  # the same IEEE operations on both paths: equal, not close
+
+
+@st.composite
+def _points_case(draw):
+    """Floor points within reach (pans with the wrap's edges +-pi among them), then up to two corrupted:
+    at or beyond the reach radius, at the nadir, infinite, NaN, or off the floor by about floor_tol."""
+    m = draw(st.sampled_from(_MODELS))
+    n = draw(st.integers(1, 12))
+    r_reach = m.h * math.tan(m.tilt_limit)
+    r = np.array(draw(st.lists(st.floats(1e-6, 0.999 * r_reach), min_size=n, max_size=n)))
+    phi = np.array(draw(st.lists(st.sampled_from([math.pi, -math.pi, -math.pi / 2, 0.0]) | st.floats(-4, 4),
+                                 min_size=n, max_size=n)))
+    p = np.column_stack([r * np.sin(phi), r * np.cos(phi), np.full(n, -m.H)])
+    for _ in range(draw(st.integers(0, 2))):
+        i = draw(st.integers(0, n - 1))
+        col, v = draw(st.sampled_from([
+            (0, 0.0), (1, 0.0), (1, 1e-12), (0, math.nan), (1, math.inf), (0, -math.inf), (1, r_reach),
+            (1, math.nextafter(r_reach, 0.0)), (1, math.nextafter(r_reach, math.inf)), (1, r_reach * (1 + 1e-9)),
+            (0, 1.5 * r_reach),
+            (2, -m.H + 1e-6), (2, -m.H - 1e-6), (2, -m.H + 1.2e-6), (2, -m.H - 1.2e-6), (2, math.nan)]))
+        if col < 2:
+            p[i, 1 - col] = 0.0  # the value is the point's distance from the nadir
+        p[i, col] = v
+    return m, p[:, :draw(st.sampled_from([2, 3]))]
+
+
+@settings(max_examples=120, deadline=None)
+@given(_points_case())
+def test_ik_fused_checks_decide_as_the_elementwise_checks(case):
+    m, p = case
+    for kw in ({}, {"check_reach": False}, {"on_nadir": "raise"}):
+        fast, ref = _outcome(m.ik, p, **kw), _outcome(m.ik, p.tolist(), **kw)
+        assert fast[0] == ref[0]
+        if fast[0] == "raised":
+            assert fast[1:] == ref[1:]
+        else:
+            assert fast[2] == ref[2]
+            d = fast[1] - ref[1]
+            d[..., 0] = wrap_angle(d[..., 0])  # pi and -pi are one pan
+            # atan(r / h) vs atan2(r, h) and the pan's one shift vs wrap_angle: a few ulps of pi
+            assert np.abs(d).max() < 1e-13
+            assert np.all((fast[1][..., 0] > -math.pi) & (fast[1][..., 0] <= math.pi))

@@ -22,6 +22,7 @@ from robocal.rigs.projector.singular import (
     NearSingularityWarning,
     UnreachablePointError,
     first_index as _first,
+    frozen_scalar as _scalar,
     indices as _indices,
 )
 from robocal.validation import check_array
@@ -97,7 +98,7 @@ class InverseKinematics:
         p = points
         if not (type(p) is np.ndarray and p.dtype is _F8 and p.ndim and p.size and p.shape[-1] in (2, 3)):
             return None
-        H, h, r_nadir, r_reach, o1, o2 = self._ik_constants
+        H, h, r_nadir, r_reach, o1, o2, wrap_up, wrap_down = self._ik_constants
         f = p if p.ndim == 2 else p.reshape(-1, p.shape[-1])
         x, y = f[:, 0], f[:, 1]
         if f.shape[1] == 3:
@@ -116,27 +117,31 @@ class InverseKinematics:
         out = np.empty(p.shape[:-1] + (2,))
         o = out if out.ndim == 2 else out.reshape(-1, 2)
         a1, a2 = o[:, 0], o[:, 1]
-        np.arctan2(x, y, out=a1)
-        np.arctan(np.divide(r, h, out=r), out=a2)  # atan(r / h): equal to atan2(r, h) to round-off, 1.8x faster
+        # outputs positional (the out= keyword costs ~0.1 us a call), h, o1, o2 0-d arrays (see frozen_scalar)
+        np.arctan2(x, y, a1)
+        np.arctan(np.divide(r, h, r), a2)  # atan(r / h): equal to atan2(r, h) to round-off, 1.8x faster
         if o1:  # per column: one broadcast call on (N, 2) runs an inner loop of 2 values, 10x slower at 10^4
             a1 -= o1
         if o2:
             a2 -= o2
         # the pan is atan2 - o1 in [-pi - |o1|, pi + |o1|]: one shift of 2 pi where it left (-pi, pi]
         # (atan2(-0.0, y < 0) = -pi included), not a modulo over all points
-        if o1 >= 0 and a1[a1.argmin()] <= -math.pi:
+        if wrap_up and a1[a1.argmin()] <= -math.pi:
             np.add(a1, 2 * math.pi, out=a1, where=a1 <= -math.pi)
-        if o1 < 0 and a1[a1.argmax()] > math.pi:
+        if wrap_down and a1[a1.argmax()] > math.pi:
             np.subtract(a1, 2 * math.pi, out=a1, where=a1 > math.pi)
         return out
 
     @cached_property
     def _ik_constants(self) -> tuple:
-        """``(H, h, NADIR_TOL h, h tan(tilt_limit), o1, o2)`` for :meth:`_ik_fast`, once per (frozen) model;
-        the nadir radius is inf when ``|o1| >= pi`` (the fast path's pan wrap assumes less)."""
+        """``(H, h, NADIR_TOL h, h tan(tilt_limit), o1, o2, o1 >= 0, o1 < 0)`` for :meth:`_ik_fast`, once per
+        (frozen) model; the nadir radius is inf when ``|o1| >= pi`` (the fast path's pan wrap assumes less).
+        ``h, o1, o2`` are read-only 0-d arrays (:func:`~.singular.frozen_scalar`), the pan wrap's two tests
+        on ``o1`` bools (on a 0-d array each would be a ufunc call)."""
         h = self.H - self.d1
         o1, o2 = self.offsets
-        return (self.H, h, NADIR_TOL * h if abs(o1) < math.pi else math.inf, h * math.tan(self.tilt_limit), o1, o2)
+        return (self.H, _scalar(h), NADIR_TOL * h if abs(o1) < math.pi else math.inf, h * math.tan(self.tilt_limit),
+                _scalar(o1), _scalar(o2), o1 >= 0, o1 < 0)
 
     def _floor_xy(self, points, name: str, floor_tol: float) -> np.ndarray:
         p = check_array(points, name)

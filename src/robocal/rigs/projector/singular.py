@@ -34,6 +34,17 @@ class UnreachablePointError(InputError):
 F8 = np.dtype(np.float64)
 
 
+def frozen_scalar(v: float) -> np.ndarray:
+    """A read-only 0-d float64 array for a per-model constant of the fast paths (issue 16).
+
+    As a NumPy operand it gives the same IEEE result as the float, at ~0.25 us less per call than a Python
+    float (which NumPy converts on every call); read-only because every call shares it.
+    """
+    a = np.array(float(v))
+    a.setflags(write=False)
+    return a
+
+
 def first_index(mask) -> tuple:
     idx = np.argwhere(np.asarray(mask))
     return tuple(int(i) for i in idx[0]) if idx.size else ()
