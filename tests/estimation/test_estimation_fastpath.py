@@ -1,5 +1,6 @@
-"""solve(method='lm') calls MINPACK directly (scipy.optimize.leastsq), not through least_squares' wrappers
-(issue 16): the same answer, uncertainty, history and diagnostics as the least_squares path."""
+"""solve(method='lm') calls MINPACK directly (SciPy's lmder, or scipy.optimize.leastsq where that private
+entry is unusable), not through least_squares' wrappers (issue 16): the same answer, uncertainty, history
+and diagnostics as the least_squares path, by either direct route."""
 
 import warnings
 
@@ -63,20 +64,41 @@ def _general(monkeypatch, p, **kw):
     with monkeypatch.context() as m:
         m.setattr(S, "_minpack_diag", lambda *a, **k: False)     # as before: through least_squares
         m.setattr(S, "leastsq", None)                             # and never MINPACK directly
+        m.setattr(S, "_lmder", None)
         return solve(p, method="lm", **kw)
 
 
+def _spy(monkeypatch, via):
+    """Route 'lm' through ``via`` ('lmder': SciPy's private lmder; 'leastsq': the public wrapper, the
+    fallback) and count the calls."""
+    calls = []
+    if via == "lmder":
+        if S._lmder is None:
+            pytest.skip("SciPy's _minpack._lmder is not usable here (solve falls back to leastsq)")
+        real = S._lmder
+        monkeypatch.setattr(S, "_lmder", lambda *a: calls.append(1) or real(*a))
+    else:
+        real = S.leastsq
+        monkeypatch.setattr(S, "_lmder", None)
+        monkeypatch.setattr(S, "leastsq", lambda *a, **k: calls.append(1) or real(*a, **k))
+    return calls
+
+
+def test_lmder_probe_finds_the_private_entry():
+    # SciPy >= 1.12 (the lowest pin) has _minpack._lmder with leastsq's call: the fast route is the one taken
+    assert S._lmder is not None and S._probe_lmder() is S._lmder
+
+
+@pytest.mark.parametrize("via", ["lmder", "leastsq"])
 @pytest.mark.parametrize("name", sorted(PROBLEMS))
 @pytest.mark.parametrize("opts", [{}, {"x_scale": 1.0}, {"jac": "2-point"}],
                          ids=["scale-default", "scale-1", "finite-differences"])
-def test_direct_minpack_matches_least_squares(monkeypatch, name, opts):
+def test_direct_minpack_matches_least_squares(monkeypatch, name, opts, via):
     kw = dict(xtol=XTOL, ftol=1e-12, **opts)
     ref = _general(monkeypatch, PROBLEMS[name](), **kw)
-    calls = []
-    real = S.leastsq
-    monkeypatch.setattr(S, "leastsq", lambda *a, **k: calls.append(1) or real(*a, **k))
+    calls = _spy(monkeypatch, via)
     r = solve(PROBLEMS[name](), method="lm", **kw)
-    assert calls, "method='lm' did not take the direct MINPACK path"
+    assert calls, f"method='lm' did not take the direct MINPACK path ({via})"
     # one MINPACK run with the same inputs: identical iterates in exact arithmetic. The tolerance is the
     # solver's own (xtol, relative to the parameters' size); std and cost follow from x (first order).
     scale = max(np.max(np.abs(ref.x)), 1.0)
@@ -101,13 +123,16 @@ def test_the_problems_exercise_what_they_claim(monkeypatch):
     assert "outliers" in r.warning_codes() and 17 in r.outliers and r.std["off[1]"] == r.std["off[0]"]
 
 
-def test_stop_budget_and_callback_on_the_direct_path(monkeypatch):
+@pytest.mark.parametrize("via", ["lmder", "leastsq"])
+def test_stop_budget_and_callback_on_the_direct_path(monkeypatch, via):
     p = make_exponential()[0]
+    _spy(monkeypatch, via)
     # the evaluation budget: MINPACK's info 5 is least_squares' status 0, with its message
     r, ref = solve(p, method="lm", max_nfev=2), _general(monkeypatch, p, max_nfev=2)
     assert r.status == ref.status == 0 and r.message == ref.message and "not_converged" in r.warning_codes()
     np.testing.assert_array_equal(r.x, ref.x)
-    # the callback sees iterate 0 once (leastsq probes the start point before MINPACK does) and can stop
+    # the callback sees iterate 0 once (leastsq probes the start point before MINPACK does; the tracker
+    # serves the second request from its cache) and can stop
     seen = []
     r = solve(p, method="lm", callback=lambda it: seen.append(it.iteration) or it.iteration >= 2)
     assert seen == [0, 1, 2] and r.status == -2 and r.iterations == 2

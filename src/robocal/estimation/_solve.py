@@ -246,6 +246,26 @@ def _minpack_diag(x_scale, n: int, ftol, xtol, gtol, verbose):
     return 1.0 / np.broadcast_to(xs, (n,))
 
 
+def _probe_lmder():
+    """SciPy's private ``_minpack._lmder`` (MINPACK's lmder as :func:`scipy.optimize.leastsq` calls it), or
+    None when it is missing or does not solve a one-parameter probe as expected (then ``leastsq`` takes
+    every call). Like the finite-difference engine (``_evaluate.py``), private on purpose: ``leastsq``'s
+    Python layer around it — argument probes that :class:`_Tracker`'s checked shapes make redundant, its
+    message table and, with ``full_output``, a covariance from MINPACK's QR that :func:`_analyse` does not
+    use — cost ~0.1 ms a call, a tenth of a 15-pose hand-eye refinement (issue 16)."""
+    try:
+        from scipy.optimize._minpack import _lmder
+
+        x, info = _lmder(lambda x: np.array([x[0] - 2.0, 2.0 - x[0]]), lambda x: np.array([[1.0], [-1.0]]),
+                         np.zeros(1), (), 0, 0, 1e-8, 1e-8, 1e-8, 100, 100.0, None)
+        return _lmder if 1 <= int(info) <= 4 and abs(float(x[0]) - 2.0) < 1e-12 else None
+    except Exception:  # noqa: BLE001 - any failure of the probe means: use the public leastsq
+        return None
+
+
+_lmder = _probe_lmder()
+
+
 def _minpack_lm(tr, x0, diag, ftol, xtol, gtol, max_nfev):
     """Levenberg-Marquardt by MINPACK's ``lmder`` through :func:`scipy.optimize.leastsq`.
 
@@ -253,10 +273,16 @@ def _minpack_lm(tr, x0, diag, ftol, xtol, gtol, max_nfev):
     1 / x_scale`` or column norms for ``'jac'``, budget ``100 n``), so the same iterates and answer, without
     its wrappers: since SciPy 1.15 it builds a ``VectorFunction``, evaluates the residuals and the Jacobian
     at the start point before MINPACK does and once more at the end, ~1 ms of a 90 x 12 problem's ~1.5 ms
-    (issue 16). ``leastsq`` probes the start point once (served from :class:`_Tracker`'s caches).
+    (issue 16). ``leastsq`` probes the start point once (served from :class:`_Tracker`'s caches); where
+    SciPy's ``_lmder`` is usable (:func:`_probe_lmder`) it is called without ``leastsq``'s Python layer.
     """
-    x, _, _, _, ier = leastsq(tr.fun, x0, Dfun=tr.jac, full_output=True, ftol=ftol, xtol=xtol, gtol=gtol,
-                              maxfev=int(max_nfev), factor=100.0, diag=diag)
+    if _lmder is not None and leastsq is not None:
+        # lmder works on x in place: a copy, so that x0 (the caller's) stays the start point
+        x, ier = _lmder(tr.fun, tr.jac, np.array(x0, dtype=float), (), 0, 0, ftol, xtol, gtol, int(max_nfev),
+                        100.0, diag)
+    else:
+        x, _, _, _, ier = leastsq(tr.fun, x0, Dfun=tr.jac, full_output=True, ftol=ftol, xtol=xtol, gtol=gtol,
+                                  maxfev=int(max_nfev), factor=100.0, diag=diag)
     status = _FROM_MINPACK.get(int(ier), -1)   # 6-8 (tolerances below epsilon) cannot occur: see _minpack_diag
     return x, status, _LSQ_MESSAGES[status]
 
