@@ -21,6 +21,9 @@ import numpy as np
 
 __all__ = ["log_so3", "exp_so3", "left_jacobian", "left_jacobian_inverse", "skew3"]
 
+_I3 = np.eye(3)
+_I3.flags.writeable = False      # shared: every use below makes a new array from it
+
 
 def _coefficients1(w) -> tuple[np.ndarray, float, float, float]:
     """One rotation vector (3,): ``[w]x``, ``t``, ``sin t / t``, ``(1 - cos t) / t^2`` with Python floats (a
@@ -88,14 +91,14 @@ def exp_so3(w: np.ndarray) -> np.ndarray:
     w = np.asarray(w, dtype=float)
     if w.shape == (3,):
         K, _, a, b = _coefficients1(w)
-        return np.eye(3) + a * K + b * (K @ K)
+        return _I3 + a * K + b * (K @ K)
     th = np.linalg.norm(w, axis=-1)[..., None, None]
     K = skew3(w)
     small = th < 1e-4
     ths = np.where(small, 1.0, th)
     a = np.where(small, 1.0 - th * th / 6.0, np.sin(ths) / ths)
     b = np.where(small, 0.5 - th * th / 24.0, 2.0 * (np.sin(ths / 2) / ths) ** 2)    # (1 - cos t) / t^2
-    return np.eye(3) + a * K + b * (K @ K)
+    return _I3 + a * K + b * (K @ K)
 
 
 def left_jacobian(w: np.ndarray) -> np.ndarray:
@@ -104,7 +107,7 @@ def left_jacobian(w: np.ndarray) -> np.ndarray:
     if w.shape == (3,):
         K, t, a, b = _coefficients1(w)      # (1 - cos t)/t^2 = b, (t - sin t)/t^3 = (1 - a)/t^2
         c = 1.0 / 6.0 - t * t / 120.0 if t < 1e-4 else (1.0 - a) / (t * t)
-        return np.eye(3) + b * K + c * (K @ K)
+        return _I3 + b * K + c * (K @ K)
     th = np.linalg.norm(w, axis=-1)[..., None, None]
     K = skew3(w)
     small = th < 1e-4
@@ -112,7 +115,7 @@ def left_jacobian(w: np.ndarray) -> np.ndarray:
     # 1 - cos t as 2 sin^2(t/2): no cancellation at small angles
     a = np.where(small, 0.5 - th * th / 24.0, 2.0 * (np.sin(ths / 2) / ths) ** 2)
     b = np.where(small, 1.0 / 6.0 - th * th / 120.0, (ths - np.sin(ths)) / ths**3)
-    return np.eye(3) + a * K + b * (K @ K)
+    return _I3 + a * K + b * (K @ K)
 
 
 def left_jacobian_inverse(w: np.ndarray) -> np.ndarray:
@@ -132,4 +135,4 @@ def left_jacobian_inverse(w: np.ndarray) -> np.ndarray:
         ths = np.where(small, 1.0, th)
         c = np.where(small, 1.0 / 12.0 + th * th / 720.0,
                      1.0 / ths**2 - (1.0 + np.cos(ths)) / (2.0 * ths * np.sin(ths)))
-    return np.eye(3) - 0.5 * K + c * (K @ K)
+    return _I3 - 0.5 * K + c * (K @ K)

@@ -16,7 +16,7 @@ import numpy as np
 
 from robocal.errors import DegenerateGeometryError, InputError, NotEnoughDataError, ShapeError
 from robocal.geometry import matrix_from_quaternion, project_to_rotation, skew
-from robocal.handeye._lie import log_so3, skew3
+from robocal.handeye._lie import _I3, log_so3, skew3
 from robocal.handeye.motions import (MIN_AXIS_SPREAD, MIN_ROTATION, MotionCheck, _check_poses,
                                                        check_motions)
 
@@ -67,14 +67,15 @@ def _rot_tsai(alpha, beta):
     Pa = alpha * (2 * np.sin(ta / 2) / np.maximum(ta, 1e-300))[:, None]
     Pb = beta * (2 * np.sin(tb / 2) / np.maximum(tb, 1e-300))[:, None]
     S, d = Pa + Pb, Pb - Pa
-    N = np.eye(3) * np.einsum("ij,ij->", S, S) - S.T @ S
+    N = _I3 * np.einsum("ij,ij->", S, S) - S.T @ S
+    D = d.T @ S                                   # sum d s^T: its antisymmetric part is sum d x s
     try:
-        Pp = np.linalg.solve(N, np.cross(d, S).sum(axis=0))
+        Pp = np.linalg.solve(N, np.array([D[1, 2] - D[2, 1], D[2, 0] - D[0, 2], D[0, 1] - D[1, 0]]))
     except np.linalg.LinAlgError:       # exactly singular (parallel axes; the motion check refuses them first)
         Pp, *_ = np.linalg.lstsq(skew3(S).reshape(-1, 3), d.reshape(-1), rcond=None)
     Px = 2 * Pp / np.sqrt(1 + Pp @ Pp)
     n2 = Px @ Px
-    return (1 - n2 / 2) * np.eye(3) + 0.5 * (np.outer(Px, Px) + np.sqrt(4 - n2) * skew3(Px))
+    return (1 - n2 / 2) * _I3 + 0.5 * (np.outer(Px, Px) + np.sqrt(4 - n2) * skew3(Px))
 
 
 def _norms(v):
@@ -148,7 +149,7 @@ def _translation(RA, tA, RB_tB_rot, Rx):
     eigenvalues are the squared singular values of the stack): ``t = V diag(1/w) V^T M^T rhs``.
     """
     tB = RB_tB_rot
-    M = RA - np.eye(3)                                            # (M, 3, 3) blocks of the stack
+    M = RA - _I3                                                  # (M, 3, 3) blocks of the stack
     u = tB @ Rx.T - tA                                            # (M, 3) right-hand sides
     w, V = np.linalg.eigh(np.einsum("nki,nkj->ij", M, M))
     if np.sqrt(max(w[0], 0.0)) < 1e-6 * np.sqrt(w[-1]):

@@ -7,6 +7,7 @@ in :mod:`robocal.handeye`.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -108,8 +109,7 @@ def pair_indices(T_base_gripper, pairs: str = "auto") -> tuple[np.ndarray, np.nd
 
             require_memory(m * (BYTES_PER_MOTION + 16), f"the relative motions of all {m} pairs of {n} "
                            "poses (--pairs all)")
-        i, j = np.triu_indices(n, 1)
-        return i, j
+        return _all_pairs(n)
     cons = np.arange(n - 1)
     if pairs == "consecutive":
         return cons, cons + 1
@@ -124,6 +124,14 @@ def pair_indices(T_base_gripper, pairs: str = "auto") -> tuple[np.ndarray, np.nd
     ang = np.arccos(cos)
     keep = (ang >= LONG_PAIR_ANGLES[0]) & (ang <= LONG_PAIR_ANGLES[1])
     return np.concatenate([cons, li[keep]]), np.concatenate([cons + 1, lj[keep]])
+
+
+@functools.lru_cache(maxsize=32)
+def _all_pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.triu_indices(n, 1)``, cached read-only (a calibration's closed forms and checks ask again)."""
+    i, j = np.triu_indices(n, 1)
+    i.flags.writeable = j.flags.writeable = False
+    return i, j
 
 
 def _inverse(T):
@@ -168,6 +176,27 @@ def _axes_angles(R: np.ndarray, rv: np.ndarray | None = None):
     ang = np.linalg.norm(rv, axis=-1)
     axes = rv / np.maximum(ang, 1e-300)[..., None]
     return axes, ang
+
+
+def _angles(R: np.ndarray, rv: np.ndarray | None = None) -> np.ndarray:
+    """Rotation angles (rad) of ``R`` (M, 3, 3), from its rotation vectors ``rv`` when given."""
+    if rv is None:
+        from robocal.handeye._lie import log_so3
+
+        rv = log_so3(R)
+    return np.sqrt(np.einsum("ij,ij->i", rv, rv))
+
+
+_ONE_DEGREE = np.deg2rad(1.0)
+
+
+def _median(a: np.ndarray) -> float:
+    """``np.median`` of a finite 1-D array: its partition and mean of the middle pair, without its wrapper."""
+    k = a.size // 2
+    if a.size % 2:
+        return float(np.partition(a, k)[k])
+    p = np.partition(a, (k - 1, k))
+    return float((p[k - 1] + p[k]) / 2)
 
 
 def pose_label(k: int, times=None) -> str:
@@ -261,9 +290,9 @@ def check_motions(A, B=None, *, min_rotation: float = MIN_ROTATION, min_axis_spr
                                 f"rotation axes span only {np.rad2deg(spread):.3g} deg: {what} is weakly determined",
                                 params=("rx", "ry", "rz", "tx", "ty", "tz")))
     if B is not None:
-        _, angB = _axes_angles(np.asarray(B, float)[:, :3, :3], rvB)
+        angB = _angles(np.asarray(B, float)[:, :3, :3], rvB)
         diff = np.abs(ang - angB)
-        bad = diff > max(np.deg2rad(1.0), 10 * np.median(diff))
+        bad = diff > max(_ONE_DEGREE, 10 * _median(diff))
         if bad.any():
             if pairs is not None:
                 i, j = (np.asarray(a, np.intp) for a in pairs)
@@ -300,7 +329,11 @@ def _pose_residual(T_a, T_b):
     return np.concatenate([rotvec_from_matrix(Rerr), T_a[..., :3, 3] - T_b[..., :3, 3]], axis=-1)
 
 
-def _sigmas(r: np.ndarray, floor_rot=1e-9, floor_t=1e-12):
+#: the smallest rotation (rad) and translation (m) residual scales the refinement weights by (:func:`_sigmas`)
+_SIGMA_FLOORS = (1e-9, 1e-12)
+
+
+def _sigmas(r: np.ndarray, floor_rot=_SIGMA_FLOORS[0], floor_t=_SIGMA_FLOORS[1]):
     sr = max(float(np.sqrt(np.mean(r[:, :3] ** 2))), floor_rot)
     st = max(float(np.sqrt(np.mean(r[:, 3:] ** 2))), floor_t)
     return sr, st

@@ -192,12 +192,12 @@ def _judge_checked(Tg, Tc, *, names=("T_base_gripper", "T_cam_target"), method: 
     example (below the floor) but 13 mm on consecutive ones, and is named. Otherwise the lists are judged as
     :func:`judge_poses` does (its own closed form on consecutive pairs, the slips tried against it).
     """
-    from robocal.plausibility import Slip, check_slips
-
     if closed_form is not None:
         rot0, trans0, X0 = closed_form
         if rot0 <= ROT_TRY and _translations_plausible(Tg, Tc, rot0, trans0, X0, floor=0.0)[0]:
             return []
+    from robocal.plausibility import Slip, check_slips
+
     m = method
 
     def closure_residuals(a, b, _method=None):

@@ -11,6 +11,7 @@ closed form (the warm start: MINPACK's LM stops after 2-3 steps);
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -18,9 +19,9 @@ import numpy as np
 from robocal.errors import InputError, NotEnoughDataError, ShapeError
 from robocal.estimation import Problem, solve
 from robocal.geometry import PoseWithCovariance, invert_transform
-from robocal.handeye._lie import exp_so3, left_jacobian, left_jacobian_inverse, log_so3, skew3
+from robocal.handeye._lie import _I3, exp_so3, left_jacobian, left_jacobian_inverse, log_so3, skew3
 from robocal.handeye.axxb import _check_method, _nearest_rotation, _solve_checked
-from robocal.handeye.motions import (_LABELS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses, _motions, _sigmas,
+from robocal.handeye.motions import (_LABELS, _SIGMA_FLOORS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses, _motions,
                                      name_outliers, pair_indices)
 from robocal.handeye.plausibility import _judge_checked
 from robocal.validation import check_array, check_transform
@@ -112,6 +113,12 @@ def _closure_residual(C, Y):
     return r
 
 
+def _rms(r):
+    """RMS of the rotation (rad) and translation (m) columns of closure residuals (N, 6): np.mean's own sums."""
+    r2 = r * r
+    return math.sqrt(float(r2[:, :3].sum()) / (3 * len(r))), math.sqrt(float(r2[:, 3:].sum()) / (3 * len(r)))
+
+
 def _closure_jacobian(Tg, Tc, X, e, wx, wy, _const=None):
     """d(closure residual)/d(X's and Y's parameters), (N, 6, 12): columns X's then Y's (rx, ry, rz, tx, ty, tz).
 
@@ -142,7 +149,7 @@ def _closure_constants(Tg, Tc):
     Rg = np.ascontiguousarray(Tg[:, :3, :3])
     J0 = np.zeros((len(Tg), 6, 12))
     J0[:, 3:, 3:6] = Rg
-    J0[:, 3:, 9:] = -np.eye(3)
+    J0[:, 3:, 9:] = -_I3
     return Rg, np.ascontiguousarray(Tc[:, :3, 3]), J0
 
 
@@ -260,7 +267,7 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
     Y0 = np.eye(4)
     Y0[:3, :3], Y0[:3, 3] = _nearest_rotation(Yall[:, :3, :3].mean(axis=0)), Yall[:, :3, 3].mean(axis=0)
     r0 = _closure_residual(Yall, Y0)
-    rot0, trans0 = float(np.sqrt(np.mean(r0[:, :3] ** 2))), float(np.sqrt(np.mean(r0[:, 3:] ** 2)))
+    rot0, trans0 = _rms(r0)
     # the lists are validated above: the plausibility check (judge_poses) takes them as they are, and this
     # closed form's closure figures (plausible ones need no closed form of the check's own)
     warnings = _judge_checked(Tg, Tc, names=names, accept=accept_implausible, times=times,
@@ -269,7 +276,7 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
                         warnings=warnings, setup=setup)
     if not refine:
         return out
-    sr, st = _sigmas(r0)
+    sr, st = max(rot0, _SIGMA_FLOORS[0]), max(trans0, _SIGMA_FLOORS[1])        # _sigmas(r0)
 
     w = np.ones((len(Tc), 6))
     if pose_sigmas is not None:
@@ -285,11 +292,10 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
     _, res = _refine_closure(Tg, Tc, X0, Y0, w, sr, st, r0=r0)
     X, Y = _perturb(X0, res.params["X"]), _perturb(Y0, res.params["Y"])
     # the closure at the solution: the solver's raw residuals (r * w) without the weights
-    r = res.residuals.reshape(-1, 6) / w
+    rot, trans = _rms(res.residuals.reshape(-1, 6) / w)
     idx = [res.free_labels.index(f"X.{k}") for k in _LABELS]
     return HandEyeResult(X=X, method=f"{m}+refine", Y=Y, cov=res.cov[np.ix_(idx, idx)], std=_std_dict(res, "X"),
-                         rot_rms=float(np.sqrt(np.mean(r[:, :3] ** 2))),
-                         trans_rms=float(np.sqrt(np.mean(r[:, 3:] ** 2))), n_motions=len(ij[0]),
+                         rot_rms=rot, trans_rms=trans, n_motions=len(ij[0]),
                          warnings=warnings + name_outliers(res.warnings, times, what="T_base_gripper X "
                                                            "T_cam_target = Y"), lsq=res, setup=setup)
 
