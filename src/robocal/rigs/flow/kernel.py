@@ -25,7 +25,8 @@ The integer search is a numba kernel batched over frame pairs: frames are
 laid out pixel-major with the pairs innermost, so each absolute difference is
 one SIMD lane and no Python loop touches a pixel or an offset. An 8x8 block
 has its own fully unrolled path (the PX4FLOW default); other block sizes use a
-generic compiled path. See ``bench/bench_flow.py``.
+generic compiled path. The C kernel (the default where it was built) splits a call's pairs into chunks on
+:func:`kernel_threads` threads, with the same bits as one thread. See ``bench/bench_flow.py``.
 
 The module is split along its seams: :mod:`.kernel_config` (:class:`FlowConfig`,
 no numba), :mod:`.kernel_compiled` (the numba loops), :mod:`.kernel_metric`
