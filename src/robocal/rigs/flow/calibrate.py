@@ -40,7 +40,7 @@ import numpy as np
 from robocal.diagnostics import Diagnostic
 from robocal.errors import InputError, NotEnoughDataError
 from robocal.rigs.flow.kernel_bias import displacement_bias
-from robocal.rigs.flow.model import SensorArray, rot2
+from robocal.rigs.flow.model import SensorArray, median, rot2
 from robocal.rigs.flow.odometry import SensorSteps
 
 __all__ = ["ArrayCalibration", "calibrate_array", "interpolate_poses", "window_observations", "KERNEL_SYSTEMATIC"]
@@ -89,7 +89,7 @@ def window_observations(steps: SensorSteps, poses, window: float):
         ``theta_k1 - theta_k0``.
     """
     K = steps.disp.shape[1]
-    dt = float(np.median(steps.dt))
+    dt = median(steps.dt)
     if not np.isfinite(window) or window < MIN_WINDOW_FRAMES * dt * (1 - 1e-9):
         raise InputError(f"window must be at least {MIN_WINDOW_FRAMES} frame intervals ({MIN_WINDOW_FRAMES * dt:.4g} s "
                          f"at this log's {1 / dt:.4g} Hz), got {window} s")

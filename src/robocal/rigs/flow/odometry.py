@@ -31,7 +31,7 @@ import numpy as np
 
 from robocal.diagnostics import Diagnostic
 from robocal.errors import InputError, NotEnoughDataError
-from robocal.rigs.flow.model import SensorArray, integrate_twists, se2_exp
+from robocal.rigs.flow.model import SensorArray, integrate_twists, median, se2_exp
 
 __all__ = ["SensorSteps", "Odometry", "fuse_steps", "dead_reckon", "flow_sigma", "final_pose_covariance",
            "CHI2_RATIO_WARN"]
@@ -381,7 +381,7 @@ def dead_reckon(steps: SensorSteps, array: SensorArray, *, pose0=(0.0, 0.0, 0.0)
     # sigma_px on rendered drives, which is conservative); far above 1, the noise is understated
     # and the covariance and the outlier test are wrong with it
     red = (dof > 0) & np.isfinite(raw_chi2)
-    chi2_ratio = float(np.median(raw_chi2[red] / chi2_isf(dof[red], 0.5))) if red.sum() >= 10 else float("nan")
+    chi2_ratio = median(raw_chi2[red] / chi2_isf(dof[red], 0.5)) if red.sum() >= 10 else float("nan")
     if chi2_ratio > CHI2_RATIO_WARN:
         warnings.append(Diagnostic("inconsistent_data", f"the sensors disagree {np.sqrt(chi2_ratio):.1f}x more than their "
                                    f"stated noise (median chi-square ratio {chi2_ratio:.2f}, expected <= 1): the flow "

@@ -38,7 +38,7 @@ import numpy as np
 from robocal.errors import RobocalError
 from robocal.plausibility import Slip, check_slips
 from robocal.rigs.flow.calibrate import MIN_WINDOW_FRAMES, interpolate_poses, window_observations
-from robocal.rigs.flow.model import SensorArray, rot2
+from robocal.rigs.flow.model import SensorArray, median, rot2
 from robocal.rigs.flow.odometry import SensorSteps
 
 __all__ = ["reference_misfit", "check_height", "check_reference", "MAX_FREE_MISFIT", "SCALE_RANGE"]
@@ -54,7 +54,7 @@ SCALE_RANGE = (1 / 3, 3.0)
 
 def _windows(steps: SensorSteps) -> float:
     """Window length: 0.1 s, shorter on short runs so that at least 8 windows fit."""
-    dt = float(np.median(steps.dt))
+    dt = median(steps.dt)
     span = float(steps.t[-1] - steps.t[0])
     return max(MIN_WINDOW_FRAMES * dt, min(0.1, span / 8))
 

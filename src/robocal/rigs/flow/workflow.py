@@ -24,7 +24,7 @@ from robocal.rigs.flow.evaluate import evaluate_trajectory
 from robocal.rigs.flow.kernel import FlowConfig, compute_flow_sequence, kernel_name, speed_limit
 from robocal.rigs.flow.log import (RunSpec, load_steps, read_poses_csv, write_flow_csv, write_frames_npz,
                                    write_poses_csv)
-from robocal.rigs.flow.model import SensorArray, seed_array
+from robocal.rigs.flow.model import SensorArray, median, seed_array
 from robocal.rigs.flow.inputs import load_input  # noqa: F401 (the step, in a light module)
 from robocal.rigs.flow.odometry import Odometry, dead_reckon
 from robocal.rigs.flow.report import compare_text, display, plot_series, systematic_note  # noqa: F401 (re-exported)
@@ -370,7 +370,9 @@ def odometry_result(od: Odometry, spec: RunSpec, errors: dict | None = None, *, 
     # 18 / 9 times this std), so `std.final_pose` stays None: the run alone does not determine it.
     std_white = np.sqrt(np.abs(np.diag(final_pose_covariance(od.poses, od.twists, od.twist_cov,
                                                              method=od.method))))
-    diag = {"summary": od.summary(), "velocity_std_median": np.nanmedian(od.velocity_std, axis=0),
+    # np.nanmedian per column, without its numpy.ma import (model.median)
+    vstd = np.array([median(c[~np.isnan(c)]) for c in od.velocity_std.T])
+    diag = {"summary": od.summary(), "velocity_std_median": vstd,
             "final_pose_std_white_noise": std_white}
     if errors:
         diag["evaluation"] = {k: v.to_dict() for k, v in errors.items()}
