@@ -6,6 +6,9 @@ frames file for ``result.json``'s ``inputs`` and ~0.02 s reading each 12,000-row
 at 400 Hz, quiet machine). None of it depends on the flow, so it runs while the kernel does:
 :mod:`hashlib` releases the GIL on buffers over 2 KiB and the C kernel releases it around its loops
 (:func:`robocal.rigs.flow.kernel._chunked`), so the threads share the cores, not the interpreter.
+:func:`~robocal.rigs.flow.workflow.odometry_run` starts the hashing first and the trajectories (CSV
+parsing, which holds the GIL) once the frames are read, when the kernel starts: so the parsing overlaps
+the kernel's C loops, not the main thread's own Python work.
 
 Each job remembers its files' ``(path, size, mtime_ns, inode)`` when it started; :func:`collect`
 returns the job's value only when the files still match, else it computes afresh, so a file written
@@ -30,29 +33,39 @@ _ATTR = "_robocal_background"       # where a spec keeps its jobs: {name: (stamp
 
 
 class _Job:
-    """``fn(arg)`` in a daemon thread (an error exit does not wait for a hash nobody will read); ``result()``
-    waits for it and returns its value or raises its exception. (Not :mod:`concurrent.futures`: importing
-    it is 7 ms of the command's fixed cost, for the three lines used here.)"""
+    """``fn(arg)``, run by :func:`_in_thread`; ``result()`` waits for it and returns its value or raises its
+    exception. (Not :mod:`concurrent.futures`: importing it is 7 ms of the command's fixed cost, for the
+    few lines used here.)"""
 
     def __init__(self, fn, arg):
+        self._fn, self._arg = fn, arg
         self._done = threading.Event()
         self._value = self._error = None
 
-        def work():
-            try:
-                self._value = fn(arg)
-            except BaseException as exc:  # handed to whoever collects it
-                self._error = exc
-            finally:
-                self._done.set()
-
-        threading.Thread(target=work, name=f"robocal-flow-{getattr(fn, '__name__', 'job')}", daemon=True).start()
+    def run(self):
+        try:
+            self._value = self._fn(self._arg)
+        except BaseException as exc:  # handed to whoever collects it
+            self._error = exc
+        finally:
+            self._done.set()
 
     def result(self):
         self._done.wait()
         if self._error is not None:
             raise self._error
         return self._value
+
+
+def _in_thread(jobs) -> None:
+    """The jobs one after the other in one daemon thread (an error exit does not wait for a hash nobody will
+    read). One thread, not one each: a CSV parse holds the GIL, and every thread that does makes the main
+    thread wait up to the switch interval (5 ms) each time it wants the GIL back."""
+    def work():
+        for job in jobs:
+            job.run()
+
+    threading.Thread(target=work, name="robocal-flow-background", daemon=True).start()
 
 
 def _stamp(paths) -> tuple:
@@ -84,8 +97,10 @@ def _job(spec, name):
 
 
 def start(spec, jobs=JOBS) -> None:
-    """Start ``jobs`` of ``spec`` in background threads (those already running on unchanged files are kept)."""
+    """Start ``jobs`` of ``spec``, in this order, in one background thread (those already started on
+    unchanged files are kept)."""
     store = spec.__dict__.setdefault(_ATTR, {})
+    new = []
     for name in jobs:
         job = _job(spec, name)
         if job is None:
@@ -95,6 +110,9 @@ def start(spec, jobs=JOBS) -> None:
         if name in store and store[name][0] == stamp:
             continue
         store[name] = (stamp, _Job(fn, arg))
+        new.append(store[name][1])
+    if new:
+        _in_thread(new)
 
 
 def collect(spec, name, compute):

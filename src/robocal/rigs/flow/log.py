@@ -531,18 +531,25 @@ def load_run(path) -> RunSpec:
 
 
 def load_steps(spec: RunSpec, config: FlowConfig | None = None, *, allow_missing: bool = False, progress=None,
-               prefer: str = "frames"):
-    """Per-sensor displacements of a run (from raw frames when present, else the flow log)."""
+               prefer: str = "frames", before_kernel=None):
+    """Per-sensor displacements of a run (from raw frames when present, else the flow log).
+
+    ``before_kernel``: called once the frames are read and checked, before the flow kernel (or the flow
+    log's conversion) starts: :func:`~robocal.rigs.flow.workflow.odometry_run` starts reading the
+    trajectories there, to overlap the kernel (:mod:`robocal.rigs.flow.background`)."""
     config = config or FlowConfig(window=spec.window)
     use_frames = spec.frames is not None and (prefer == "frames" or spec.flow_log is None)
+    go = before_kernel or (lambda: None)
     if use_frames:
         d = read_frames_npz(spec.frames)
         if d["frames"].ndim != 4 or d["frames"].shape[0] != spec.array.n:
             raise ShapeError(f"{spec.frames}: frames must have shape ({spec.array.n}, T, W, W) for the "
                              f"{spec.array.n} sensors of {spec.path.name}, got {d['frames'].shape}")
+        go()
         steps, flows = steps_from_frames(d["frames"], d["t"], d["gyro"], d["height"], spec.focal_px, config, progress=progress)
         return steps, flows
     if getattr(spec, "records", None) is not None:  # a recording's records (robocal.rigs.flow.bag), in memory
+        go()
         return steps_from_records(spec.records, spec.focal_px, config, sigma_px=spec.sigma_px), None
     from robocal.resources import require_memory
 
@@ -550,4 +557,5 @@ def load_steps(spec: RunSpec, config: FlowConfig | None = None, *, allow_missing
     size = spec.flow_log.stat().st_size
     require_memory(FLOW_LOG_BYTES_PER_BYTE * size, f"the {size / 1e6:,.0f} MB flow log", source=str(spec.flow_log))
     rec = read_flow_csv(spec.flow_log, spec.array.n, allow_missing=allow_missing)
+    go()
     return steps_from_records(rec, spec.focal_px, config, sigma_px=spec.sigma_px), None

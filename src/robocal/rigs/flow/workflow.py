@@ -183,9 +183,12 @@ def odometry_run(spec: RunSpec, *, config: FlowConfig | None = None, array: Sens
     ``reference``: the run's ``(t, poses)`` when already read.
     """
     config = config or FlowConfig(window=spec.window)
-    # the inputs' hashes and the trajectories are read while the kernel runs (they do not depend on it)
-    background.start(spec, background.JOBS if reference is None else ("inputs", "wheel"))
-    steps, flows = load_steps(spec, config, allow_missing=allow_missing, progress=progress)
+    # the inputs' hashes and the trajectories are read while the kernel runs (they do not depend on it); the
+    # CSVs once the kernel starts (robocal.rigs.flow.background)
+    background.start(spec, ("inputs",))
+    csvs = ("reference", "wheel") if reference is None else ("wheel",)
+    steps, flows = load_steps(spec, config, allow_missing=allow_missing, progress=progress,
+                              before_kernel=lambda: background.start(spec, csvs))
     judged = judge_run(spec, steps, config, allow_missing=allow_missing, accept_implausible=accept_implausible,
                        reference=reference)
     od = dead_reckon(steps, array or spec.array, robust=robust, method=method)
@@ -251,8 +254,8 @@ def calibration_run(spec: RunSpec, *, config: FlowConfig | None = None, window: 
         raise InputError(f"{spec.path}: calibration needs a 'reference' trajectory file (t, x, y, theta)")
     config = config or FlowConfig(window=spec.window)
     nominal = spec.array.copy(scale=np.ones(spec.array.n))
-    background.start(spec, ("inputs", "reference"))
-    steps, flows = load_steps(spec, config, progress=progress)
+    background.start(spec, ("inputs",))
+    steps, flows = load_steps(spec, config, progress=progress, before_kernel=lambda: background.start(spec, ("reference",)))
     reference = t_ref, p_ref = read_reference(spec)
     _interp(spec.reference, t_ref, p_ref, steps.t)          # coverage, with the file named
     judged = judge_run(spec, steps, config, accept_implausible=accept_implausible, reference=reference)
