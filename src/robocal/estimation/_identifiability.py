@@ -9,7 +9,6 @@ not see, whatever the units.
 
 from __future__ import annotations
 
-import copy
 import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -83,7 +82,8 @@ class Identifiability:
         k = float(residual_variance) / self.residual_variance if self.residual_variance else np.nan
         # a shallow copy with three fields set: dataclasses.replace re-runs __init__ over every field, a
         # tenth of a small problem's analysis (issue 16)
-        new = copy.copy(self)
+        new = object.__new__(Identifiability)
+        new.__dict__.update(self.__dict__)
         object.__setattr__(new, "cov", self.cov * k)
         object.__setattr__(new, "std", self.std * np.sqrt(k))
         object.__setattr__(new, "residual_variance", float(residual_variance))
@@ -235,7 +235,7 @@ def _analyze_checked(Jm, labels=None, *, residual_variance: float = 1.0, rank_to
     if sp.issparse(Jm):
         d = np.sqrt(np.asarray(Jm.multiply(Jm).sum(axis=0)).ravel())
     else:
-        d = np.linalg.norm(Jm, axis=0)
+        d = np.sqrt(np.add.reduce(Jm * Jm, axis=0))       # np.linalg.norm(Jm, axis=0)'s own arithmetic
     m, n = Jm.shape
     labels = tuple(labels) if labels is not None else tuple(f"p[{j}]" for j in range(n))
     if len(labels) != n:
@@ -260,7 +260,7 @@ def _analyze_checked(Jm, labels=None, *, residual_variance: float = 1.0, rank_to
     leverage = np.einsum("ij,ij->i", V0, V0)
     bad = leverage >= null_tol**2
     cov = residual_variance * cov_scaled / np.outer(d_safe, d_safe)
-    vif = np.diag(cov_scaled).copy()
+    vif = cov_scaled.diagonal().copy()
     any_bad = bool(bad.any())
     # (issue 16) the masks and sub-matrix copies only where a parameter is unidentifiable: on a small
     # problem each of these NumPy calls costs as much as the SVD's share of a row
@@ -268,7 +268,7 @@ def _analyze_checked(Jm, labels=None, *, residual_variance: float = 1.0, rank_to
         cov[bad, :] = np.nan
         cov[:, bad] = np.nan
         vif[bad] = np.nan
-    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    std = np.sqrt(np.maximum(cov.diagonal(), 0.0))       # NaN stays NaN, as with np.clip
     if any_bad:
         std[bad] = np.nan
         g = np.flatnonzero(~bad)

@@ -34,7 +34,10 @@ class _Layout:
             k = idx[t]
             if fixed[k]:
                 raise InputError(f"'{t}' is both fixed and tied; use one or the other")
-        self.free_full = np.array([k for k in range(n) if not fixed[k] and k not in tied_full], dtype=int)
+        if tied_full or fixed.any():
+            self.free_full = np.array([k for k in range(n) if not fixed[k] and k not in tied_full], dtype=int)
+        else:                                       # the common case, without a Python loop over elements
+            self.free_full = np.arange(n)
         free_pos = {int(k): i for i, k in enumerate(self.free_full)}
         rows = list(self.free_full)
         cols = list(range(len(self.free_full)))
@@ -63,11 +66,15 @@ class _Layout:
         self._tied_from = np.array([free_pos[self.tied[k][0]] for k in self._tied_to], dtype=int)
         self._tied_factor = np.array([self.tied[k][1] for k in self._tied_to], dtype=float)
         self.free_pos = free_pos
+        self._all_free = len(self.free_full) == n and not self.tied
         self.lower = lo[self.free_full]
         self.upper = hi[self.free_full]
-        scales = [b.scale if b.scale is not None else np.full(b.size, np.nan) for b in blocks]
-        sc = np.concatenate(scales)[self.free_full] if blocks else np.zeros(0)
-        self.scale = None if np.all(np.isnan(sc)) else np.where(np.isnan(sc), 1.0, sc)
+        if all(b.scale is None for b in blocks):
+            self.scale = None
+        else:
+            scales = [b.scale if b.scale is not None else np.full(b.size, np.nan) for b in blocks]
+            sc = np.concatenate(scales)[self.free_full]
+            self.scale = None if np.all(np.isnan(sc)) else np.where(np.isnan(sc), 1.0, sc)
         self.units = {lab: u for b in blocks for lab, u in zip(b.labels, b.units)}
 
     @property
@@ -83,6 +90,8 @@ class _Layout:
         return self._M
 
     def full_from_free(self, x: np.ndarray) -> np.ndarray:
+        if self._all_free:                          # nothing fixed or tied: the free vector is the full one
+            return np.array(x, dtype=float)
         x = np.asarray(x, dtype=float)
         full = self.c.copy()
         full[self.free_full] = x

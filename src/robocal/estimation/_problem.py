@@ -73,6 +73,14 @@ class _Term:
     jac_sparsity: object | None
 
 
+def _checked_floats(x, name: str) -> np.ndarray:
+    """``check_array(x, name)``; a finite float64 ndarray is returned as it is without the generic checks (the
+    text and boolean scans are for lists; issue 16: a small problem's set-up is mostly such checks)."""
+    if type(x) is np.ndarray and x.dtype == np.float64 and np.isfinite(x).all():
+        return x
+    return check_array(x, name)
+
+
 def _per_element(value, size: int, shape: tuple, name: str, what: str, *, default: float) -> np.ndarray:
     if value is None:
         return np.full(size, default, dtype=float)
@@ -161,7 +169,7 @@ class Problem:
             raise InputError(f"block name must be a non-empty string, got {name!r}")
         if name in self._blocks:
             raise InputError(f"block '{name}' already exists")
-        x = check_array(x0, f"x0 of block '{name}'")
+        x = _checked_floats(x0, f"x0 of block '{name}'")
         shape = tuple(x.shape)
         size = x.size
         if size == 0:
@@ -193,8 +201,9 @@ class Problem:
         lo = _per_element(lower, size, shape, name, "lower", default=-np.inf)
         hi = _per_element(upper, size, shape, name, "upper", default=np.inf)
         flat = x.reshape(-1).copy()
-        outside = (flat < lo) | (flat > hi)
-        if np.any(outside):
+        # no bounds given: x0 is finite (checked above), so inside (-inf, inf); no comparison needed
+        outside = (flat < lo) | (flat > hi) if lower is not None or upper is not None else None
+        if outside is not None and np.any(outside):
             k = int(np.flatnonzero(outside)[0])
             raise InputError(f"x0 of '{labs[k]}' = {flat[k]!r} is outside its bounds [{lo[k]}, {hi[k]}]")
         offset = len(self._label_index)
@@ -304,7 +313,7 @@ class Problem:
         if residual_dim is not None and (int(residual_dim) != residual_dim or residual_dim < 1):
             raise InputError(f"residual_dim must be a positive integer, got {residual_dim!r}")
         if sigma is not None:
-            sigma = check_array(sigma, f"sigma of term '{name}'")
+            sigma = _checked_floats(sigma, f"sigma of term '{name}'")
             if np.any(sigma <= 0):
                 raise InputError(f"sigma of term '{name}' must be > 0, got min {sigma.min()!r}")
         self._terms.append(_Term(name, fun, jacobian, None if blocks is None else tuple(blocks),

@@ -120,19 +120,24 @@ def left_jacobian(w: np.ndarray) -> np.ndarray:
 
 def left_jacobian_inverse(w: np.ndarray) -> np.ndarray:
     """``J_l(w)^-1`` (..., 3, 3): ``I - [w]x / 2 + (1/t^2 - (1 + cos t) / (2 t sin t)) [w]x^2`` (Sola et al.
-    eq. 146; the coefficient's series 1/12 + t^2/720 below 1e-3 rad). ``J_r(w)^-1 = J_l(w)^-T``."""
+    eq. 146; its coefficient by a series below 0.03 rad). ``J_r(w)^-1 = J_l(w)^-T``."""
     w = np.asarray(w, dtype=float)
     th2 = np.einsum("...i,...i->...", w, w)[..., None, None]
     th = np.sqrt(th2)
     K = skew3(w)
-    small = th < 1e-3
-    # one branch when every angle is on one side of the series' cut (a calibration's residuals usually are)
+    # the coefficient's series 1/12 + t^2/720 + t^4/30240 below 0.03 rad (the next term, t^6/1209600, is
+    # < 6e-16 there; the closed form loses ~eps/t^2 to cancellation: 2.5e-13 at 0.03 rad). One branch
+    # when every angle is on one side of the cut, as a calibration's residuals are.
+    small = th < _JINV_SERIES
     if small.all():
-        c = 1.0 / 12.0 + th * th / 720.0
+        c = 1.0 / 12.0 + th2 * (1.0 / 720.0 + th2 / 30240.0)
     elif not small.any():
-        c = 1.0 / th**2 - (1.0 + np.cos(th)) / (2.0 * th * np.sin(th))
+        c = 1.0 / th2 - (1.0 + np.cos(th)) / (2.0 * th * np.sin(th))
     else:
         ths = np.where(small, 1.0, th)
-        c = np.where(small, 1.0 / 12.0 + th * th / 720.0,
+        c = np.where(small, 1.0 / 12.0 + th2 * (1.0 / 720.0 + th2 / 30240.0),
                      1.0 / ths**2 - (1.0 + np.cos(ths)) / (2.0 * ths * np.sin(ths)))
     return _I3 - 0.5 * K + c * (K @ K)
+
+
+_JINV_SERIES = 0.03

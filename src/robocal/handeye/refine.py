@@ -155,6 +155,7 @@ def _closure_constants(Tg, Tc):
 
 _X_LABELS, _Y_LABELS = tuple(f"X.{k}" for k in _LABELS), tuple(f"Y.{k}" for k in _LABELS)
 _UNITS = ("rad",) * 3 + ("m",) * 3
+_ZERO3 = np.zeros(3)
 
 
 def _refine_closure(Tg, Tc, X0, Y0, w, sr: float, st: float, *, jac: str = "analytic", r0=None):
@@ -170,7 +171,7 @@ def _refine_closure(Tg, Tc, X0, Y0, w, sr: float, st: float, *, jac: str = "anal
     wj = w[:, :, None]
     const = _closure_constants(Tg, Tc)
     unit = bool(np.all(w == 1.0))          # unit weights (no pose_sigmas): the products by w are identities
-    x0X, x0Y = np.r_[0, 0, 0, X0[:3, 3]], np.r_[0, 0, 0, Y0[:3, 3]]
+    x0X, x0Y = np.concatenate((_ZERO3, X0[:3, 3])), np.concatenate((_ZERO3, Y0[:3, 3]))
     if r0 is not None:
         # the start is the closed form itself, whose closure the caller has: the Problem's first evaluation
         # (and the Jacobian there) reuse it instead of a second product and log map of every pose
@@ -194,7 +195,7 @@ def _refine_closure(Tg, Tc, X0, Y0, w, sr: float, st: float, *, jac: str = "anal
     prob = Problem()
     prob.add_block("X", x0X, labels=_X_LABELS, unit=_UNITS)
     prob.add_block("Y", x0Y, labels=_Y_LABELS, unit=_UNITS)
-    prob.add_residuals(fun, name="closure", residual_dim=6, sigma=[sr] * 3 + [st] * 3,
+    prob.add_residuals(fun, name="closure", residual_dim=6, sigma=np.array([sr, sr, sr, st, st, st]),
                        jacobian=jacobian if jac == "analytic" else None)
     return prob, solve(prob, method="lm", jac=jac)
 
