@@ -200,7 +200,8 @@ def _clipped_variance(q, dims, m, rank, n_sigma, max_iter=20, unique=None) -> fl
     udims, which = np.unique(dims, return_inverse=True) if unique is None else unique
     tc = np.array([_clip_constants(float(n_sigma), int(d)) for d in udims.tolist()])
     # one observation size: the constants as scalars (the same products, without gathering them per row)
-    t, c = (tc[0, 0], tc[0, 1]) if len(tc) == 1 else (tc[which, 0], tc[which, 1])
+    one = len(tc) == 1
+    t, c = (float(tc[0, 0]), float(tc[0, 1])) if one else (tc[which, 0], tc[which, 1])
     inl = None
     for _ in range(max_iter):
         new = q <= t * s2
@@ -209,7 +210,7 @@ def _clipped_variance(q, dims, m, rank, n_sigma, max_iter=20, unique=None) -> fl
         inl = new
         if not inl.any():
             break
-        s2 = float(np.sum(q[inl]) / np.sum(dims[inl] * (c if np.ndim(c) == 0 else c[inl]))) * dof_factor
+        s2 = float(q[inl].sum() / (dims[inl] * (c if one else c[inl])).sum()) * dof_factor
         if s2 <= 0:
             return 0.0
     return s2

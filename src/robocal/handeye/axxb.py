@@ -13,6 +13,7 @@ R. Horaud, B. Espiau, 3DIM 1999. K. Daniilidis, IJRR 18(3), 1999.
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import lapack as _lapack
 
 from robocal.errors import DegenerateGeometryError, InputError, NotEnoughDataError, ShapeError
 from robocal.geometry import matrix_from_quaternion, project_to_rotation, skew
@@ -50,8 +51,9 @@ def _aligned_rotvecs(RA, RB, rotvecs=None):
     safe = th < 0.8 * np.pi
     use = safe if safe.sum() >= 2 else np.ones_like(safe)
     R0 = _rot_park(alpha[use], beta[use])
-    flip = np.einsum("ni,ij,nj->n", alpha, R0, beta) < 0
-    beta[flip] = beta[flip] * ((th[flip] - 2 * np.pi) / np.maximum(th[flip], 1e-300))[:, None]
+    flip = np.einsum("ij,ij->i", alpha @ R0, beta) < 0        # alpha_i . R0 beta_i
+    if flip.any():
+        beta[flip] = beta[flip] * ((th[flip] - 2 * np.pi) / np.maximum(th[flip], 1e-300))[:, None]
     return alpha, beta
 
 
@@ -84,11 +86,23 @@ def _norms(v):
 
 
 def _nearest_rotation(M):
-    """:func:`robocal.geometry.project_to_rotation` of one finite 3 x 3 matrix, without its validation."""
-    U, _, Vt = np.linalg.svd(M)
-    if np.linalg.det(U @ Vt) < 0:
+    """:func:`robocal.geometry.project_to_rotation` of one finite 3 x 3 matrix, without its validation.
+
+    LAPACK's dgesdd through scipy.linalg.lapack (numpy.linalg's wrapper costs more than a 3 x 3 SVD) and
+    the determinant of ``U V^T`` as the product of its factors' (+-1 each), numpy's SVD where LAPACK fails.
+    """
+    U, _, Vt, info = _lapack.dgesdd(M)
+    if info != 0:
+        U, _, Vt = np.linalg.svd(M)
+    if _det3(U) * _det3(Vt) < 0:
         U[:, -1] = -U[:, -1]
     return U @ Vt
+
+
+def _det3(A) -> float:
+    """Determinant of a 3 x 3 matrix (Python floats: the sign of an orthogonal factor)."""
+    (a, b, c), (d, e, f), (g, h, i) = A.tolist()
+    return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
 
 
 def _rot_park(alpha, beta):
