@@ -56,6 +56,20 @@ def _combine(terms):
     return np.zeros((3, 1)) if acc is None else acc
 
 
+def _z_motion(cols: list, c, s, d) -> list:
+    """Columns of ``M @ Rz(theta) Tz(d)``, a D-H link's joint motion, for the columns ``[c0, c1, c2, c3]`` of
+    the top rows of ``M``: ``[c c0 + s c1, c c1 - s c0, c2, c3 + d c2]`` (one formula for :meth:`DHChain._fk_columns`
+    and :func:`._dh_frames.frame_columns`).
+
+    ``c, s``: cos and sin of theta, (N,) arrays or floats; None: no rotation. ``d``: (N,) or a float; None: no
+    translation. The callers skip the zero motions (Rz(0), Tz(0)): nothing is multiplied by 1 or added 0.
+    """
+    c0, c1, c2, c3 = cols
+    if c is not None:
+        c0, c1 = c0 * c + c1 * s, c1 * c - c0 * s
+    return [c0, c1, c2, c3 if d is None else c3 + c2 * d]
+
+
 def _times_constant(cols: list, K: list, want=(0, 1, 2, 3)) -> list:
     """Columns of ``M @ K`` for the columns of top rows ``M`` (each (3, N) or (3, 1)) and a constant ``K``
     (4, 4, as nested lists: no NumPy scalar per entry).
@@ -483,11 +497,7 @@ class DHChain:
                 continue
             if K is not None:
                 cols = _times_constant(cols, K[1])
-            c0, c1 = cols[0], cols[1]
-            cols[0] = c0 * c + c1 * s
-            cols[1] = c1 * c - c0 * s
-            if not revolute or lk.d != 0.0:  # Tz(0) moves nothing
-                cols[3] = cols[3] + cols[2] * d
+            cols = _z_motion(cols, c, s, None if revolute and lk.d == 0.0 else d)  # Tz(0) moves nothing
         if cols is None:  # no joint: a constant pose
             B = _EYE34 if K_end is None else K_end[0][:3]
             return [B[:, k:k + 1] for k in range(4)]

@@ -51,27 +51,22 @@ def frame_columns(chain, qf) -> list:
     ``qf`` is validated and flat, (N, dof), or None for a chain without joints. Each column is (3, N) or
     a constant (3, 1).
     """
-    from robocal.kinematics._dh import _times_constant
+    from robocal.kinematics._dh import _times_constant, _z_motion
 
     steps, cols = _frames_plan(chain)
     frames = [cols]
     for kind, j, theta, d, K_pre, K_post in steps:
         if K_pre is not None:
             cols = _times_constant(cols, K_pre)
-        c0, c1, c2, c3 = cols
         if kind == "revolute":
             theta = qf[:, j] + theta
             c, s = np.cos(theta), np.sin(theta)
-            c0, c1 = c0 * c + c1 * s, c1 * c - c0 * s
         else:
             if kind == "prismatic":
                 d = qf[:, j] + d
-            if theta != 0.0:  # a constant angle; Rz(0) moves nothing
-                c, s = math.cos(theta), math.sin(theta)
-                c0, c1 = c0 * c + c1 * s, c1 * c - c0 * s
-        if not (isinstance(d, float) and d == 0.0):
-            c3 = c3 + c2 * d
-        cols = [c0, c1, c2, c3]
+            # a constant angle; Rz(0) moves nothing
+            c, s = (math.cos(theta), math.sin(theta)) if theta != 0.0 else (None, None)
+        cols = _z_motion(cols, c, s, None if isinstance(d, float) and d == 0.0 else d)  # a new list: frames keep theirs
         if K_post is not None:
             cols = _times_constant(cols, K_post)
         frames.append(cols)
