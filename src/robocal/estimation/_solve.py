@@ -573,7 +573,7 @@ def _analyse(problem, ev, x, f, J, history, status, message, *, method, loss, f_
             std[labels[kt]] = None if sr is None else abs(factor) * sr
         else:
             std[labels[kt]] = 0.0
-    fixed_labels = [lab for b in lay.blocks for lab, fx in zip(b.labels, b.fixed) if fx]
+    fixed_labels = [lab for b in lay.blocks if b.fixed.any() for lab, fx in zip(b.labels, b.fixed.tolist()) if fx]
 
     return LSQResult(
         params=ev.params(x), x=np.array(x, dtype=float), free_labels=free_labels, labels=list(labels),

@@ -294,8 +294,9 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
     X, Y = _perturb(X0, res.params["X"]), _perturb(Y0, res.params["Y"])
     # the closure at the solution: the solver's raw residuals (r * w) without the weights
     rot, trans = _rms(res.residuals.reshape(-1, 6) / w)
-    idx = [res.free_labels.index(f"X.{k}") for k in _LABELS]
-    return HandEyeResult(X=X, method=f"{m}+refine", Y=Y, cov=res.cov[np.ix_(idx, idx)], std=_std_dict(res, "X"),
+    idx = [res.free_labels.index(lab) for lab in _X_LABELS]
+    cov = res.cov[:6, :6].copy() if idx == [0, 1, 2, 3, 4, 5] else res.cov[np.ix_(idx, idx)]
+    return HandEyeResult(X=X, method=f"{m}+refine", Y=Y, cov=cov, std=_std_dict(res, "X"),
                          rot_rms=rot, trans_rms=trans, n_motions=len(ij[0]),
                          warnings=warnings + name_outliers(res.warnings, times, what="T_base_gripper X "
                                                            "T_cam_target = Y"), lsq=res, setup=setup)
