@@ -6,7 +6,7 @@ sensors at 400 Hz. ``compute_flow`` runs the rig's C extension where it was buil
 in the C-peer table, the numba fallback too (``ROBOCAL_FLOW_KERNEL``).
 
     python bench/bench_flow.py            # prints a Markdown table (about 1 min)
-    python bench/bench_flow.py --command [DIR]  # what a user runs: 'robocal flow odometry' on a
+    python bench/bench_flow.py --command [DIR] [--repeats N]  # what a user runs: 'robocal flow odometry' on a
                                           # 30 s, 3-sensor, 400 Hz frames log vs real time, the
                                           # command's fixed cost, the library from files (about 3 min;
                                           # DIR keeps the simulated log for the next run)
@@ -18,7 +18,7 @@ in the C-peer table, the numba fallback too (``ROBOCAL_FLOW_KERNEL``).
 The kernel tables are per core: CPU seconds of this process (``time.process_time``, best of several
 repeats) with the C kernel on one thread (``ROBOCAL_FLOW_THREADS=1``), as OpenCV and numba here. The
 ``--command`` table gives what the user waits, wall seconds (the kernel on its threads, the hashing
-and reading beside it), and the CPU seconds beside them; each the least of 5 runs.
+and reading beside it), and the CPU seconds beside them; each the least of 5 round-robin rounds (``--repeats N``).
 """
 
 from __future__ import annotations
@@ -235,7 +235,7 @@ def command(duration=30.0, folder=None):
     compressed (the pre-0.2 format), the fixed cost (the same command on 0.1 s of that log), the
     floor under it (Python + NumPy + PyYAML + the CLI), and the library from files and from memory, with
     the kernel on its threads and on one. Every figure is the least wall time and the least CPU time
-    (user + sys, all threads) of :data:`REPEATS` runs after a warm-up; the real-time factor is ``duration / wall s``
+    (user + sys, all threads) of :data:`REPEATS` rounds (``--repeats N``) after a warm-up; the real-time factor is ``duration / wall s``
     (what the user waits), by CPU beside it."""
     import shutil
     import sys as _sys
@@ -278,7 +278,7 @@ def command(duration=30.0, folder=None):
     _child_cpu(odo(run, "--no-report"), repeats=1,                 # warm-up: page cache, .pyc files
                env={k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"})
     one = {K.THREADS_ENV: "1"}
-    rows = []
+    specs = []
     for label, argv, secs, extra in (
             (f"robocal flow odometry --no-report, {duration:g} s log (frames.npz memory-mapped)", odo(run, "--no-report"),
              duration, {}),
@@ -299,8 +299,7 @@ def command(duration=30.0, folder=None):
         env.update(extra)
         if K.KERNEL_ENV in extra:
             _child_cpu(argv, repeats=1, env=env)        # warm-up: numba's cache
-        cpu, wall = _child_cpu(argv, repeats=REPEATS, env=env)
-        rows.append((label, cpu, wall, secs))
+        specs.append((label, argv, secs, env))
 
     # the library, in this process (imports and numba's cache already loaded); a fresh RunSpec each run:
     # odometry_run starts the hashing and the reading beside the kernel (robocal.rigs.flow.background)
@@ -318,17 +317,31 @@ def command(duration=30.0, folder=None):
         st, _ = steps_from_frames(frames["frames"], frames["t"], frames["gyro"], frames["height"], spec.focal_px)
         dead_reckon(st, spec.array)
 
-    lib = {}
-    for threads in (None, "1"):
-        if threads:
-            os.environ[K.THREADS_ENV] = threads
-        else:
-            os.environ.pop(K.THREADS_ENV, None)
-        from_files()
-        lib[threads] = (_times(from_files, REPEATS), _times(in_memory, REPEATS))
+    def threads(n):
+        def call(fn):
+            if n:
+                os.environ[K.THREADS_ENV] = n
+            try:
+                return _times(fn, 1)
+            finally:
+                os.environ.pop(K.THREADS_ENV, None)
+        return call
+
+    from_files()
+    # round robin: every figure once a round, REPEATS rounds, the least of each kept (on a shared machine the
+    # neighbours' load comes and goes; each figure gets its share of the quiet moments)
+    best = {}
+    for _ in range(REPEATS):
+        for label, argv, secs, env in specs:
+            best[label] = np.minimum(best.get(label, np.inf), _child_cpu(argv, repeats=1, env=env))
+        for n in (None, "1"):
+            for what, fn in (("files", from_files), ("memory", in_memory)):
+                best[(what, n)] = np.minimum(best.get((what, n), np.inf), threads(n)(fn))
+    rows = [(label, *best[label], secs) for label, _, secs, _ in specs]
+    lib = {n: (tuple(best[("files", n)]), tuple(best[("memory", n)])) for n in (None, "1")}
     os.environ.pop(K.THREADS_ENV, None)
     print(f"{duration:g} s log, 3 sensors x 400 Hz, 64x64 frames ({(run / 'frames.npz').stat().st_size / 1e6:.0f} MB); "
-          f"least of {REPEATS} runs after a warm-up (wall and CPU separately; CPU = user + sys of all threads); flow kernel: "
+          f"least of {REPEATS} round-robin runs after a warm-up (wall and CPU separately; CPU = user + sys of all threads); flow kernel: "
           f"{K.kernel_name()} on {K.kernel_threads()} thread(s)\n")
     print("| what | wall s | x real time | CPU s | x real time by CPU |")
     print("|---|---:|---:|---:|---:|")
@@ -480,6 +493,9 @@ if __name__ == "__main__":
     elif "--s270" in sys.argv[1:]:
         s270()
     elif "--command" in sys.argv[1:]:
+        if "--repeats" in sys.argv[1:]:
+            REPEATS = int(sys.argv.pop(sys.argv.index("--repeats") + 1))
+            sys.argv.remove("--repeats")
         rest = sys.argv[sys.argv.index("--command") + 1:]
         command(folder=rest[0] if rest else None)     # a folder keeps the simulated log for the next run
     else:
