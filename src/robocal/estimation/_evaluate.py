@@ -134,9 +134,11 @@ class Evaluator:
             info = TermInfo(t.name, row, r.size, dim, n_obs, obs)
             infos.append(info)
             sigmas.append(self._sigma(t, info))
-            names = t.blocks if t.blocks is not None else [b.name for b in layout.blocks]
-            self._cols.append(np.concatenate([np.arange(self._blocks[n].offset, self._blocks[n].offset
-                                                        + self._blocks[n].size) for n in names]))
+            if t.blocks is None:                   # every block in order: every element
+                self._cols.append(np.arange(layout.n_full))
+            else:
+                self._cols.append(np.concatenate([np.arange(self._blocks[n].offset, self._blocks[n].offset
+                                                            + self._blocks[n].size) for n in t.blocks]))
             row += r.size
             obs += n_obs
         self.term_info: list[TermInfo] = infos
@@ -205,7 +207,9 @@ class Evaluator:
         if s.ndim == 1 and s.size == info.size:
             s = s.reshape(shape)
         try:
-            return np.broadcast_to(s, shape).reshape(-1).astype(float)
+            out = np.empty(shape)              # broadcast by assignment: np.broadcast_to's wrapper costs more
+            out[...] = s
+            return out.reshape(-1)
         except ValueError:
             raise ShapeError(f"sigma of term '{t.name}' must be a scalar or have shape ({info.dim},), "
                              f"({info.n_obs}, 1), {shape} or ({info.size},), got {s.shape}") from None

@@ -38,7 +38,7 @@ class _Layout:
             self.free_full = np.array([k for k in range(n) if not fixed[k] and k not in tied_full], dtype=int)
         else:                                       # the common case, without a Python loop over elements
             self.free_full = np.arange(n)
-        free_pos = {int(k): i for i, k in enumerate(self.free_full)}
+        free_pos = {k: i for i, k in enumerate(self.free_full.tolist())}
         rows = list(self.free_full)
         cols = list(range(len(self.free_full)))
         vals = [1.0] * len(self.free_full)

@@ -18,7 +18,7 @@ from scipy.linalg import lapack as _lapack
 from robocal.errors import DegenerateGeometryError, InputError, NotEnoughDataError, ShapeError
 from robocal.geometry import matrix_from_quaternion, project_to_rotation, skew
 from robocal.handeye._lie import _I3, log_so3, skew3
-from robocal.handeye.motions import (MIN_AXIS_SPREAD, MIN_ROTATION, MotionCheck, _check_poses,
+from robocal.handeye.motions import (MIN_AXIS_SPREAD, MIN_ROTATION, MotionCheck, _check_poses, _eigh3,
                                                        check_motions)
 
 __all__ = ["AXXB_METHODS", "solve_ax_xb"]
@@ -71,9 +71,10 @@ def _rot_tsai(alpha, beta):
     S, d = Pa + Pb, Pb - Pa
     N = _I3 * np.einsum("ij,ij->", S, S) - S.T @ S
     D = d.T @ S                                   # sum d s^T: its antisymmetric part is sum d x s
-    try:
-        Pp = np.linalg.solve(N, np.array([D[1, 2] - D[2, 1], D[2, 0] - D[0, 2], D[0, 1] - D[1, 0]]))
-    except np.linalg.LinAlgError:       # exactly singular (parallel axes; the motion check refuses them first)
+    # LAPACK's dgesv (numpy.linalg.solve's wrapper costs 4x a 3 x 3 solve); info > 0: exactly singular
+    # (parallel axes, which the motion check refuses first)
+    _, _, Pp, info = _lapack.dgesv(N, np.array([D[1, 2] - D[2, 1], D[2, 0] - D[0, 2], D[0, 1] - D[1, 0]]))
+    if info != 0:
         Pp, *_ = np.linalg.lstsq(skew3(S).reshape(-1, 3), d.reshape(-1), rcond=None)
     Px = 2 * Pp / np.sqrt(1 + Pp @ Pp)
     n2 = Px @ Px
@@ -165,7 +166,7 @@ def _translation(RA, tA, RB_tB_rot, Rx):
     tB = RB_tB_rot
     M = RA - _I3                                                  # (M, 3, 3) blocks of the stack
     u = tB @ Rx.T - tA                                            # (M, 3) right-hand sides
-    w, V = np.linalg.eigh(np.einsum("nki,nkj->ij", M, M))
+    w, V = _eigh3(np.einsum("nki,nkj->ij", M, M))
     if np.sqrt(max(w[0], 0.0)) < 1e-6 * np.sqrt(w[-1]):
         v = V[:, 0]
         raise DegenerateGeometryError(

@@ -8,6 +8,8 @@ scalar-first quaternions explain, translations in the wrong unit. See
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from robocal.errors import DegenerateGeometryError
@@ -71,9 +73,11 @@ def _closure_residuals(Tg, Tc, A, B, m: str, pairs: str):
 
 
 def _translations_plausible(Tg, Tc, rot_rms, trans_rms, X, floor: float = TRANS_FLOOR) -> tuple[bool, str]:
-    lever = float(np.sqrt(np.mean(np.sum(Tc[:, :3, 3] ** 2, axis=1)))) + float(np.linalg.norm(X[:3, 3]))
-    reach = max(float(np.max(np.linalg.norm(Tg[:, :3, 3], axis=1))), 0.2)
-    tx = float(np.linalg.norm(X[:3, 3]))
+    # the sums np.mean / np.linalg.norm take, without their wrappers (issue 16: every calibration asks)
+    tx = math.sqrt(float(X[:3, 3] @ X[:3, 3]))
+    tc2 = np.einsum("ij,ij->i", Tc[:, :3, 3], Tc[:, :3, 3])
+    lever = math.sqrt(float(tc2.sum()) / len(tc2)) + tx
+    reach = max(math.sqrt(float(np.einsum("ij,ij->i", Tg[:, :3, 3], Tg[:, :3, 3]).max())), 0.2)
     if tx > max(2.0, REACH_FACTOR * reach):
         return False, (f"the camera comes out {tx:.3g} m from the gripper, more than {REACH_FACTOR:g} x the "
                        f"gripper's largest distance from the base ({reach:.3g} m)")
