@@ -194,7 +194,7 @@ def _clipped_variance(q, dims, m, rank, n_sigma, max_iter=20, unique=None) -> fl
     the median absolute deviation is robust but too noisy for small samples.
     """
     dof_factor = m / max(m - rank, 1)
-    s2 = float(np.sum(q)) / max(m - rank, 1)
+    s2 = float(q.sum()) / max(m - rank, 1)
     if s2 <= 0:
         return 0.0
     udims, which = np.unique(dims, return_inverse=True) if unique is None else unique
@@ -491,7 +491,8 @@ def _analyse(problem, ev, x, f, J, history, status, message, *, method, loss, f_
     # (with a robust loss) for the covariance.
     if len(ev.term_info) == 1:       # one term: no per-term pieces to stack (issue 16: small problems)
         info0 = ev.term_info[0]
-        q = np.sum(f.reshape(info0.n_obs, info0.dim) ** 2, axis=1)
+        fo = f.reshape(info0.n_obs, info0.dim)
+        q = (fo * fo).sum(axis=1)                     # np.sum's own reduction, without its wrapper
         dims = np.full(info0.n_obs, info0.dim)
         unique = (np.array([info0.dim]), np.zeros(info0.n_obs, dtype=np.intp))
     else:
@@ -515,7 +516,7 @@ def _analyse(problem, ev, x, f, J, history, status, message, *, method, loss, f_
             "cannot be estimated; give sigma and absolute_sigma=True, or add observations",
             params=tuple(free_labels)))
     elif loss == "linear":
-        s2 = float(np.sum(f**2) / dof)
+        s2 = float((f * f).sum() / dof)
     else:
         # the robust loss has (mostly) removed the outliers from the fit; their
         # residuals must not set the noise level of the inliers either
