@@ -102,14 +102,25 @@ def test_the_c_kernel_releases_the_gil():
     """While one thread is inside ``_flowc.match`` another runs Python. With a switch interval of 100 s the
     interpreter never takes the GIL from a thread that holds it, so the main thread resumes during the
     match only if the match let go of it; if it did not, the main thread would resume after the match
-    and see it finished. The match (4000 pairs, ~30 ms) outlasts the main thread's wake-up by far."""
+    and see it finished, every time. The match (4000 pairs, ~30 ms) outlasts the main thread's wake-up;
+    three tries, one enough, so that a loaded machine's late wake-up cannot fail the test."""
     frames = np.random.default_rng(0).integers(0, 256, size=(4001, 64, 64), dtype=np.uint8)
-    started, state = threading.Event(), {"done": False}
 
-    def work():
-        started.set()
-        match_sequence(frames)
-        state["done"] = True
+    def resumed_during_the_match() -> bool:
+        started, state = threading.Event(), {"done": False}
+
+        def work():
+            started.set()
+            match_sequence(frames)
+            state["done"] = True
+
+        t = threading.Thread(target=work)
+        t.start()
+        started.wait()
+        during = not state["done"]
+        t.join()
+        assert state["done"]
+        return during
 
     old = sys.getswitchinterval()
     sys.setswitchinterval(100.0)
@@ -117,14 +128,9 @@ def test_the_c_kernel_releases_the_gil():
         with pytest.MonkeyPatch.context() as mp:
             mp.setenv(K.THREADS_ENV, "1")
             mp.setenv(K.KERNEL_ENV, "c")
-            t = threading.Thread(target=work)
-            t.start()
-            started.wait()
-            during = state["done"]
-            t.join()
+            assert any(resumed_during_the_match() for _ in range(3))
     finally:
         sys.setswitchinterval(old)
-    assert state["done"] and not during
 
 
 @pytest.fixture()
