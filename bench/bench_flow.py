@@ -10,6 +10,7 @@ in the C-peer table, the numba fallback too (``ROBOCAL_FLOW_KERNEL``).
                                           # 30 s, 3-sensor, 400 Hz frames log vs real time, the
                                           # command's fixed cost, the library from files (about 3 min;
                                           # DIR keeps the simulated log for the next run)
+    python bench/bench_flow.py --scaling  # do two CPUs run the C kernel side by side (processes, threads)
     python bench/bench_flow.py --seeds    # calibration accuracy and fresh-run ATE/RPE over
                                           # seeds 100-103 (docs/rigs/flow.md; about 2 min)
     python bench/bench_flow.py --s270     # where sensor s270's R bias comes from: ideal vs kernel
@@ -364,6 +365,53 @@ def command(duration=30.0, folder=None):
         shutil.rmtree(base, ignore_errors=True)
 
 
+def scaling(rounds=40):
+    """Whether the machine's CPUs run the C kernel side by side: the least time of 3000 pairs alone, of two
+    processes doing 3000 pairs each at once, and of 6000 pairs on the kernel's two threads (rounds
+    interleaved). Two real cores: both ratios near 1; SMT siblings or a busy neighbour: near 2."""
+    os.environ[K.THREADS_ENV] = "1"
+    fr = np.random.default_rng(0).integers(0, 256, (6001, 64, 64), dtype=np.uint8)
+    K.match_sequence(fr[:300])
+
+    def solo():
+        t0 = time.perf_counter()
+        K.match_sequence(fr[:3001])
+        return time.perf_counter() - t0
+
+    def procs():
+        r, w = os.pipe()
+        pid = os.fork()
+        if pid == 0:
+            os.close(r)
+            t0 = time.perf_counter()
+            K.match_sequence(fr[3000:])
+            os.write(w, str(time.perf_counter() - t0).encode())
+            os._exit(0)
+        os.close(w)
+        a = solo()
+        os.waitpid(pid, 0)
+        b = float(os.read(r, 64))
+        os.close(r)
+        return max(a, b)
+
+    def threads():
+        os.environ[K.THREADS_ENV] = "2"
+        try:
+            t0 = time.perf_counter()
+            K.match_sequence(fr)
+            return time.perf_counter() - t0
+        finally:
+            os.environ[K.THREADS_ENV] = "1"
+
+    best = {"solo": np.inf, "procs": np.inf, "threads": np.inf}
+    for _ in range(rounds):
+        for k, f in (("solo", solo), ("procs", procs), ("threads", threads)):
+            best[k] = min(best[k], f())
+    print(f"C kernel, least of {rounds} rounds: 3000 pairs alone {best['solo'] * 1e3:.1f} ms; two processes x 3000 "
+          f"{best['procs'] * 1e3:.1f} ms ({best['procs'] / best['solo']:.2f}x); 6000 pairs on two threads "
+          f"{best['threads'] * 1e3:.1f} ms ({best['threads'] / best['solo']:.2f}x)")
+
+
 def _times(fn, repeats=3):
     """The least CPU seconds (all threads) and the least wall seconds of ``repeats`` calls of ``fn``."""
     cpus, walls = [], []
@@ -492,6 +540,8 @@ if __name__ == "__main__":
         seeds()
     elif "--s270" in sys.argv[1:]:
         s270()
+    elif "--scaling" in sys.argv[1:]:
+        scaling()
     elif "--command" in sys.argv[1:]:
         if "--repeats" in sys.argv[1:]:
             REPEATS = int(sys.argv.pop(sys.argv.index("--repeats") + 1))
