@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import lapack as _lapack
 
+from robocal._stats import median
 from robocal.diagnostics import Diagnostic
 from robocal.errors import DegenerateGeometryError, InputError, NotEnoughDataError, ShapeError
 from robocal.geometry import PoseWithCovariance, matrix_from_rotvec, rotvec_from_matrix, transform_from
@@ -202,15 +203,6 @@ def _angles(R: np.ndarray, rv: np.ndarray | None = None) -> np.ndarray:
 _ONE_DEGREE = np.deg2rad(1.0)
 
 
-def _median(a: np.ndarray) -> float:
-    """``np.median`` of a finite 1-D array: its partition and mean of the middle pair, without its wrapper."""
-    k = a.size // 2
-    if a.size % 2:
-        return float(np.partition(a, k)[k])
-    p = np.partition(a, (k - 1, k))
-    return float((p[k - 1] + p[k]) / 2)
-
-
 def pose_label(k: int, times=None) -> str:
     """``"pose 12"`` or ``"pose 12 (t = 3.400 s)"``: a pose as the user finds it (numbered from 0, the order
     of the file and of the report's per-pose figures)."""
@@ -304,7 +296,7 @@ def check_motions(A, B=None, *, min_rotation: float = MIN_ROTATION, min_axis_spr
     if B is not None:
         angB = _angles(np.asarray(B, float)[:, :3, :3], rvB)
         diff = np.abs(ang - angB)
-        bad = diff > max(_ONE_DEGREE, 10 * _median(diff))
+        bad = diff > max(_ONE_DEGREE, 10 * median(diff))
         if bad.any():
             if pairs is not None:
                 i, j = (np.asarray(a, np.intp) for a in pairs)

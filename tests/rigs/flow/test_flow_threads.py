@@ -176,17 +176,3 @@ def test_a_damaged_reference_reads_as_it_would_without_the_thread(frames_copy):
     with pytest.raises(InputError) as via_thread:
         odometry_run(load_run(frames_copy / "run.yaml"))
     assert type(via_thread.value) is type(direct.value) and str(via_thread.value) == str(direct.value)
-
-
-def test_median_is_numpys_to_the_bit():
-    """model.median stands in for np.median on the command's path (no numpy.ma import): the same value, not
-    a close one, for odd and even sizes, below and above NumPy's small-array paths; NaN as NumPy."""
-    from robocal.rigs.flow.model import median
-
-    rng = np.random.default_rng(3)
-    for n in (1, 2, 3, 4, 7, 10, 599, 600, 601, 12000):
-        a = rng.normal(size=n) * 10.0 ** rng.uniform(-6, 6, size=n)
-        assert median(a) == np.median(a), n
-        a[n // 3] = np.nan
-        assert np.isnan(median(a)) and np.isnan(np.median(a))
-    assert np.isnan(median([]))

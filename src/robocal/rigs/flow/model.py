@@ -18,27 +18,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from robocal._stats import median  # noqa: F401 - np.median without numpy.ma's import (issue 16); re-exported
 from robocal.errors import DegenerateGeometryError, InputError, NotEnoughDataError
 from robocal.validation import check_array
 
 __all__ = ["SensorArray", "seed_array", "median", "rot2", "se2_exp", "se2_log", "integrate_twists", "relative_twists"]
-
-
-def median(a) -> float:
-    """``np.median`` of the values of ``a`` (NaN when one is NaN or there are none), the same bits: the
-    middle of a partition, or the mean ``(x + y) / 2`` of the middle two as ``np.median`` takes it.
-
-    Here because ``np.median``'s first call imports ``numpy.ma`` (14 ms of a ``robocal flow odometry``
-    call's fixed cost, issue 16) to test for a masked array."""
-    a = np.asarray(a, float).ravel()
-    n = a.size
-    if n == 0 or np.isnan(a).any():
-        return float("nan")
-    h = n // 2
-    if n % 2:
-        return float(np.partition(a, h)[h])
-    p = np.partition(a, (h - 1, h))
-    return float((p[h - 1] + p[h]) / 2.0)
 
 
 def rot2(angle):
