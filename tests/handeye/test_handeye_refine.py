@@ -9,7 +9,7 @@ from robocal.geometry import invert_transform, matrix_from_rotvec, transform_fro
 from robocal.handeye import calibrate_hand_eye, calibrate_robot_world, simulate_eye_in_hand
 from robocal.handeye._lie import exp_so3, left_jacobian, left_jacobian_inverse, log_so3
 from robocal.handeye.axzb import _refine_robot_world, _rw_residual
-from robocal.handeye.motions import _sigmas
+from robocal.handeye.motions import _rms, _sigmas
 from robocal.handeye.refine import _closure, _perturb, _refine_closure
 
 # Central differences (Problem.check_jacobian, step ~eps^(1/3) ~ 6e-6 relative) are exact to ~eps^(2/3) ~ 4e-11
@@ -28,7 +28,7 @@ def eye_in_hand():
     _, r0 = _closure(sim.T_base_gripper, sim.T_cam_target, closed.X, closed.Y)
     # per-pose weights as pose_sigmas gives them: the Jacobian must carry them
     w = np.random.default_rng(1).uniform(0.5, 2.0, (len(r0), 6))
-    return sim, closed, w, _sigmas(r0)
+    return sim, closed, w, _sigmas(*_rms(r0))
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +41,7 @@ def robot_world():
     TA = transform_from(matrix_from_rotvec(rng.normal(size=(15, 3)) * 1e-3) @ TA[:, :3, :3],
                         TA[:, :3, 3] + rng.normal(size=(15, 3)) * 1e-3)
     closed = calibrate_robot_world(TA, TB, refine=False)
-    return TA, TB, closed, _sigmas(_rw_residual(TA, TB, closed.X, closed.Z))
+    return TA, TB, closed, _sigmas(*_rms(_rw_residual(TA, TB, closed.X, closed.Z)))
 
 
 def test_log_map_matches_scipy_everywhere_including_half_turns():
@@ -137,7 +137,7 @@ def test_robot_world_refinement_beats_shah_with_an_honest_covariance():
         shah = calibrate_robot_world(TA, TB, refine=False)
         # calibrate_robot_world's refinement (test_robot_world_refinement_unchanged_...), without a second
         # closed form and plausibility check per set
-        _, lsq = _refine_robot_world(TA, TB, shah.X, shah.Z, *_sigmas(_rw_residual(TA, TB, shah.X, shah.Z)))
+        _, lsq = _refine_robot_world(TA, TB, shah.X, shah.Z, *_sigmas(*_rms(_rw_residual(TA, TB, shah.X, shah.Z))))
         X, Z = _perturb(shah.X, lsq.params["X"]), _perturb(shah.Z, lsq.params["Z"])
         t_shah.append([np.linalg.norm(err(shah.X, Xt)[3:]), np.linalg.norm(err(shah.Z, Zt)[3:])])
         t_ref.append([np.linalg.norm(err(X, Xt)[3:]), np.linalg.norm(err(Z, Zt)[3:])])

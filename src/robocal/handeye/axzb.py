@@ -16,8 +16,8 @@ from robocal.errors import DegenerateGeometryError, NotEnoughDataError, ShapeErr
 from robocal.estimation import Problem, solve
 from robocal.geometry import PoseWithCovariance, invert_transform, project_to_rotation, transform_from
 from robocal.handeye._lie import left_jacobian, left_jacobian_inverse, log_so3, skew3
-from robocal.handeye.motions import (_LABELS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses, _sigmas, check_motions,
-                                     name_outliers, pair_indices)
+from robocal.handeye.motions import (_LABELS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses, _rms, _sigmas,
+                                     check_motions, name_outliers, pair_indices)
 from robocal.handeye.refine import _perturb
 from robocal.handeye.plausibility import judge_poses
 
@@ -188,20 +188,18 @@ def calibrate_robot_world(T_cam_world, T_gripper_base, *, refine: bool = True, p
     rhs = (np.einsum("ij,nj->ni", Rz, TB[:, :3, 3]) - TA[:, :3, 3]).reshape(-1)
     sol, *_ = np.linalg.lstsq(M, rhs, rcond=None)
     X0, Z0 = transform_from(Rx, sol[:3]), transform_from(Rz, sol[3:])
-    r0 = _rw_residual(TA, TB, X0, Z0)
+    rot0, trans0 = _rms(_rw_residual(TA, TB, X0, Z0))
     warnings = judged + list(chk.warnings)
-    out = RobotWorldResult(X=X0, Z=Z0, method="shah", rot_rms=float(np.sqrt(np.mean(r0[:, :3] ** 2))),
-                           trans_rms=float(np.sqrt(np.mean(r0[:, 3:] ** 2))), warnings=warnings)
+    out = RobotWorldResult(X=X0, Z=Z0, method="shah", rot_rms=rot0, trans_rms=trans0, warnings=warnings)
     if not refine:
         return out
-    sr, st = _sigmas(r0)
+    sr, st = _sigmas(rot0, trans0)
 
     _, res = _refine_robot_world(TA, TB, X0, Z0, sr, st)
     X, Z = _perturb(X0, res.params["X"]), _perturb(Z0, res.params["Z"])
-    r = _rw_residual(TA, TB, X, Z)
+    rot, trans = _rms(_rw_residual(TA, TB, X, Z))
     std = {f"X.{k}": res.std.get(f"X.{k}") for k in _LABELS} | {f"Z.{k}": res.std.get(f"Z.{k}") for k in _LABELS}
     return RobotWorldResult(X=X, Z=Z, method="shah+refine", cov=res.cov, std=std,
-                            rot_rms=float(np.sqrt(np.mean(r[:, :3] ** 2))),
-                            trans_rms=float(np.sqrt(np.mean(r[:, 3:] ** 2))),
+                            rot_rms=rot, trans_rms=trans,
                             warnings=warnings + name_outliers(res.warnings, times, what="A X = Z B"),
                             lsq=res)

@@ -302,7 +302,7 @@ def refine_with_clock(pairing: StreamPairing, X0, Y0, *, setup: str = "eye-in-ha
     (from 0) and their stamp.
     """
     from robocal.estimation import Problem, solve
-    from robocal.handeye.motions import _LABELS, _perturbed, _pose_residual, _sigmas, name_outliers
+    from robocal.handeye.motions import _LABELS, _perturbed, _pose_residual, _rms, _sigmas, name_outliers
 
     tr, Tr, tc, Tc = pairing.robot_t, pairing.robot_T, pairing.t, pairing.T_cam_target
     margin = 4 * (pairing.grid_step or 0.0) + 2 * _median_step(tr)
@@ -325,7 +325,7 @@ def refine_with_clock(pairing: StreamPairing, X0, Y0, *, setup: str = "eye-in-ha
             cache[dt] = G if setup == "eye-in-hand" else invert_transform(G)
         return cache[dt]
 
-    sr, st = _sigmas(_pose_residual(gripper(dt0) @ X0 @ Tc, Y0[None]))
+    sr, st = _sigmas(*_rms(_pose_residual(gripper(dt0) @ X0 @ Tc, Y0[None])))
 
     def fun(p):
         X, Y = _perturbed(X0, p["X"]), _perturbed(Y0, p["Y"])

@@ -8,6 +8,7 @@ in :mod:`robocal.handeye`.
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -333,14 +334,17 @@ def _pose_residual(T_a, T_b):
     return np.concatenate([rotvec_from_matrix(Rerr), T_a[..., :3, 3] - T_b[..., :3, 3]], axis=-1)
 
 
-#: the smallest rotation (rad) and translation (m) residual scales the refinement weights by (:func:`_sigmas`)
-_SIGMA_FLOORS = (1e-9, 1e-12)
+def _rms(r) -> tuple[float, float]:
+    """RMS of the rotation (rad) and translation (m) columns of pose residuals (N, 6) (np.mean's own sums)."""
+    r2 = r * r
+    n = 3 * len(r)
+    return math.sqrt(float(r2[:, :3].sum()) / n), math.sqrt(float(r2[:, 3:].sum()) / n)
 
 
-def _sigmas(r: np.ndarray, floor_rot=_SIGMA_FLOORS[0], floor_t=_SIGMA_FLOORS[1]):
-    sr = max(float(np.sqrt(np.mean(r[:, :3] ** 2))), floor_rot)
-    st = max(float(np.sqrt(np.mean(r[:, 3:] ** 2))), floor_t)
-    return sr, st
+def _sigmas(rot_rms: float, trans_rms: float, floor_rot=1e-9, floor_t=1e-12):
+    """The refinement's residual scales (rad, m): a closed form's closure RMS (:func:`_rms`), floored (an exact
+    closed form has none)."""
+    return max(rot_rms, floor_rot), max(trans_rms, floor_t)
 
 
 _LABELS = ("rx", "ry", "rz", "tx", "ty", "tz")

@@ -11,7 +11,6 @@ closed form (the warm start: MINPACK's LM stops after 2-3 steps);
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -21,7 +20,7 @@ from robocal.estimation import Problem, solve
 from robocal.geometry import PoseWithCovariance, invert_transform
 from robocal.handeye._lie import _I3, exp_so3, left_jacobian, left_jacobian_inverse, log_so3, skew3
 from robocal.handeye.axxb import _check_method, _nearest_rotation, _solve_checked
-from robocal.handeye.motions import (_LABELS, _SIGMA_FLOORS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses, _motions,
+from robocal.handeye.motions import (_LABELS, MIN_AXIS_SPREAD, MIN_ROTATION, _check_poses, _motions, _rms, _sigmas,
                                      name_outliers, pair_indices)
 from robocal.handeye.plausibility import _judge_checked
 from robocal.validation import check_array, check_transform
@@ -111,12 +110,6 @@ def _closure_residual(C, Y):
     r[:, :3] = log_so3(C[:, :3, :3] @ Y[:3, :3].T)
     r[:, 3:] = C[:, :3, 3] - Y[:3, 3]
     return r
-
-
-def _rms(r):
-    """RMS of the rotation (rad) and translation (m) columns of closure residuals (N, 6): np.mean's own sums."""
-    r2 = r * r
-    return math.sqrt(float(r2[:, :3].sum()) / (3 * len(r))), math.sqrt(float(r2[:, 3:].sum()) / (3 * len(r)))
 
 
 def _closure_jacobian(Tg, Tc, X, e, wx, wy, _const=None):
@@ -277,7 +270,7 @@ def calibrate_hand_eye(T_base_gripper, T_cam_target, method: str = "tsai", *, re
                         warnings=warnings, setup=setup)
     if not refine:
         return out
-    sr, st = max(rot0, _SIGMA_FLOORS[0]), max(trans0, _SIGMA_FLOORS[1])        # _sigmas(r0)
+    sr, st = _sigmas(rot0, trans0)
 
     w = np.ones((len(Tc), 6))
     if pose_sigmas is not None:

@@ -211,14 +211,15 @@ def _with_pose_covariances(res, pair: PosePair, pose_covariances, setup: str):
     """``res`` refined again on closures whitened by each view's covariance
     (:func:`robocal.handeye.weighted.refine_with_pose_covariances`); returns it and the whitening."""
     from robocal.handeye import HandEyeResult
+    from robocal.handeye.motions import _rms
     from robocal.handeye.weighted import refine_with_pose_covariances
 
     w = refine_with_pose_covariances(_gripper(pair, setup), pair.T_cam_target, pose_covariances, res.X, res.Y,
                                      times=pair.t)
-    r = w.residuals
+    rot, trans = _rms(w.residuals)
     return HandEyeResult(
-        X=w.X, method=f"{res.method}+cov", Y=w.Y, cov=w.cov, std=w.std, rot_rms=float(np.sqrt(np.mean(r[:, :3] ** 2))),
-        trans_rms=float(np.sqrt(np.mean(r[:, 3:] ** 2))), n_motions=res.n_motions, setup=res.setup, lsq=w.lsq,
+        X=w.X, method=f"{res.method}+cov", Y=w.Y, cov=w.cov, std=w.std, rot_rms=rot,
+        trans_rms=trans, n_motions=res.n_motions, setup=res.setup, lsq=w.lsq,
         warnings=[x for x in res.warnings if x.code != "outliers"] + list(w.warnings)), w.whitening
 
 
