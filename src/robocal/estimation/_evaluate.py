@@ -163,7 +163,6 @@ class Evaluator:
         # assembly, no fold; issue 16: a small problem's evaluation is mostly that overhead)
         self._single = (len(terms) == 1 and not layout.tied
                         and (terms[0].blocks is None or list(terms[0].blocks) == list(self._blocks)))
-        self._all_free = len(layout.free_full) == layout.n_full
         self.stage = "during the solve"
 
     # ----------------------------------------------------------- residuals
@@ -277,7 +276,7 @@ class Evaluator:
                 if not np.isfinite(J).all():
                     # the general path below words the error (term, residual, parameter)
                     return self._analytic_general(params, N, t, out)
-                return J if self._all_free else J[:, self.layout.free_full]
+                return J if self.layout._all_free else J[:, self.layout.free_full]
             return self._analytic_general(params, N, t, out)
         return self._analytic_general(params, N)
 
