@@ -10,10 +10,10 @@ a small JSON cache beside the user's other caches and reused while nothing it
 was read from has changed.
 
 The cache's key is the modification time of every ``sys.path`` folder but
-the script's or current one (pip installing or removing any distribution creates or
-deletes a ``*.dist-info`` folder there, which changes the folder's time) and
-of each providing
-distribution's ``entry_points.txt``. A missing, unreadable, corrupt or stale
+the script's or current one (pip installing or removing any distribution
+creates or deletes a ``*.dist-info`` folder there, which changes the
+folder's time) and of each providing distribution's ``entry_points.txt``.
+A missing, unreadable, corrupt or stale
 cache is rebuilt from ``importlib.metadata``; a cache folder that cannot be
 written is ignored. Set ``ROBOCAL_CACHE_DIR`` to move it, or
 ``ROBOCAL_NO_CACHE=1`` to read the metadata every time.
@@ -24,6 +24,7 @@ from __future__ import annotations
 import json
 import os
 import sys
+import zlib
 from importlib import import_module
 from pathlib import Path
 from typing import NamedTuple
@@ -64,9 +65,8 @@ def cache_path() -> Path | None:
         return None
     root = os.environ.get("ROBOCAL_CACHE_DIR") or os.path.join(
         os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "robocal")
-    import zlib  # a stable name across runs (``hash`` is salted per process)
-
-    # not sys.executable: the launcher's shebang names bin/python3.11 where a shell says bin/python
+    # crc32, not ``hash`` (salted per process); not sys.executable: the launcher's shebang names
+    # bin/python3 where a shell says bin/python
     tag = zlib.crc32(f"{sys.prefix}\0{sys.version}".encode("utf-8", "surrogateescape"))
     return Path(root) / f"metadata-{tag:08x}.json"
 

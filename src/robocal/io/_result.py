@@ -293,12 +293,12 @@ _ENCODER = json.JSONEncoder(allow_nan=False)  # one encoder: json.dumps(..., all
 
 
 def _key_text(k) -> str:
-    """A dict key as :func:`json.dumps` writes it (non-string keys become strings the same way)."""
-    if not isinstance(k, str):
-        k = _ENCODER.encode(k) if isinstance(k, _NUMBERS) else k
-        if not isinstance(k, str):
-            raise TypeError(f"keys must be str, int, float, bool or None, not {type(k).__name__}")
-    return _ENCODER.encode(k)
+    """A dict key as :func:`json.dumps` writes it (a number, bool or None as the string of its JSON text)."""
+    if isinstance(k, str):
+        return _ENCODER.encode(k)
+    if isinstance(k, _NUMBERS):
+        return _ENCODER.encode(_ENCODER.encode(k))
+    raise TypeError(f"keys must be str, int, float, bool or None, not {type(k).__name__}")
 
 
 def json_text(obj, *, indent: int = 2) -> str:
