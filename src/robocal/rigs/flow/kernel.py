@@ -131,35 +131,42 @@ def kernel_threads() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-_POOL = None            # (workers, ThreadPoolExecutor), made on first use
-
-
 def _chunked(n: int, run) -> None:
     """``run(start, stop)`` over ``0 .. n`` in contiguous chunks, on up to :func:`kernel_threads` threads.
 
     Every frame pair (and every frame's aggregation) is computed alone, from its own inputs into its own
     output rows, so the chunks give the same bits as one call (tests/rigs/flow/test_flow_threads.py).
     ``run`` must release the GIL (the C kernel's loops do, ``Py_BEGIN_ALLOW_THREADS``): the caller's
-    thread takes the first chunk, a shared pool the others.
+    thread takes the first chunk, a new thread each of the others (a command makes a few such calls, each
+    of milliseconds: no pool to keep, and no 7 ms import of :mod:`concurrent.futures`, which
+    :mod:`.background` avoids for the same reason); the first chunk's error is raised after all have ended.
     """
-    global _POOL
     k = min(kernel_threads(), -(-n // MIN_PAIRS_PER_THREAD))
     if k <= 1:
         run(0, n)
         return
-    if _POOL is None or _POOL[0] < k - 1:
-        from concurrent.futures import ThreadPoolExecutor
+    import threading
 
-        if _POOL is not None:
-            _POOL[1].shutdown(wait=False)
-        _POOL = (k - 1, ThreadPoolExecutor(max_workers=k - 1, thread_name_prefix="robocal-flow"))
     edges = [n * i // k for i in range(k + 1)]
-    futures = [_POOL[1].submit(run, edges[i], edges[i + 1]) for i in range(1, k)]
+    errors = [None] * k
+
+    def work(i):
+        try:
+            run(edges[i], edges[i + 1])
+        except BaseException as exc:  # raised in the caller's thread below
+            errors[i] = exc
+
+    threads = [threading.Thread(target=work, args=(i,), name="robocal-flow", daemon=True) for i in range(1, k)]
+    for t in threads:
+        t.start()
     try:
-        run(edges[0], edges[1])
+        work(0)
     finally:
-        for f in futures:
-            f.result()
+        for t in threads:
+            t.join()
+    for exc in errors:
+        if exc is not None:
+            raise exc
 
 
 def kernel_name() -> str:
