@@ -29,7 +29,7 @@ from importlib import import_module
 from pathlib import Path
 from typing import NamedTuple
 
-__all__ = ["version", "entry_points", "cache_path", "forget", "RIG_GROUP"]
+__all__ = ["version", "entry_points", "cache_dir", "cache_path", "forget", "RIG_GROUP"]
 
 RIG_GROUP = "robocal.rigs"
 _SCHEMA = "robocal.metadata-cache/1"
@@ -55,20 +55,28 @@ class EntryPoint(NamedTuple):
 _memo: dict | None = None  # this process's answer: read once
 
 
+def cache_dir() -> Path | None:
+    """robocal's cache folder: ``ROBOCAL_CACHE_DIR``, else ``$XDG_CACHE_HOME/robocal`` or
+    ``~/.cache/robocal`` (None when ``ROBOCAL_NO_CACHE`` is set: no cache at all)."""
+    if os.environ.get("ROBOCAL_NO_CACHE", "").strip() not in ("", "0"):
+        return None
+    return Path(os.environ.get("ROBOCAL_CACHE_DIR") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "robocal"))
+
+
 def cache_path() -> Path | None:
     """Where the cache lives (None when ``ROBOCAL_NO_CACHE`` is set).
 
     One file per environment and Python (``sys.prefix`` + ``sys.version``):
     two virtual environments never share an answer.
     """
-    if os.environ.get("ROBOCAL_NO_CACHE", "").strip() not in ("", "0"):
+    root = cache_dir()
+    if root is None:
         return None
-    root = os.environ.get("ROBOCAL_CACHE_DIR") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "robocal")
     # crc32, not ``hash`` (salted per process); not sys.executable: the launcher's shebang names
     # bin/python3 where a shell says bin/python
     tag = zlib.crc32(f"{sys.prefix}\0{sys.version}".encode("utf-8", "surrogateescape"))
-    return Path(root) / f"metadata-{tag:08x}.json"
+    return root / f"metadata-{tag:08x}.json"
 
 
 def _mtime(path: str) -> int | None:

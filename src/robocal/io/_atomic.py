@@ -14,6 +14,7 @@ import os
 import tempfile
 from pathlib import Path
 
+from robocal._digests import sha256_file  # noqa: F401 (re-exported: a large file's digest is cached)
 from robocal.errors import InputError
 
 __all__ = ["atomic_write_bytes", "atomic_write_text", "sha256_file", "sha256_bytes", "protected_paths"]
@@ -82,10 +83,3 @@ def sha256_bytes(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
-def sha256_file(path) -> str:
-    """SHA-256 of a file's content (hex), read in chunks."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
