@@ -520,6 +520,32 @@ def _split_header(cell: str) -> tuple[str, str | None]:
     return cell, None
 
 
+def _plain_table(lines):
+    """(header cells, data, file line of each record) when every line after the header is a data row (no
+    comment or blank line among them: a recorded log's usual shape), else None.
+
+    The careful path tests each of a 12,000-row log's lines in Python (~15 ms, per reading); here the
+    lines go to NumPy's reader as they are, and a row count equal to the line count shows that none was a
+    comment or blank (the reader skips blank lines and rejects ``#`` text: then the careful path runs).
+    """
+    h = 0
+    while h < len(lines) and (not lines[h].strip() or lines[h].lstrip().startswith("#")):
+        h += 1
+    body = lines[h + 1:]
+    while body and not body[-1].strip():      # trailing blank lines, as an editor leaves them
+        body.pop()
+    if h == len(lines) or not body:
+        return None
+    try:
+        data = np.loadtxt(body, delimiter=",", comments=None, ndmin=2, dtype=float)
+    except ValueError:
+        return None
+    cells = lines[h].split(",")
+    if data.shape != (len(body), len(cells)):
+        return None
+    return cells, data, np.arange(h + 1, h + 2 + len(body))
+
+
 def _fast_table(kept):
     """(header cells, data) parsed by NumPy's C reader, or None to take the careful path.
 
@@ -583,14 +609,18 @@ def load_csv(path, *, required=(), finite: bool = True, text: str | None = None)
     if text is None:
         text = _read_text(Path(path), source)
     text = text.removeprefix("\ufeff")
-    # (file line number, text) of the lines that are neither blank nor comments
-    kept = [(n, ln) for n, ln in enumerate(text.splitlines(), 1) if ln.strip() and not ln.lstrip().startswith("#")]
-    if not kept:
-        raise FileFormatError("file has no header row", source=source)
-    fast = _fast_table(kept) if '"' not in text else None
+    lines = text.splitlines()
+    fast = _plain_table(lines) if '"' not in text else None
+    if fast is None:
+        # (file line number, text) of the lines that are neither blank nor comments
+        kept = [(n, ln) for n, ln in enumerate(lines, 1) if ln.strip() and not ln.lstrip().startswith("#")]
+        if not kept:
+            raise FileFormatError("file has no header row", source=source)
+        fast = _fast_table(kept) if '"' not in text else None
+        if fast is not None:
+            fast = (*fast, [n for n, _ in kept])  # without quotes a record is one line
     if fast is not None:
-        names_cells, data = fast
-        row_lines = [n for n, _ in kept]  # without quotes a record is one line
+        names_cells, data, row_lines = fast
         header = [_split_header(c) for c in names_cells]
         names = [h[0] for h in header]
         if len(set(names)) != len(names):
@@ -601,8 +631,9 @@ def load_csv(path, *, required=(), finite: bool = True, text: str | None = None)
         bad = np.argwhere(~np.isfinite(data))
         if bad.size:
             i, j = (int(k) for k in bad[0])  # row-major: the first bad cell in file order
-            cell = kept[i + 1][1].split(",")[j] if '"' not in text else repr(float(data[i, j]))
-            raise FileFormatError(f"row {i + 1} (line {row_lines[i + 1]}), column '{names[j]}': value is "
+            line = int(row_lines[i + 1])
+            cell = lines[line - 1].split(",")[j] if '"' not in text else repr(float(data[i, j]))
+            raise FileFormatError(f"row {i + 1} (line {line}), column '{names[j]}': value is "
                                   f"{cell.strip()}", source=source)
     missing = [r for r in required if r not in names]
     if missing:
@@ -614,5 +645,6 @@ def load_csv(path, *, required=(), finite: bool = True, text: str | None = None)
             except UnitError as exc:
                 raise UnitError(exc.message, source=source) from None
     return CsvTable(
-        {n: data[:, j].copy() for j, n in enumerate(names)}, {n: u for n, u in header}, source, np.array(row_lines[1:], dtype=int)
+        {n: data[:, j].copy() for j, n in enumerate(names)}, {n: u for n, u in header}, source,
+        np.asarray(row_lines[1:], dtype=int)
     )

@@ -221,24 +221,30 @@ def _load_headerless(kept, src: str, strict_times: bool = True) -> PoseList:
 def _load_table(path: Path, src: str, strict_times: bool = True) -> PoseList:
     text = _read_text(path, src)
     lines = text.splitlines()
-    kept = [(n, ln) for n, ln in enumerate(lines, 1) if ln.strip() and not ln.lstrip().startswith(("#", "%"))]
-    if not kept:
+
+    def skipped(ln):
+        return not ln.strip() or ln.lstrip().startswith(("#", "%"))
+
+    first = next((n for n, ln in enumerate(lines, 1) if not skipped(ln)), None)
+    if first is None:
         raise FileFormatError("no pose rows (only blank or # comment lines)", source=src)
-    head = kept[0][1]
+    head = lines[first - 1]
     cells = [c for c in (head.split(",") if "," in head else _HEADER_SEP.split(head.strip())) if c.strip()]
     # a header names every column: a first row with any number in it is data (and its junk an error)
     if any(_is_number(c.strip()) for c in cells):
-        return _load_headerless(kept, src, strict_times)
+        return _load_headerless([(n, ln) for n, ln in enumerate(lines, 1) if not skipped(ln)], src, strict_times)
     # a header without units (the TUM order "t x y z qx qy qz qw" as a header row) is read in SI units, and
     # said so; spaces / tabs as separators are rewritten as commas, line for line, so that the table's
     # errors keep the file's line numbers
     named = [c.strip() for c in cells]
     assumed = [c for c in named if "[" not in c and c in _SI_OF]
-    header = ", ".join(f"{c} [{_SI_OF[c]}]" if c in assumed else c for c in named)
-    rows_text = [header if n == kept[0][0] else
-                 (ln if "," in head else ", ".join(c for c in _SEP.split(ln.strip()) if c)) if ln.strip()
-                 and not ln.lstrip().startswith(("#", "%")) else ln for n, ln in enumerate(lines, 1)]
-    text = "\n".join(rows_text)
+    if assumed or "," not in head or "%" in text:
+        header = ", ".join(f"{c} [{_SI_OF[c]}]" if c in assumed else c for c in named)
+        rows_text = [header if n == first else
+                     (ln if "," in head else ", ".join(c for c in _SEP.split(ln.strip()) if c)) if not skipped(ln)
+                     else "" for n, ln in enumerate(lines, 1)]
+        text = "\n".join(rows_text)
+    # else: a comma table with units in its header, as load_csv reads it (a 12,000-row log: no Python per line)
     tab = load_csv(path, text=text)
     if all(c in tab for c in ("x", "y", "z", "qx", "qy", "qz", "qw")):
         p = np.column_stack([tab.column(c, kind="length") for c in "xyz"])
