@@ -39,14 +39,26 @@
 /* GCC on x86-64 Linux: the pair loop is also compiled for AVX2 (3-operand VEX forms, no register copies;
  * 1.3-1.8x on this kernel) and the loader picks the copy the CPU runs (an ifunc), so the built module stays
  * portable to any x86-64. AVX2 brings no FMA: the arithmetic, and so the flow, is the same. */
-#if FLOWC_SSE2 && defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__) \
-    && defined(__GLIBC__)
+#if FLOWC_SSE2 && !defined(FLOWC_NO_AVX2) && defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) \
+    && defined(__linux__) && defined(__GLIBC__)
 #define FLOWC_CLONES __attribute__((target_clones("avx2", "default")))
 #define FLOWC_INLINE static inline __attribute__((always_inline))   /* into each clone, compiled for its ISA */
 #else
 #define FLOWC_CLONES
 #define FLOWC_INLINE static inline
 #endif
+
+/* The default 8x8 / +/-4 px search has its own AVX2 function (match_pairs8_avx2, mpsadbw), compiled with a
+ * target attribute and called when the CPU has AVX2 (checked once at import): GCC or clang on x86-64.
+ * -DFLOWC_NO_AVX2 leaves it and the AVX2 clones out (the SSE2 build the tests compare). */
+#if FLOWC_SSE2 && !defined(FLOWC_NO_AVX2) && (defined(__GNUC__) || defined(__clang__)) && defined(__x86_64__)
+#include <immintrin.h>
+#define FLOWC_AVX2 1
+#define FLOWC_TARGET_AVX2 __attribute__((target("avx2")))
+#else
+#define FLOWC_AVX2 0
+#endif
+static int flowc_have_avx2 = 0;       /* set by PyInit__flowc */
 
 #define MAX_SEARCH 15                 /* FlowConfig allows search <= 15 */
 #define MAX_SIDE (2 * MAX_SEARCH + 1)
@@ -151,6 +163,42 @@ FLOWC_INLINE double interp3(double sm, double s0, double sp, int mode) {
     return d > 0.5 ? 0.5 : (d < -0.5 ? -0.5 : d);
 }
 
+/* ---- one block's outputs from its SAD surface: the tests (gate, SAD limit, distinctness) and the fit -------- */
+
+/* bv: the least SAD at offset (bdx, bdy); sec: the least outside its 3x3; nl, nr, nu, nd: the SADs left, right,
+ * above, below it ("big" outside the window); gate: the texture measure. Shared by both SAD paths. */
+FLOWC_INLINE void finish_block(const uint8_t *P, const uint8_t *C, const params_t *p, const int B, const int S, int b,
+                               int y0, int x0, uint32_t bv, uint32_t sec, int bdx, int bdy, uint32_t nl, uint32_t nr,
+                               uint32_t nu, uint32_t nd, int32_t gate, double *flow, int8_t *status, double *sadmin,
+                               double *distinct, double *texture) {
+    int W = p->window;
+    int32_t bvi = (int32_t)bv, svi = (int32_t)sec;   /* int32 as the numba kernel's arrays */
+    texture[b] = (double)gate;
+    sadmin[b] = (double)bvi;
+    distinct[b] = (double)((int64_t)svi - bvi) / (double)(bvi > 1 ? bvi : 1);
+    flow[2 * b] = NAN;
+    flow[2 * b + 1] = NAN;
+    if ((double)gate < p->feat_thr) { status[b] = 1; return; }
+    if ((double)bvi > p->sad_thr) { status[b] = 2; return; }
+    if ((double)svi < (1.0 + p->min_distinct) * (double)bvi || svi == bvi) { status[b] = 3; return; }
+    status[b] = 0;
+    double fx = (double)bdx, fy = (double)bdy;
+    if (p->mode >= 3) {
+        if (abs(bdx) < S) fx += interp3((double)nl, (double)bvi, (double)nr, p->mode);
+        if (abs(bdy) < S) fy += interp3((double)nu, (double)bvi, (double)nd, p->mode);
+    } else if (p->mode == 1 || p->mode == 2) {
+        const int scale = 4;
+        int64_t qx = (int64_t)bdx * scale, qy = (int64_t)bdy * scale;
+        double fv = sad_frac(P, C, W, y0, x0, B, bdy, bdx, 0, 0, scale);
+        refine_step(P, C, W, y0, x0, B, &qx, &qy, &fv, 2, scale);
+        if (p->mode == 2) refine_step(P, C, W, y0, x0, B, &qx, &qy, &fv, 1, scale);
+        fx = (double)qx / scale;
+        fy = (double)qy / scale;
+    }
+    flow[2 * b] = fx;
+    flow[2 * b + 1] = fy;
+}
+
 /* ---- one frame pair: every block's gate, SAD surface, tests and sub-pixel flow ----------------- */
 
 /* B and S are arguments (not read from p) so that the call with the defaults' constants (8, 4) below is
@@ -196,32 +244,8 @@ FLOWC_INLINE void match_pair_bs(const uint8_t *P, const uint8_t *C, const params
             for (int c = 0; c < qn; c++)
                 gate += abs((int)P[(size_t)(gy + r) * W + gx + c] - (int)P[(size_t)(gy + r + 1) * W + gx + c])
                       + abs((int)P[(size_t)(gy + c) * W + gx + r] - (int)P[(size_t)(gy + c) * W + gx + r + 1]);
-        int32_t bvi = (int32_t)bv, svi = (int32_t)sec;   /* int32 as the numba kernel's arrays */
-        int bdy = oy - S, bdx = ox - S;
-        texture[b] = (double)gate;
-        sadmin[b] = (double)bvi;
-        distinct[b] = (double)((int64_t)svi - bvi) / (double)(bvi > 1 ? bvi : 1);
-        flow[2 * b] = NAN;
-        flow[2 * b + 1] = NAN;
-        if ((double)gate < p->feat_thr) { status[b] = 1; continue; }
-        if ((double)bvi > p->sad_thr) { status[b] = 2; continue; }
-        if ((double)svi < (1.0 + p->min_distinct) * (double)bvi || svi == bvi) { status[b] = 3; continue; }
-        status[b] = 0;
-        double fx = (double)bdx, fy = (double)bdy;
-        if (p->mode >= 3) {
-            if (abs(bdx) < S) fx += interp3((double)nl, (double)bvi, (double)nr, p->mode);
-            if (abs(bdy) < S) fy += interp3((double)nu, (double)bvi, (double)nd, p->mode);
-        } else if (p->mode == 1 || p->mode == 2) {
-            const int scale = 4;
-            int64_t qx = (int64_t)bdx * scale, qy = (int64_t)bdy * scale;
-            double fv = sad_frac(P, C, W, y0, x0, B, bdy, bdx, 0, 0, scale);
-            refine_step(P, C, W, y0, x0, B, &qx, &qy, &fv, 2, scale);
-            if (p->mode == 2) refine_step(P, C, W, y0, x0, B, &qx, &qy, &fv, 1, scale);
-            fx = (double)qx / scale;
-            fy = (double)qy / scale;
-        }
-        flow[2 * b] = fx;
-        flow[2 * b + 1] = fy;
+        finish_block(P, C, p, B, S, b, y0, x0, bv, sec, ox - S, oy - S, nl, nr, nu, nd, gate, flow, status, sadmin,
+                     distinct, texture);
     }
 }
 
@@ -238,6 +262,103 @@ static void match_pairs(const uint8_t *prev, const uint8_t *curr, Py_ssize_t n, 
                           sadmin + k * nb, distinct + k * nb, texture + k * nb);
     }
 }
+
+#if FLOWC_AVX2
+/* ---- the default 8x8 / +/-4 px search with AVX2 mpsadbw ----------------------------------------------------
+ *
+ * vmpsadbw (Intel SDM, MPSADBW) gives 8 SADs of one 4-byte group at 8 consecutive byte offsets, per 128-bit lane.
+ * With a block row t (8 bytes, in both lanes) against the 16 bytes s of a search row from x0 - 4 (in both lanes),
+ * the low lane sums |s[d + k] - t[k]|, k < 4, and the high lane |s[d + 4 + k] - t[4 + k]| (imm 0x28: a offset 4,
+ * b group 1), d = 0..7: the two lanes added are the row's SADs at dx = d - 4 = -4..+3. Eight rows summed give the
+ * block's SADs at those dx for one dy (at most 8 * 8 * 255 = 16,320: u16, no overflow); dx = +4 by psadbw on the
+ * rows' high halves. 72 vmpsadbw and 36 psadbw a block where sad8_sse2 takes 324 psadbw, and the 16 search rows
+ * are loaded once for every offset. Same integer SADs, so the same selection, tests and fit: bit-identical. */
+
+FLOWC_TARGET_AVX2
+static inline uint64_t load64(const uint8_t *a) { uint64_t v; memcpy(&v, a, 8); return v; }
+
+FLOWC_TARGET_AVX2
+static inline uint32_t load32(const uint8_t *a) { uint32_t v; memcpy(&v, a, 4); return v; }
+
+FLOWC_TARGET_AVX2
+static void match_pairs8_avx2(const uint8_t *prev, const uint8_t *curr, Py_ssize_t n, const params_t *p,
+                              double *flow, int8_t *status, double *sadmin, double *distinct, double *texture) {
+    const int W = p->window, nb = p->nb;
+    const Py_ssize_t ww = (Py_ssize_t)W * W;
+    const __m128i lane = _mm_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7), ones = _mm_set1_epi16(-1);
+    /* s16[16 * j + d]: the SAD at dy = j - 4, dx = d - 4 (d = 8 the psadbw column) */
+    _Alignas(16) uint16_t s16[9 * 16];
+    for (Py_ssize_t k = 0; k < n; k++) {
+        const uint8_t *P = prev + k * ww, *C = curr + k * ww;
+        double *fl = flow + k * nb * 2;
+        int8_t *st = status + k * nb;
+        double *sm = sadmin + k * nb, *di = distinct + k * nb, *tx = texture + k * nb;
+        for (int b = 0; b < nb; b++) {
+            const int y0 = (int)p->ys[b], x0 = (int)p->xs[b];
+            const uint8_t *pb = P + (size_t)y0 * W + x0, *cb = C + (size_t)(y0 - 4) * W + x0 - 4;
+            __m256i t[8];
+            __m128i srow[16], ref[4];
+            for (int r = 0; r < 8; r++) t[r] = _mm256_set1_epi64x((long long)load64(pb + (size_t)r * W));
+            for (int r = 0; r < 4; r++)
+                ref[r] = _mm_set_epi64x((long long)load64(pb + (size_t)(2 * r + 1) * W), (long long)load64(pb + (size_t)(2 * r) * W));
+            for (int i = 0; i < 16; i++) srow[i] = _mm_loadu_si128((const __m128i *)(cb + (size_t)i * W));
+            /* best as one key: SAD << 8 | j << 4 | d, so the least key is the least SAD, the first in scan
+             * order (row j, then d) on ties: the firmware's strict '<' over the offsets in scan order */
+            uint32_t bkey = 0xffffffffu, rmin[9];
+            for (int j = 0; j < 9; j++) {
+                /* the search rows broadcast straight from the frame (vbroadcasti128: a load, no shuffle) */
+                __m256i acc = _mm256_mpsadbw_epu8(
+                    _mm256_broadcastsi128_si256(_mm_loadu_si128((const __m128i *)(cb + (size_t)j * W))), t[0], 0x28);
+                for (int r = 1; r < 8; r++)
+                    acc = _mm256_add_epi16(acc, _mm256_mpsadbw_epu8(_mm256_broadcastsi128_si256(
+                        _mm_loadu_si128((const __m128i *)(cb + (size_t)(j + r) * W))), t[r], 0x28));
+                __m128i v = _mm_add_epi16(_mm256_castsi256_si128(acc), _mm256_extracti128_si256(acc, 1));
+                _mm_store_si128((__m128i *)(s16 + 16 * j), v);
+                __m128i e = _mm_add_epi32(
+                    _mm_add_epi32(_mm_sad_epu8(ref[0], _mm_unpackhi_epi64(srow[j], srow[j + 1])),
+                                  _mm_sad_epu8(ref[1], _mm_unpackhi_epi64(srow[j + 2], srow[j + 3]))),
+                    _mm_add_epi32(_mm_sad_epu8(ref[2], _mm_unpackhi_epi64(srow[j + 4], srow[j + 5])),
+                                  _mm_sad_epu8(ref[3], _mm_unpackhi_epi64(srow[j + 6], srow[j + 7]))));
+                uint32_t e8 = (uint32_t)(_mm_cvtsi128_si32(e) + _mm_extract_epi16(e, 4));
+                s16[16 * j + 8] = (uint16_t)e8;
+                uint32_t mp = (uint32_t)_mm_cvtsi128_si32(_mm_minpos_epu16(v));   /* first least of d = 0..7 */
+                uint32_t m = mp & 0xffffu, k1 = m << 8 | (uint32_t)j << 4 | mp >> 16, k2 = e8 << 8 | (uint32_t)j << 4 | 8u;
+                k1 = k1 < k2 ? k1 : k2;
+                bkey = k1 < bkey ? k1 : bkey;
+                rmin[j] = m < e8 ? m : e8;
+            }
+            const uint32_t bv = bkey >> 8;
+            const int oy = (int)(bkey >> 4 & 15u), ox = (int)(bkey & 15u), bo = 16 * oy + ox;
+            const uint32_t big = 65535u;
+            uint32_t nl = ox > 0 ? s16[bo - 1] : big, nr = ox < 8 ? s16[bo + 1] : big;
+            uint32_t nu = oy > 0 ? s16[bo - 16] : big, nd = oy < 8 ? s16[bo + 16] : big;
+            /* second: the least SAD outside the best's 3x3; in its rows, d = ox - 1 .. ox + 1 masked to big */
+            uint32_t sec = big;
+            for (int j = 0; j < 9; j++)
+                if (j < oy - 1 || j > oy + 1) sec = rmin[j] < sec ? rmin[j] : sec;
+            const __m128i mask = _mm_and_si128(_mm_cmpgt_epi16(lane, _mm_set1_epi16((short)(ox - 2))),
+                                               _mm_cmpgt_epi16(_mm_set1_epi16((short)(ox + 2)), lane));
+            for (int j = oy > 0 ? oy - 1 : 0; j <= (oy < 8 ? oy + 1 : 8); j++) {
+                __m128i v = _mm_or_si128(_mm_load_si128((const __m128i *)(s16 + 16 * j)), _mm_and_si128(mask, ones));
+                uint32_t m = (uint32_t)_mm_cvtsi128_si32(_mm_minpos_epu16(v)) & 0xffffu;
+                sec = m < sec ? m : sec;
+                if (ox < 7 && s16[16 * j + 8] < sec) sec = s16[16 * j + 8];
+            }
+            /* PX4FLOW compute_diff on the 4x4 centre (rows gy..gy+3, bytes gx..gx+3): the differences down the
+             * columns (rows 0-2 against 1-3) and along the rows (bytes 0-2 against 1-3, byte 3 zeroed) by psadbw */
+            const uint8_t *g = pb + 2 * (size_t)W + 2;
+            int32_t r0 = (int32_t)load32(g), r1 = (int32_t)load32(g + W), r2 = (int32_t)load32(g + 2 * (size_t)W),
+                    r3 = (int32_t)load32(g + 3 * (size_t)W);
+            __m128i h = _mm_setr_epi32(r0, r1, r2, r3);
+            __m128i gs = _mm_add_epi64(
+                _mm_sad_epu8(_mm_setr_epi32(r0, r1, r2, 0), _mm_setr_epi32(r1, r2, r3, 0)),
+                _mm_sad_epu8(_mm_and_si128(h, _mm_set1_epi32(0x00ffffff)), _mm_srli_epi32(h, 8)));
+            int32_t gate = _mm_cvtsi128_si32(gs) + _mm_extract_epi16(gs, 4);
+            finish_block(P, C, p, 8, 4, b, y0, x0, bv, sec, ox - 4, oy - 4, nl, nr, nu, nd, gate, fl, st, sm, di, tx);
+        }
+    }
+}
+#endif
 
 static int need(Py_buffer *b, Py_ssize_t nbytes, const char *name) {
     if (b->len < nbytes) {
@@ -284,6 +405,13 @@ static PyObject *flowc_match(PyObject *self, PyObject *args) {
         }
     }
     Py_BEGIN_ALLOW_THREADS
+#if FLOWC_AVX2
+    if (flowc_have_avx2 && p.block == 8 && p.search == 4)
+        match_pairs8_avx2((const uint8_t *)prev.buf + p0 * ww, (const uint8_t *)curr.buf + c0 * ww, n, &p,
+                          (double *)flow.buf, (int8_t *)status.buf, (double *)sadmin.buf, (double *)distinct.buf,
+                          (double *)texture.buf);
+    else
+#endif
     match_pairs((const uint8_t *)prev.buf + p0 * ww, (const uint8_t *)curr.buf + c0 * ww, n, &p, (double *)flow.buf,
                 (int8_t *)status.buf, (double *)sadmin.buf, (double *)distinct.buf, (double *)texture.buf);
     Py_END_ALLOW_THREADS
@@ -419,10 +547,10 @@ static struct PyModuleDef module = {
 PyMODINIT_FUNC PyInit__flowc(void) {
     PyObject *m = PyModule_Create(&module);
     const char *simd = FLOWC_SIMD;
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__) && defined(__GLIBC__) \
-    && FLOWC_SSE2
+#if FLOWC_AVX2
     __builtin_cpu_init();
-    if (__builtin_cpu_supports("avx2")) simd = "avx2";    /* the clone the loader chose */
+    flowc_have_avx2 = __builtin_cpu_supports("avx2");
+    if (flowc_have_avx2) simd = "avx2";    /* match_pairs8_avx2 on the default path, the AVX2 clone elsewhere */
 #endif
     if (m != NULL && PyModule_AddStringConstant(m, "SIMD", simd) < 0) {
         Py_DECREF(m);
