@@ -101,6 +101,17 @@ def _adversarial(rng):
         b = np.roll(a, (1, 2), axis=(0, 1))
         yield f"period {py}x{px}", np.stack([a, a, b]), np.stack([b, a, a])   # ties between rows / columns
     yield "dilated", *_dilated(rng)
+    # smooth texture moved by half-integer steps next to the window's corners: the best at dy, dx = +3 or
+    # +4 with its 3x3 reaching the last row / the d = 8 column, which the second minimum must leave out
+    smooth = rng.integers(0, 256, (w + 16, w + 16)).astype(float)
+    smooth = (smooth + np.roll(smooth, 1, 0) + np.roll(smooth, 1, 1) + np.roll(smooth, (1, 1), (0, 1))) / 4
+    prev, curr = [], []
+    for dy, dx in ((3, 3), (3, -4), (-4, 3), (3, 0), (0, 3)):
+        a = smooth[8:8 + w, 8:8 + w]
+        moved = (np.roll(smooth, (dy, dx), (0, 1)) + np.roll(smooth, (dy + 1, dx + 1), (0, 1))) / 2
+        prev.append(a)
+        curr.append(moved[8:8 + w, 8:8 + w])
+    yield "half-pixel steps at the corners", np.round(prev).astype(np.uint8), np.round(curr).astype(np.uint8)
 
 
 def _dilated(rng, shifts=((0, 3), (3, 0), (-4, 3), (3, -4), (1, 1), (0, 0))):

@@ -270,9 +270,11 @@ static void match_pairs(const uint8_t *prev, const uint8_t *curr, Py_ssize_t n, 
  * With a block row t (8 bytes, in both lanes) against the 16 bytes s of a search row from x0 - 4 (in both lanes),
  * the low lane sums |s[d + k] - t[k]|, k < 4, and the high lane |s[d + 4 + k] - t[4 + k]| (imm 0x28: a offset 4,
  * b group 1), d = 0..7: the two lanes added are the row's SADs at dx = d - 4 = -4..+3. Eight rows summed give the
- * block's SADs at those dx for one dy (at most 8 * 8 * 255 = 16,320: u16, no overflow); dx = +4 by psadbw on the
- * rows' high halves. 72 vmpsadbw and 36 psadbw a block where sad8_sse2 takes 324 psadbw, and the 16 search rows
- * are loaded once for every offset. Same integer SADs, so the same selection, tests and fit: bit-identical. */
+ * block's SADs at those dx for one dy (at most 8 * 8 * 255 = 16,320: u16, no overflow); dx = +4 by vpsadbw on the
+ * rows' high halves. 72 vmpsadbw and 18 vpsadbw a block where sad8_sse2 takes 324 psadbw (and 144 row loads and
+ * 135 unpacks), and the 16 search rows are loaded once for every offset. The selection then works on vectors
+ * (minpos per row, a masked minimum for the second), without the scalar loops' 81-step chains and branches.
+ * Same integer SADs, the same selection rule, the same tests and fit: bit-identical to the other paths. */
 
 FLOWC_TARGET_AVX2
 static inline uint64_t load64(const uint8_t *a) { uint64_t v; memcpy(&v, a, 8); return v; }
@@ -285,76 +287,116 @@ static void match_pairs8_avx2(const uint8_t *prev, const uint8_t *curr, Py_ssize
                               double *flow, int8_t *status, double *sadmin, double *distinct, double *texture) {
     const int W = p->window, nb = p->nb;
     const Py_ssize_t ww = (Py_ssize_t)W * W;
-    const __m128i lane = _mm_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7), ones = _mm_set1_epi16(-1);
-    /* s16[16 * j + d]: the SAD at dy = j - 4, dx = d - 4 (d = 8 the psadbw column) */
-    _Alignas(16) uint16_t s16[9 * 16];
+    const __m128i lane = _mm_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7);
+    /* per chunk of blocks, two passes: the SAD surfaces of every block (throughput-bound SIMD), then every
+     * block's selection, tests and fit (short dependency chains, independent between blocks: the core
+     * overlaps them, where one pass per block would wait on each block's chain in turn).
+     * sbuf[block][16 * j + d]: the SAD at dy = j - 4, dx = d - 4 (d = 8 the psadbw column) */
+    enum { CHUNK = 32 };
+    _Alignas(16) uint16_t sbuf[CHUNK * 9 * 16], ebuf[CHUNK * 8];
+    uint32_t mpbuf[CHUNK * 9], e8buf[CHUNK];
     for (Py_ssize_t k = 0; k < n; k++) {
         const uint8_t *P = prev + k * ww, *C = curr + k * ww;
         double *fl = flow + k * nb * 2;
         int8_t *st = status + k * nb;
         double *sm = sadmin + k * nb, *di = distinct + k * nb, *tx = texture + k * nb;
-        for (int b = 0; b < nb; b++) {
-            const int y0 = (int)p->ys[b], x0 = (int)p->xs[b];
-            const uint8_t *pb = P + (size_t)y0 * W + x0, *cb = C + (size_t)(y0 - 4) * W + x0 - 4;
-            __m256i t[8];
-            __m128i srow[16], ref[4];
-            for (int r = 0; r < 8; r++) t[r] = _mm256_set1_epi64x((long long)load64(pb + (size_t)r * W));
-            for (int r = 0; r < 4; r++)
-                ref[r] = _mm_set_epi64x((long long)load64(pb + (size_t)(2 * r + 1) * W), (long long)load64(pb + (size_t)(2 * r) * W));
-            for (int i = 0; i < 16; i++) srow[i] = _mm_loadu_si128((const __m128i *)(cb + (size_t)i * W));
-            /* best as one key: SAD << 8 | j << 4 | d, so the least key is the least SAD, the first in scan
-             * order (row j, then d) on ties: the firmware's strict '<' over the offsets in scan order */
-            uint32_t bkey = 0xffffffffu, rmin[9];
-            for (int j = 0; j < 9; j++) {
-                /* the search rows broadcast straight from the frame (vbroadcasti128: a load, no shuffle) */
-                __m256i acc = _mm256_mpsadbw_epu8(
-                    _mm256_broadcastsi128_si256(_mm_loadu_si128((const __m128i *)(cb + (size_t)j * W))), t[0], 0x28);
-                for (int r = 1; r < 8; r++)
-                    acc = _mm256_add_epi16(acc, _mm256_mpsadbw_epu8(_mm256_broadcastsi128_si256(
-                        _mm_loadu_si128((const __m128i *)(cb + (size_t)(j + r) * W))), t[r], 0x28));
-                __m128i v = _mm_add_epi16(_mm256_castsi256_si128(acc), _mm256_extracti128_si256(acc, 1));
-                _mm_store_si128((__m128i *)(s16 + 16 * j), v);
-                __m128i e = _mm_add_epi32(
-                    _mm_add_epi32(_mm_sad_epu8(ref[0], _mm_unpackhi_epi64(srow[j], srow[j + 1])),
-                                  _mm_sad_epu8(ref[1], _mm_unpackhi_epi64(srow[j + 2], srow[j + 3]))),
-                    _mm_add_epi32(_mm_sad_epu8(ref[2], _mm_unpackhi_epi64(srow[j + 4], srow[j + 5])),
-                                  _mm_sad_epu8(ref[3], _mm_unpackhi_epi64(srow[j + 6], srow[j + 7]))));
-                uint32_t e8 = (uint32_t)(_mm_cvtsi128_si32(e) + _mm_extract_epi16(e, 4));
-                s16[16 * j + 8] = (uint16_t)e8;
-                uint32_t mp = (uint32_t)_mm_cvtsi128_si32(_mm_minpos_epu16(v));   /* first least of d = 0..7 */
-                uint32_t m = mp & 0xffffu, k1 = m << 8 | (uint32_t)j << 4 | mp >> 16, k2 = e8 << 8 | (uint32_t)j << 4 | 8u;
-                k1 = k1 < k2 ? k1 : k2;
-                bkey = k1 < bkey ? k1 : bkey;
-                rmin[j] = m < e8 ? m : e8;
+        for (int b0 = 0; b0 < nb; b0 += CHUNK) {
+            const int bn = nb - b0 < CHUNK ? nb - b0 : CHUNK;
+            for (int b = 0; b < bn; b++) {
+                const int y0 = (int)p->ys[b0 + b], x0 = (int)p->xs[b0 + b];
+                const uint8_t *pb = P + (size_t)y0 * W + x0, *cb = C + (size_t)(y0 - 4) * W + x0 - 4;
+                uint64_t tr[8];
+                __m256i t[8];
+                __m128i srow[16], hp[15];
+                for (int r = 0; r < 8; r++) {
+                    tr[r] = load64(pb + (size_t)r * W);
+                    t[r] = _mm256_set1_epi64x((long long)tr[r]);
+                }
+                for (int i = 0; i < 16; i++) srow[i] = _mm_loadu_si128((const __m128i *)(cb + (size_t)i * W));
+                uint16_t *s16 = sbuf + 16 * 9 * b;
+                uint32_t *mp = mpbuf + 9 * b;
+                for (int j = 0; j < 9; j++) {
+                    /* the search rows broadcast straight from the frame (vbroadcasti128: a load, no shuffle) */
+                    __m256i acc = _mm256_mpsadbw_epu8(
+                        _mm256_broadcastsi128_si256(_mm_loadu_si128((const __m128i *)(cb + (size_t)j * W))), t[0], 0x28);
+                    for (int r = 1; r < 8; r++)
+                        acc = _mm256_add_epi16(acc, _mm256_mpsadbw_epu8(_mm256_broadcastsi128_si256(
+                            _mm_loadu_si128((const __m128i *)(cb + (size_t)(j + r) * W))), t[r], 0x28));
+                    __m128i v = _mm_add_epi16(_mm256_castsi256_si128(acc), _mm256_extracti128_si256(acc, 1));
+                    _mm_store_si128((__m128i *)(s16 + 16 * j), v);
+                    mp[j] = (uint32_t)_mm_cvtsi128_si32(_mm_minpos_epu16(v));   /* the first least of d = 0..7 */
+                }
+                /* dx = +4 (d = 8) for every dy at once: vpsadbw of four rows' high halves (H_i .. H_i+3) against
+                 * four block rows gives one row's SAD a 64-bit lane (<= 2,040); four dy are packed into the 16-bit
+                 * fields of those lanes and the lanes summed by 16-bit adds (a sum <= 16,320 never carries over) */
+                for (int i = 0; i < 15; i++) hp[i] = _mm_unpackhi_epi64(srow[i], srow[i + 1]);
+                const __m256i rq0 = _mm256_setr_epi64x((long long)tr[0], (long long)tr[1], (long long)tr[2], (long long)tr[3]);
+                const __m256i rq1 = _mm256_setr_epi64x((long long)tr[4], (long long)tr[5], (long long)tr[6], (long long)tr[7]);
+                __m256i z[9];
+                for (int j = 0; j < 9; j++)
+                    z[j] = _mm256_add_epi64(
+                        _mm256_sad_epu8(_mm256_inserti128_si256(_mm256_castsi128_si256(hp[j]), hp[j + 2], 1), rq0),
+                        _mm256_sad_epu8(_mm256_inserti128_si256(_mm256_castsi128_si256(hp[j + 4]), hp[j + 6], 1), rq1));
+                __m256i za = _mm256_add_epi64(_mm256_add_epi64(z[0], _mm256_slli_epi64(z[1], 16)),
+                                              _mm256_add_epi64(_mm256_slli_epi64(z[2], 32), _mm256_slli_epi64(z[3], 48)));
+                __m256i zb = _mm256_add_epi64(_mm256_add_epi64(z[4], _mm256_slli_epi64(z[5], 16)),
+                                              _mm256_add_epi64(_mm256_slli_epi64(z[6], 32), _mm256_slli_epi64(z[7], 48)));
+                __m128i ea = _mm_add_epi16(_mm256_castsi256_si128(za), _mm256_extracti128_si256(za, 1));
+                __m128i eb = _mm_add_epi16(_mm256_castsi256_si128(zb), _mm256_extracti128_si256(zb, 1));
+                ea = _mm_add_epi16(ea, _mm_unpackhi_epi64(ea, ea));
+                eb = _mm_add_epi16(eb, _mm_unpackhi_epi64(eb, eb));
+                const __m128i ecol = _mm_unpacklo_epi64(ea, eb);           /* SADs at d = 8, dy rows 0..7 */
+                __m128i e8v = _mm_add_epi64(_mm256_castsi256_si128(z[8]), _mm256_extracti128_si256(z[8], 1));
+                e8buf[b] = (uint32_t)_mm_cvtsi128_si32(_mm_add_epi64(e8v, _mm_unpackhi_epi64(e8v, e8v)));
+                _mm_store_si128((__m128i *)(ebuf + 8 * b), ecol);
             }
-            const uint32_t bv = bkey >> 8;
-            const int oy = (int)(bkey >> 4 & 15u), ox = (int)(bkey & 15u), bo = 16 * oy + ox;
-            const uint32_t big = 65535u;
-            uint32_t nl = ox > 0 ? s16[bo - 1] : big, nr = ox < 8 ? s16[bo + 1] : big;
-            uint32_t nu = oy > 0 ? s16[bo - 16] : big, nd = oy < 8 ? s16[bo + 16] : big;
-            /* second: the least SAD outside the best's 3x3; in its rows, d = ox - 1 .. ox + 1 masked to big */
-            uint32_t sec = big;
-            for (int j = 0; j < 9; j++)
-                if (j < oy - 1 || j > oy + 1) sec = rmin[j] < sec ? rmin[j] : sec;
-            const __m128i mask = _mm_and_si128(_mm_cmpgt_epi16(lane, _mm_set1_epi16((short)(ox - 2))),
-                                               _mm_cmpgt_epi16(_mm_set1_epi16((short)(ox + 2)), lane));
-            for (int j = oy > 0 ? oy - 1 : 0; j <= (oy < 8 ? oy + 1 : 8); j++) {
-                __m128i v = _mm_or_si128(_mm_load_si128((const __m128i *)(s16 + 16 * j)), _mm_and_si128(mask, ones));
-                uint32_t m = (uint32_t)_mm_cvtsi128_si32(_mm_minpos_epu16(v)) & 0xffffu;
-                sec = m < sec ? m : sec;
-                if (ox < 7 && s16[16 * j + 8] < sec) sec = s16[16 * j + 8];
+            for (int b = 0; b < bn; b++) {
+                const int y0 = (int)p->ys[b0 + b], x0 = (int)p->xs[b0 + b];
+                uint16_t *s16 = sbuf + 16 * 9 * b;
+                const uint32_t *mp = mpbuf + 9 * b, e8 = e8buf[b];
+                const __m128i ecol = _mm_load_si128((const __m128i *)(ebuf + 8 * b));
+                /* best as one key: SAD << 8 | j << 4 | d, so the least key is the least SAD, the first in scan
+                 * order (row j, then d) on ties: the firmware's strict '<' over the offsets in scan order */
+                uint32_t bkey = 0xffffffffu;
+                for (int j = 0; j < 9; j++) {
+                    uint32_t e = j < 8 ? ebuf[8 * b + j] : e8;
+                    s16[16 * j + 8] = (uint16_t)e;
+                    uint32_t k1 = (mp[j] & 0xffffu) << 8 | (uint32_t)j << 4 | mp[j] >> 16, k2 = e << 8 | (uint32_t)j << 4 | 8u;
+                    k1 = k1 < k2 ? k1 : k2;
+                    bkey = k1 < bkey ? k1 : bkey;
+                }
+                const uint32_t bv = bkey >> 8;
+                const int oy = (int)(bkey >> 4 & 15u), ox = (int)(bkey & 15u), bo = 16 * oy + ox;
+                const uint32_t big = 65535u;
+                uint32_t nl = ox > 0 ? s16[bo - 1] : big, nr = ox < 8 ? s16[bo + 1] : big;
+                uint32_t nu = oy > 0 ? s16[bo - 16] : big, nd = oy < 8 ? s16[bo + 16] : big;
+                /* second: the least SAD outside the best's 3x3: in rows oy - 1 .. oy + 1 the columns ox - 1 .. ox + 1
+                 * are masked to big (the d = 8 column when ox >= 7), then one vector minimum, no branches */
+                const __m128i cols = _mm_and_si128(_mm_cmpgt_epi16(lane, _mm_set1_epi16((short)(ox - 2))),
+                                                   _mm_cmpgt_epi16(_mm_set1_epi16((short)(ox + 2)), lane));
+                const __m128i rows = _mm_and_si128(_mm_cmpgt_epi16(lane, _mm_set1_epi16((short)(oy - 2))),
+                                                   _mm_cmpgt_epi16(_mm_set1_epi16((short)(oy + 2)), lane));
+                __m128i low = _mm_or_si128(ecol, _mm_and_si128(rows, _mm_set1_epi16((short)-(ox >= 7))));
+                for (int j = 0; j < 9; j++) {
+                    __m128i near = _mm_set1_epi16((short)-((unsigned)(j - oy + 1) <= 2u));
+                    low = _mm_min_epu16(low, _mm_or_si128(_mm_load_si128((const __m128i *)(s16 + 16 * j)),
+                                                          _mm_and_si128(cols, near)));
+                }
+                uint32_t sec = (uint32_t)_mm_cvtsi128_si32(_mm_minpos_epu16(low)) & 0xffffu;
+                if (!(oy >= 7 && ox >= 7) && e8 < sec) sec = e8;
+                /* PX4FLOW compute_diff on the 4x4 centre (rows gy..gy+3, bytes gx..gx+3): the differences down the
+                 * columns (rows 0-2 against 1-3) and along the rows (bytes 0-2 against 1-3, byte 3 zeroed) by psadbw */
+                const uint8_t *g = P + (size_t)(y0 + 2) * W + x0 + 2;
+                int32_t r0 = (int32_t)load32(g), r1 = (int32_t)load32(g + W), r2 = (int32_t)load32(g + 2 * (size_t)W),
+                        r3 = (int32_t)load32(g + 3 * (size_t)W);
+                __m128i h = _mm_setr_epi32(r0, r1, r2, r3);
+                __m128i gs = _mm_add_epi64(
+                    _mm_sad_epu8(_mm_setr_epi32(r0, r1, r2, 0), _mm_setr_epi32(r1, r2, r3, 0)),
+                    _mm_sad_epu8(_mm_and_si128(h, _mm_set1_epi32(0x00ffffff)), _mm_srli_epi32(h, 8)));
+                int32_t gate = _mm_cvtsi128_si32(gs) + _mm_extract_epi16(gs, 4);
+                finish_block(P, C, p, 8, 4, b, y0, x0, bv, sec, ox - 4, oy - 4, nl, nr, nu, nd, gate, fl + 2 * b0,
+                             st + b0, sm + b0, di + b0, tx + b0);
             }
-            /* PX4FLOW compute_diff on the 4x4 centre (rows gy..gy+3, bytes gx..gx+3): the differences down the
-             * columns (rows 0-2 against 1-3) and along the rows (bytes 0-2 against 1-3, byte 3 zeroed) by psadbw */
-            const uint8_t *g = pb + 2 * (size_t)W + 2;
-            int32_t r0 = (int32_t)load32(g), r1 = (int32_t)load32(g + W), r2 = (int32_t)load32(g + 2 * (size_t)W),
-                    r3 = (int32_t)load32(g + 3 * (size_t)W);
-            __m128i h = _mm_setr_epi32(r0, r1, r2, r3);
-            __m128i gs = _mm_add_epi64(
-                _mm_sad_epu8(_mm_setr_epi32(r0, r1, r2, 0), _mm_setr_epi32(r1, r2, r3, 0)),
-                _mm_sad_epu8(_mm_and_si128(h, _mm_set1_epi32(0x00ffffff)), _mm_srli_epi32(h, 8)));
-            int32_t gate = _mm_cvtsi128_si32(gs) + _mm_extract_epi16(gs, 4);
-            finish_block(P, C, p, 8, 4, b, y0, x0, bv, sec, ox - 4, oy - 4, nl, nr, nu, nd, gate, fl, st, sm, di, tx);
         }
     }
 }
