@@ -1,4 +1,4 @@
-"""Lazy package exports (PEP 562), for rig packages whose modules are heavy.
+"""Lazy package exports (PEP 562), for packages whose modules are heavy (the rigs, ``robocal.geometry``).
 
 A rig package lists which submodule defines each exported name; the name is
 imported on first access and then cached in the package. ``robocal <rig>
@@ -10,7 +10,6 @@ help text (0.6-0.9 s instead of 0.2 s).
 from __future__ import annotations
 
 import importlib
-import importlib.util
 import sys
 import types
 from collections.abc import Callable, Collection, Mapping
@@ -48,8 +47,9 @@ def lazy_exports(package: str, exports: Mapping[str, str], namespace: dict, *,
 
         __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
 
-    A submodule name not listed in ``exports`` is imported on access as well,
-    as it was an attribute of a package that imported everything eagerly.
+    A public submodule name, and any submodule named in ``exports``' values
+    (also a private one, ``_so3``), is imported on access as well, as it was
+    an attribute of a package that imported everything eagerly.
     """
     collisions = frozenset(collisions)
     unknown = collisions - set(exports)
@@ -61,16 +61,24 @@ def lazy_exports(package: str, exports: Mapping[str, str], namespace: dict, *,
         namespace[name] = value
         return value
 
+    defining = frozenset(exports.values())
+
     def __getattr__(name: str):
         if name in exports:
             return _resolve(name)
-        if (name.isidentifier() and not name.startswith("_")
-                and importlib.util.find_spec(f"{package}.{name}") is not None):
+        # a defining submodule is an attribute even when private (``robocal.geometry._so3``), as the eager
+        # package's ``from package import _so3`` made it
+        if name in defining:
             return importlib.import_module(f"{package}.{name}")
+        if name.isidentifier() and not name.startswith("_"):
+            from importlib.util import find_spec  # here: only this rare path needs it (start-up, issue 16)
+
+            if find_spec(f"{package}.{name}") is not None:
+                return importlib.import_module(f"{package}.{name}")
         raise AttributeError(f"module {package!r} has no attribute {name!r}")
 
     def __dir__() -> list[str]:
-        return sorted({*namespace, *exports})
+        return sorted({*namespace, *exports, *defining})
 
     if collisions:
         _install_collision_properties(package, collisions, namespace, _resolve)

@@ -192,13 +192,18 @@ def test_prepare_out_dir_from_the_python_api_only_makes_the_folder(tmp_path):
     assert prepare_out_dir(out, "other") == out  # no run open: no refusal either
 
 
+def _refuse_temporary_files(monkeypatch):
+    """The atomic writer's temporary file cannot be made: a folder without write permission."""
+    from robocal.io import _atomic
+
+    def refuse(path):
+        raise PermissionError(13, "Permission denied", os.path.join(path.parent, f".{path.name}.1.2.0.tmp"))
+
+    monkeypatch.setattr(_atomic, "_create_temporary", refuse)
+
+
 def test_the_writer_names_the_users_folder_not_its_temporary_file(tmp_path, monkeypatch):
-    import tempfile
-
-    def refuse(prefix, suffix, dir):
-        raise PermissionError(13, "Permission denied", os.path.join(dir, f"{prefix}abc{suffix}"))
-
-    monkeypatch.setattr(tempfile, "mkstemp", refuse)
+    _refuse_temporary_files(monkeypatch)
     with pytest.raises(PermissionError) as e:
         atomic_write_bytes(tmp_path / "out" / "result.json", b"{}")
     assert e.value.filename == str(tmp_path / "out")
@@ -206,12 +211,7 @@ def test_the_writer_names_the_users_folder_not_its_temporary_file(tmp_path, monk
 
 
 def test_an_unwritable_out_is_one_line_naming_the_folder(tmp_path, run, monkeypatch):
-    import tempfile
-
-    def refuse(prefix, suffix, dir):
-        raise PermissionError(13, "Permission denied", os.path.join(dir, f"{prefix}abc{suffix}"))
-
-    monkeypatch.setattr(tempfile, "mkstemp", refuse)
+    _refuse_temporary_files(monkeypatch)
     out = tmp_path / "ro"
     code, _, err = run("toy", "first", "--out", out)
     assert code == 2 and err.count("\n") == 1 and ".tmp" not in err

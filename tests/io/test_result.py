@@ -107,3 +107,18 @@ def test_atomic_write_gives_the_usual_permissions(tmp_path):
     finally:
         os.umask(old)
     assert stat.S_IMODE(path.stat().st_mode) == 0o644
+
+
+def test_atomic_write_steps_over_a_leftover_temporary_file(tmp_path, monkeypatch):
+    # a crashed process with this pid left its temporary file: O_EXCL takes the next name, not that file
+    import itertools
+    import threading
+
+    from robocal.io import _atomic
+
+    monkeypatch.setattr(_atomic, "_serial", itertools.count())
+    stale = tmp_path / f".r.json.{os.getpid()}.{threading.get_ident()}.0.tmp"
+    stale.write_text("stale")
+    path = atomic_write_text(tmp_path / "r.json", "{}")
+    assert path.read_text() == "{}" and stale.read_text() == "stale"
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([stale.name, "r.json"])

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from robocal.cli._common import RawHelp, add_out_argument, examples_epilog
+from robocal.cli._common import RawHelp, add_command, add_out_argument, examples_epilog
 from robocal.workflow import ACCEPT_IMPLAUSIBLE_HELP, number_at_least
 
 __all__ = ["add_batch_command", "run_batch_command"]
@@ -13,9 +13,28 @@ __all__ = ["add_batch_command", "run_batch_command"]
 
 def add_batch_command(sub, rig_names) -> None:
     """Add ``robocal batch``; ``rig_names()`` lists the installed rigs (for the help text only)."""
-    p = sub.add_parser(
-        "batch", help="calibrate a fleet: every data set of a manifest as its own task, plus a fleet report",
-        formatter_class=RawHelp,
+    def build(p):
+        p.add_argument("rig", metavar="RIG", help=f"the rig that calibrates each data set ({', '.join(rig_names())})")
+        p.add_argument("manifest", type=Path, metavar="MANIFEST", help="the data sets: .yaml/.yml/.json or .csv")
+        p.add_argument("--workers", type=number_at_least(int, 1), default=None, metavar="N",
+                       help="worker processes of the embedded Dask cluster (default: one per core); "
+                            "1 runs serially without starting Dask")
+        p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="use a running Dask cluster (tcp://host:8786) instead of an embedded one; its workers "
+                            "must see the inputs and DIR at the same paths")
+        p.add_argument("--resume", action="store_true",
+                       help="keep DIR's earlier batch and skip the data sets it already finished")
+        p.add_argument("--no-fleet", action="store_true", help="skip fleet.html / fleet.json")
+        p.add_argument("--no-reports", action="store_true",
+                       help="skip each data set's report.html (its figures are most of a quick calibration's time; "
+                            "'robocal report DIR/<id>/result.json' builds one later)")
+        p.add_argument("--accept-implausible", action="store_true", help=ACCEPT_IMPLAUSIBLE_HELP)
+        add_out_argument(p)
+        p.set_defaults(func=run_batch_command)
+
+    add_command(
+        sub, "batch", build, formatter_class=RawHelp,
+        help="calibrate a fleet: every data set of a manifest as its own task, plus a fleet report",
         description="Calibrates each data set of MANIFEST (YAML or CSV: an id and the calibrate inputs per data\n"
                     "set; docs/batch.md) with RIG's calibrate step, as its own task on a Dask cluster: DIR/<id>/\n"
                     "result.json + report.html, each written whole or not at all. A data set that fails is one\n"
@@ -26,23 +45,6 @@ def add_batch_command(sub, rig_names) -> None:
                                "robocal batch humanoid fleet.csv --out fleet-cal --resume     # after a kill",
                                "robocal batch mirror fleet.yaml --out cal --scheduler tcp://10.0.0.5:8786",
                                "robocal batch projector fleet.yaml --out cal --workers 1      # serial, no Dask"))
-    p.add_argument("rig", metavar="RIG", help=f"the rig that calibrates each data set ({', '.join(rig_names())})")
-    p.add_argument("manifest", type=Path, metavar="MANIFEST", help="the data sets: .yaml/.yml/.json or .csv")
-    p.add_argument("--workers", type=number_at_least(int, 1), default=None, metavar="N",
-                   help="worker processes of the embedded Dask cluster (default: one per core); "
-                        "1 runs serially without starting Dask")
-    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="use a running Dask cluster (tcp://host:8786) instead of an embedded one; its workers "
-                        "must see the inputs and DIR at the same paths")
-    p.add_argument("--resume", action="store_true",
-                   help="keep DIR's earlier batch and skip the data sets it already finished")
-    p.add_argument("--no-fleet", action="store_true", help="skip fleet.html / fleet.json")
-    p.add_argument("--no-reports", action="store_true",
-                   help="skip each data set's report.html (its figures are most of a quick calibration's time; "
-                        "'robocal report DIR/<id>/result.json' builds one later)")
-    p.add_argument("--accept-implausible", action="store_true", help=ACCEPT_IMPLAUSIBLE_HELP)
-    add_out_argument(p)
-    p.set_defaults(func=run_batch_command)
 
 
 def run_batch_command(args) -> int:

@@ -20,6 +20,8 @@ __all__ = [
     "examples_epilog",
     "RawHelp",
     "OneLineErrorParser",
+    "LazySubParsers",
+    "add_command",
 ]
 
 
@@ -49,6 +51,81 @@ class RawHelp(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHel
                 or "default" in text:
             return text
         return super()._get_help_string(action)
+
+
+class _Pending:
+    """A sub-command's parser not made yet: the keyword arguments of its ``add_parser`` and its builder."""
+
+    __slots__ = ("make", "kwargs", "build")
+
+    def __init__(self, make, kwargs, build):
+        self.make, self.kwargs, self.build = make, kwargs, build
+
+
+class _Parsers(dict):
+    """name -> parser of a :class:`LazySubParsers`; a pending parser is made and built when looked up.
+
+    Every way argparse and a caller read a parser (``[name]``, ``get``, ``values``, ``items``) gives the
+    built one; the keys (the choices, ``in``) need no parser at all.
+    """
+
+    def _ready(self, name):
+        p = dict.__getitem__(self, name)
+        if isinstance(p, _Pending):
+            pending, p = p, p.make(**p.kwargs)
+            for k, v in dict.items(self):  # the name and its aliases share one parser
+                if v is pending:
+                    dict.__setitem__(self, k, p)
+            pending.build(p)
+        return p
+
+    def __getitem__(self, name):
+        return self._ready(name)
+
+    def get(self, name, default=None):
+        return self._ready(name) if name in self else default
+
+    def values(self):
+        return [self._ready(k) for k in self]
+
+    def items(self):
+        return [(k, self._ready(k)) for k in self]
+
+
+class LazySubParsers(argparse._SubParsersAction):
+    """Sub-commands whose parsers are made when argparse (or ``--help``) first looks one up.
+
+    ``add_parser(name, build=fn, **kwargs)`` records the name and its help line at once (the parent's
+    ``--help`` lists it as before) and calls ``fn(parser)`` to add the arguments only when that command is
+    parsed: ``robocal flow odometry`` builds one of the flow rig's 13 parsers and none of the core's other
+    commands (~10 ms of a command's start-up with argparse's per-argument formatter and gettext calls,
+    issue 16). Without ``build`` it is argparse's ``add_parser``. Use as
+    ``parser.add_subparsers(..., action=LazySubParsers)``.
+    """
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._name_parser_map = self.choices = _Parsers()
+
+    def add_parser(self, name, *, build=None, **kwargs):  # noqa: D102 - argparse hook
+        if build is None:
+            return super().add_parser(name, **kwargs)
+        make = self._parser_class
+        self._parser_class = lambda **kw: _Pending(make, kw, build)
+        try:
+            super().add_parser(name, **kwargs)  # argparse's checks, prog and help line; the parser is pending
+        finally:
+            self._parser_class = make
+        return None
+
+
+def add_command(sub, name: str, build, **kwargs) -> None:
+    """``sub.add_parser(name, **kwargs)`` with its arguments added by ``build(parser)``: when the command is
+    first looked up under a :class:`LazySubParsers`, at once under argparse's own sub-parsers action."""
+    if isinstance(sub, LazySubParsers):
+        sub.add_parser(name, build=build, **kwargs)
+    else:
+        build(sub.add_parser(name, **kwargs))
 
 
 def examples_epilog(*lines: str) -> str:

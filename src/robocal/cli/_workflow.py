@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from robocal.cli._common import (RawHelp, add_out_argument, add_seed_argument,
+from robocal.cli._common import (LazySubParsers, RawHelp, add_command, add_out_argument, add_seed_argument,
                                  examples_epilog, prepare_out_dir, write_run)
 from robocal.errors import InputError, RobocalError
 from robocal.workflow import Command, Option, Workflow, accept_implausible_option, number_at_least
@@ -37,55 +37,72 @@ def _with_step(options, default: str) -> tuple:
 
 
 def add_workflow_commands(parser: argparse.ArgumentParser, wf: Workflow) -> None:
-    """Add ``simulate``, ``calibrate``, ``report`` (those the workflow has) and its extra commands."""
-    sub = parser.add_subparsers(dest="subcommand", metavar="COMMAND")
+    """Add ``simulate``, ``calibrate``, ``report`` (those the workflow has) and its extra commands.
+
+    Each command's arguments are added when it is parsed or its help is shown (:class:`LazySubParsers`):
+    a command builds its own parser, not its rig's dozen.
+    """
+    sub = parser.add_subparsers(dest="subcommand", metavar="COMMAND", action=LazySubParsers)
     if wf.simulate is not None:
         opts = _with_step(wf.simulate_options, "simulate")
-        p = sub.add_parser("simulate", help=wf.simulate_help, description=wf.simulate_description or None,
-                           formatter_class=RawHelp,
-                           epilog=examples_epilog(*wf.simulate_examples) if wf.simulate_examples else None)
-        for o in opts:
-            o.add_to(p)
-        if not any(o.dest == "seed" for o in opts):
-            add_seed_argument(p)
-        if wf.fleet is not None:
-            p.add_argument("--fleet", type=number_at_least(int, 1), default=None, metavar="N",
-                           help="N robots instead of one (OUT/robot-000, ...), true parameters scattered as across "
-                                "a real fleet, a few with a planted fault; OUT/fleet.yaml is the manifest for "
-                                f"'robocal batch {wf.name}', OUT/fleet_truth.json names the planted robots")
-        add_out_argument(p)
-        p.set_defaults(func=lambda a, wf=wf, opts=opts: run_simulate(wf, a, opts))
+
+        def build_simulate(p, opts=opts):
+            for o in opts:
+                o.add_to(p)
+            if not any(o.dest == "seed" for o in opts):
+                add_seed_argument(p)
+            if wf.fleet is not None:
+                p.add_argument("--fleet", type=number_at_least(int, 1), default=None, metavar="N",
+                               help="N robots instead of one (OUT/robot-000, ...), true parameters scattered as "
+                                    "across a real fleet, a few with a planted fault; OUT/fleet.yaml is the manifest "
+                                    f"for 'robocal batch {wf.name}', OUT/fleet_truth.json names the planted robots")
+            add_out_argument(p)
+            p.set_defaults(func=lambda a, wf=wf, opts=opts: run_simulate(wf, a, opts))
+
+        sub.add_parser("simulate", help=wf.simulate_help, description=wf.simulate_description or None,
+                       formatter_class=RawHelp,
+                       epilog=examples_epilog(*wf.simulate_examples) if wf.simulate_examples else None,
+                       build=build_simulate)
     if wf.calibrate is not None:
         opts = _with_step(wf.calibrate_options, "calibrate")
-        p = sub.add_parser("calibrate", help=wf.calibrate_help, description=wf.calibrate_description or None,
-                           formatter_class=RawHelp,
-                           epilog=examples_epilog(*wf.calibrate_examples) if wf.calibrate_examples else None)
-        for o in wf.inputs:
-            o.add_to(p)
-        for o in opts:
-            o.add_to(p)
-        accept_implausible_option().add_to(p)
-        add_out_argument(p)
-        p.set_defaults(func=lambda a, wf=wf, opts=opts: run_calibrate(wf, a, opts))
+
+        def build_calibrate(p, opts=opts):
+            for o in wf.inputs:
+                o.add_to(p)
+            for o in opts:
+                o.add_to(p)
+            accept_implausible_option().add_to(p)
+            add_out_argument(p)
+            p.set_defaults(func=lambda a, wf=wf, opts=opts: run_calibrate(wf, a, opts))
+
+        sub.add_parser("calibrate", help=wf.calibrate_help, description=wf.calibrate_description or None,
+                       formatter_class=RawHelp,
+                       epilog=examples_epilog(*wf.calibrate_examples) if wf.calibrate_examples else None,
+                       build=build_calibrate)
     if wf.build_report is not None:
-        p = sub.add_parser("report", help="rebuild report.html from a result.json", formatter_class=RawHelp,
-                           epilog=examples_epilog(f"robocal {wf.name} report {wf.name}-cal/result.json "
-                                                  f"--out {wf.name}-report"))
-        p.add_argument("result", type=Path, help=f"result.json written by 'robocal {wf.name} calibrate'")
-        add_out_argument(p)
-        p.set_defaults(func=lambda a, wf=wf: _report_command(a, {wf.name: wf}, label=f"{wf.name}-report"))
+        def build_report(p):
+            p.add_argument("result", type=Path, help=f"result.json written by 'robocal {wf.name} calibrate'")
+            add_out_argument(p)
+            p.set_defaults(func=lambda a, wf=wf: _report_command(a, {wf.name: wf}, label=f"{wf.name}-report"))
+
+        sub.add_parser("report", help="rebuild report.html from a result.json", formatter_class=RawHelp,
+                       epilog=examples_epilog(f"robocal {wf.name} report {wf.name}-cal/result.json "
+                                              f"--out {wf.name}-report"),
+                       build=build_report)
     for cmd in wf.commands:
         _add_command(sub, wf, cmd)
 
 
 def _add_command(sub, wf: Workflow, cmd: Command) -> None:
-    p = sub.add_parser(cmd.name, help=cmd.help, description=cmd.description or None, formatter_class=RawHelp,
-                       epilog=examples_epilog(*cmd.examples) if cmd.examples else None)
-    for o in cmd.options:
-        o.add_to(p)
-    if cmd.out:
-        add_out_argument(p)
-    p.set_defaults(func=lambda a, run=cmd.run: _call(run, a))
+    def build(p):
+        for o in cmd.options:
+            o.add_to(p)
+        if cmd.out:
+            add_out_argument(p)
+        p.set_defaults(func=lambda a, run=cmd.run: _call(run, a))
+
+    sub.add_parser(cmd.name, help=cmd.help, description=cmd.description or None, formatter_class=RawHelp,
+                   epilog=examples_epilog(*cmd.examples) if cmd.examples else None, build=build)
 
 
 def _call(run, args) -> int:
@@ -192,12 +209,13 @@ def _report_command(args, workflows, *, label: str) -> int:
 
 def add_report_command(sub, workflows_loader) -> None:
     """``robocal report RESULT.json``: any rig's report, rebuilt from its result file."""
-    p = sub.add_parser(
-        "report", help="rebuild any rig's report.html from its result.json", formatter_class=RawHelp,
+    def build(p):
+        p.add_argument("result", type=Path, help="a result.json written by any 'robocal <rig> calibrate'")
+        add_out_argument(p)
+        p.set_defaults(func=lambda a: _report_command(a, workflows_loader(), label="report"))
+
+    add_command(
+        sub, "report", build, help="rebuild any rig's report.html from its result.json", formatter_class=RawHelp,
         description="Reads the result file, finds the rig named in its 'rig' field and rebuilds the report\n"
                     "that 'robocal <rig> calibrate' wrote beside it.",
         epilog=examples_epilog("robocal report mirror-cal/result.json --out mirror-report"))
-    p.add_argument("result", type=Path, help="a result.json written by any 'robocal <rig> calibrate'")
-    add_out_argument(p)
-    p.set_defaults(func=lambda a: _report_command(a, workflows_loader(), label="report"))
-

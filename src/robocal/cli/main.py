@@ -24,7 +24,8 @@ import numpy as np
 
 import robocal
 from robocal.cli._bag import add_bag_command
-from robocal.cli._common import FORCE_HELP, OneLineErrorParser, RawHelp, examples_epilog, prepare_out_dir
+from robocal.cli._common import (FORCE_HELP, LazySubParsers, OneLineErrorParser, RawHelp, examples_epilog,
+                                prepare_out_dir)
 from robocal.cli._rig import DemoContext, demo_of, discover_rigs, registered_rig_names
 from robocal.cli._batch import add_batch_command
 from robocal.cli._workflow import add_report_command, add_workflow_commands
@@ -54,10 +55,26 @@ def build_parser(rigs=None) -> argparse.ArgumentParser:
         ),
     )
     parser.add_argument("--version", action="version", version=f"robocal {robocal.__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    # each command's parser is built when it is parsed or its help shown (LazySubParsers): a rig command
+    # builds its own parser, not every command's (issue 16, start-up); `robocal --help` lists them all
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", action=LazySubParsers)
 
     with_demo = [r.name for r in rigs if r.demo is not None]
-    demo = sub.add_parser(
+
+    def build_demo(demo):
+        demo.add_argument("--out", type=Path, default=None, metavar="DIR",
+                          help="report directory (default: a fresh robocal-out-demo-<time> folder)")
+        demo.add_argument("--force", action="store_true", help=FORCE_HELP)
+        demo.add_argument("--seed", type=seed_value, default=2026,
+                          help="seed of the random generator; each rig draws from its own stream keyed by its name, "
+                               "so a rig's figures do not depend on which other rigs run")
+        demo.add_argument("--rigs", default=None, metavar="NAMES",
+                          help=f"comma-separated subset of rigs to run, of: {', '.join(with_demo) or 'none installed'} "
+                               "(default: all)")
+        demo.add_argument("--no-progress", action="store_true", help="never show progress bars")
+        demo.set_defaults(func=lambda a: run_demo(a, rigs))
+
+    sub.add_parser(
         "demo",
         help="run every rig end to end on embedded default data and write one HTML report",
         description=(
@@ -68,31 +85,24 @@ def build_parser(rigs=None) -> argparse.ArgumentParser:
         ),
         formatter_class=RawHelp,
         epilog=examples_epilog("robocal demo", "robocal demo --out demo-out --rigs projector,flow"),
+        build=build_demo,
     )
-    demo.add_argument("--out", type=Path, default=None, metavar="DIR",
-                      help="report directory (default: a fresh robocal-out-demo-<time> folder)")
-    demo.add_argument("--force", action="store_true", help=FORCE_HELP)
-    demo.add_argument("--seed", type=seed_value, default=2026,
-                      help="seed of the random generator; each rig draws from its own stream keyed by its name, "
-                           "so a rig's figures do not depend on which other rigs run")
-    demo.add_argument("--rigs", default=None, metavar="NAMES",
-                      help=f"comma-separated subset of rigs to run, of: {', '.join(with_demo) or 'none installed'} "
-                           "(default: all)")
-    demo.add_argument("--no-progress", action="store_true", help="never show progress bars")
-    demo.set_defaults(func=lambda a: run_demo(a, rigs))
 
-    lst = sub.add_parser("rigs", help="list the installed rigs")
-    lst.set_defaults(func=lambda a: _list_rigs(rigs))
+    sub.add_parser("rigs", help="list the installed rigs",
+                   build=lambda lst: lst.set_defaults(func=lambda a: _list_rigs(rigs)))
 
     # `robocal report` reads the rig from the result file: it loads every rig when it runs
     add_report_command(sub, lambda: {w.name: w for w in discover_rigs()})
     add_batch_command(sub, registered_rig_names)  # robocal batch RIG MANIFEST (issue 17)
     add_bag_command(sub)
 
-    for rig in rigs:
-        p = sub.add_parser(rig.name, help=rig.help, description=rig.description, formatter_class=RawHelp)
+    def build_rig(p, rig):
         add_workflow_commands(p, rig)
         p.set_defaults(func=lambda a, p=p: (p.print_help(), 0)[1])
+
+    for rig in rigs:
+        sub.add_parser(rig.name, help=rig.help, description=rig.description, formatter_class=RawHelp,
+                       build=lambda p, rig=rig: build_rig(p, rig))
     return parser
 
 

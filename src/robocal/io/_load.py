@@ -30,7 +30,6 @@ mark (Excel's "CSV UTF-8"); errors name the data row and the file line.
 from __future__ import annotations
 
 import csv
-import difflib
 import json
 import re
 from dataclasses import dataclass, field
@@ -134,6 +133,7 @@ _QUANTITY_KEYS = ("value", "unit")
 
 def _closest(name: str, allowed) -> str | None:
     """The allowed name closest to a misspelt ``name`` (difflib's default cutoff), or None."""
+    import difflib  # here: only a misspelt name needs it (~2 ms of every command's start-up, issue 16)
     close = difflib.get_close_matches(name, list(allowed), n=1)
     return close[0] if close else None
 

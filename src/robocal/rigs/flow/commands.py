@@ -119,7 +119,6 @@ def run_odometry(args) -> int:
     """``robocal flow odometry RUN --out DIR``: trajectory.csv, result.json, report.html (not with ``--no-report``:
     ``robocal flow report DIR/result.json`` draws it from the result later)."""
     from robocal.rigs.flow.log import write_poses_csv
-    from robocal.rigs.flow.report import build_report
     from robocal.rigs.flow.workflow import (check_kernel_options, evaluation_run, flow_config, frames_table,
                                             load_input, odometry_result, odometry_run, read_reference,
                                             trajectory_curves)
@@ -145,7 +144,12 @@ def run_odometry(args) -> int:
     else:
         curves = trajectory_curves(spec, od)
     res = odometry_result(od, spec, errors, curves=curves, steps=steps)
-    _write(out, res, None if getattr(args, "no_report", False) else build_report(res))
+    report = None
+    if not getattr(args, "no_report", False):
+        from robocal.rigs.flow.report import build_report  # here: --no-report draws nothing (issue 16)
+
+        report = build_report(res)
+    _write(out, res, report)
     print(f"wrote {out / 'trajectory.csv'}")
     s = od.summary()
     line = f"distance {s['distance_m']:.3f} m, {s['bridged_steps']} bridged steps"

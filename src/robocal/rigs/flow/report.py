@@ -18,12 +18,19 @@ its ``result.json`` are equal.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from robocal.errors import InputError
 from robocal.io import CalibrationResult
-from robocal.report import Report, new_figure, plot_residual_histogram, solver_section
 from robocal.rigs.flow.evaluate import TrajectoryErrors, plot_trajectories
+
+if TYPE_CHECKING:
+    from robocal.report import Report
+
+# robocal.report (and html, matplotlib's helpers) is imported by the functions that draw: the odometry
+# command imports this module for plot_series and display, and with --no-report draws nothing (issue 16)
 
 __all__ = ["build_report", "calibration_report", "odometry_report", "evaluation_report", "trajectory_section",
            "compare_text", "systematic_note", "velocity_figure", "quality_figure", "window_residual_figure",
@@ -101,6 +108,8 @@ def systematic_note(source: str, removed: bool) -> str:
 
 def velocity_figure(t, velocity, velocity_std):
     """vx, vy, omega over time with the 3-sigma band of the array geometry and per-frame quality."""
+    from robocal.report import new_figure
+
     fig, axs = new_figure(3, 1, size=(6.4, 5.5), sharex=True)
     t, v, s = _nan(t), _nan(velocity).reshape(-1, 3), _nan(velocity_std).reshape(-1, 3)
     k = _every(len(t))                                       # drawn every k-th interval on long runs
@@ -116,6 +125,8 @@ def velocity_figure(t, velocity, velocity_std):
 
 def quality_figure(t, quality: dict):
     """Per-sensor quality (0..255) over time; ``quality``: sensor name -> series at the times ``t``."""
+    from robocal.report import new_figure
+
     fig, ax = new_figure(size=(6.4, 3.0))
     t = _nan(t)
     k = _every(len(t))
@@ -129,6 +140,8 @@ def quality_figure(t, quality: dict):
 
 def window_residual_figure(windows: dict):
     """Per-window residual norm of each sensor over the drive; ``windows``: name -> {"t", "residual"}."""
+    from robocal.report import new_figure
+
     fig, ax = new_figure(size=(6.4, 3.2))
     for nm, w in windows.items():
         r = _nan(w["residual"]).reshape(-1, 2)
@@ -162,6 +175,8 @@ def trajectory_section(report: Report, title: str, curves: dict, errors: dict | 
     :class:`~robocal.rigs.flow.evaluate.TrajectoryErrors` (empty or None: a run
     without a reference, drawn without truth).
     """
+    from robocal.report import new_figure
+
     errors = errors or {}
     sec = report.section(title)
     fig, ax = new_figure(size=(6.0, 5.0))
@@ -206,6 +221,8 @@ def _subtitle(result: CalibrationResult) -> str | None:
 
 def calibration_report(result: CalibrationResult) -> Report:
     """``robocal flow calibrate``'s page: parameters with their three stds, window residuals, solver."""
+    from robocal.report import Report, plot_residual_histogram, solver_section
+
     d = result.diagnostics
     report = Report("robocal flow calibrate", subtitle=_subtitle(result))
     sec = report.section("Calibrated array")
@@ -245,6 +262,8 @@ def calibration_report(result: CalibrationResult) -> Report:
 
 def odometry_report(result: CalibrationResult) -> Report:
     """``robocal flow odometry``'s page: trajectory (with or without a reference), velocity, sensor quality."""
+    from robocal.report import Report
+
     d = result.diagnostics
     report = Report("robocal flow odometry", subtitle=_subtitle(result))
     plots = d.get("plots") or {}
@@ -269,6 +288,8 @@ def odometry_report(result: CalibrationResult) -> Report:
 
 def evaluation_report(result: CalibrationResult) -> Report:
     """``robocal flow evaluate``'s page: the trajectories and their ATE / RPE."""
+    from robocal.report import Report
+
     d = result.diagnostics
     report = Report("robocal flow evaluate", subtitle=_subtitle(result))
     curves = (d.get("plots") or {}).get("trajectories") or {}
