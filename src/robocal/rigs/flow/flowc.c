@@ -276,11 +276,69 @@ static void match_pairs(const uint8_t *prev, const uint8_t *curr, Py_ssize_t n, 
  * (minpos per row, a masked minimum for the second), without the scalar loops' 81-step chains and branches.
  * Same integer SADs, the same selection rule, the same tests and fit: bit-identical to the other paths. */
 
+#define FLOWC_CHUNK 32                /* blocks a pass (the default grid has 25) */
+
 FLOWC_TARGET_AVX2
 static inline uint64_t load64(const uint8_t *a) { uint64_t v; memcpy(&v, a, 8); return v; }
 
 FLOWC_TARGET_AVX2
 static inline uint32_t load32(const uint8_t *a) { uint32_t v; memcpy(&v, a, 4); return v; }
+
+/* finish_block for the fits that read only the SAD surface (none, parabolic, equiangular), four blocks a vector:
+ * the same operations in the same order on the same doubles (IEEE products and quotients are correctly rounded in
+ * either form; no fused multiply-add), selections by compare and blend instead of branches (a block's status is
+ * data: the branches mispredict on real frames), so the same bits. iv[i][b]: finish_block's integer inputs. */
+FLOWC_TARGET_AVX2
+static void finish_blocks_avx2(const params_t *p, int bn, int32_t iv[][FLOWC_CHUNK], double *flow, int8_t *status,
+                               double *sadmin, double *distinct, double *texture) {
+    const __m256d one = _mm256_set1_pd(1.0), half = _mm256_set1_pd(0.5), mhalf = _mm256_set1_pd(-0.5);
+    const __m256d zero = _mm256_setzero_pd(), four = _mm256_set1_pd(4.0), sign = _mm256_set1_pd(-0.0);
+    const __m256d feat = _mm256_set1_pd(p->feat_thr), sadt = _mm256_set1_pd(p->sad_thr);
+    const __m256d dist = _mm256_set1_pd(1.0 + p->min_distinct);
+    _Alignas(32) double out[6][FLOWC_CHUNK];       /* texture, least SAD, distinctness, fx, fy, status */
+    for (int b = 0; b < bn; b += 4) {
+#define IV(i) _mm256_cvtepi32_pd(_mm_load_si128((const __m128i *)(iv[i] + b)))
+        const __m256d bv = IV(0), sv = IV(1), gate = IV(2), bdx = IV(3), bdy = IV(4);
+        const __m256d s1 = _mm256_cmp_pd(gate, feat, _CMP_LT_OQ), s2 = _mm256_cmp_pd(bv, sadt, _CMP_GT_OQ);
+        const __m256d s3 = _mm256_or_pd(_mm256_cmp_pd(sv, _mm256_mul_pd(dist, bv), _CMP_LT_OQ),
+                                        _mm256_cmp_pd(sv, bv, _CMP_EQ_OQ));
+        /* status: 1 no texture, else 2 the SAD over its limit, else 3 ambiguous, else 0 (finish_block's order) */
+        const __m256d code = _mm256_blendv_pd(
+            _mm256_blendv_pd(_mm256_blendv_pd(zero, _mm256_set1_pd(3.0), s3), _mm256_set1_pd(2.0), s2), one, s1);
+        __m256d f[2] = {bdx, bdy};
+        if (p->mode >= 3) {
+            for (int a = 0; a < 2; a++) {         /* interp3 along x (left, right), then y (above, below) */
+                const __m256d sm = IV(5 + 2 * a), sp = IV(6 + 2 * a);
+                const __m256d den = p->mode == 3
+                    ? _mm256_add_pd(_mm256_sub_pd(sm, _mm256_mul_pd(_mm256_set1_pd(2.0), bv)), sp)
+                    : _mm256_sub_pd(_mm256_max_pd(sm, sp), bv);          /* max_pd(a, b) is a > b ? a : b */
+                __m256d d = _mm256_div_pd(_mm256_mul_pd(half, _mm256_sub_pd(sm, sp)), den);
+                d = _mm256_blendv_pd(zero, d, _mm256_cmp_pd(den, zero, _CMP_GT_OQ));
+                d = _mm256_blendv_pd(d, half, _mm256_cmp_pd(d, half, _CMP_GT_OQ));
+                d = _mm256_blendv_pd(d, mhalf, _mm256_cmp_pd(d, mhalf, _CMP_LT_OQ));
+                /* the fit only where |offset| < S (at the window's edge a neighbour is missing): else + 0.0 */
+                const __m256d inside = _mm256_cmp_pd(_mm256_andnot_pd(sign, f[a]), four, _CMP_LT_OQ);
+                f[a] = _mm256_add_pd(f[a], _mm256_and_pd(d, inside));
+            }
+        }
+        const __m256d rejected = _mm256_or_pd(_mm256_or_pd(s1, s2), s3), nan = _mm256_set1_pd(NAN);
+        _mm256_store_pd(out[0] + b, gate);
+        _mm256_store_pd(out[1] + b, bv);
+        _mm256_store_pd(out[2] + b, _mm256_div_pd(_mm256_sub_pd(sv, bv), _mm256_max_pd(bv, one)));
+        _mm256_store_pd(out[3] + b, _mm256_blendv_pd(f[0], nan, rejected));
+        _mm256_store_pd(out[4] + b, _mm256_blendv_pd(f[1], nan, rejected));
+        _mm256_store_pd(out[5] + b, code);
+#undef IV
+    }
+    for (int b = 0; b < bn; b++) {
+        texture[b] = out[0][b];
+        sadmin[b] = out[1][b];
+        distinct[b] = out[2][b];
+        flow[2 * b] = out[3][b];
+        flow[2 * b + 1] = out[4][b];
+        status[b] = (int8_t)out[5][b];
+    }
+}
 
 FLOWC_TARGET_AVX2
 static void match_pairs8_avx2(const uint8_t *prev, const uint8_t *curr, Py_ssize_t n, const params_t *p,
@@ -292,16 +350,18 @@ static void match_pairs8_avx2(const uint8_t *prev, const uint8_t *curr, Py_ssize
      * block's selection, tests and fit (short dependency chains, independent between blocks: the core
      * overlaps them, where one pass per block would wait on each block's chain in turn).
      * sbuf[block][16 * j + d]: the SAD at dy = j - 4, dx = d - 4 (d = 8 the psadbw column) */
-    enum { CHUNK = 32 };
-    _Alignas(16) uint16_t sbuf[CHUNK * 9 * 16], ebuf[CHUNK * 8];
-    uint32_t mpbuf[CHUNK * 9], e8buf[CHUNK];
+    _Alignas(16) uint16_t sbuf[FLOWC_CHUNK * 9 * 16], ebuf[FLOWC_CHUNK * 8];
+    uint32_t mpbuf[FLOWC_CHUNK * 9], e8buf[FLOWC_CHUNK];
+    /* per block for the third pass: least SAD, second, gate, dx, dy, the SADs left, right, above, below */
+    _Alignas(32) int32_t iv[9][FLOWC_CHUNK];
+    memset(iv, 0, sizeof iv);            /* the lanes past the last block compute on zeros, never stored */
     for (Py_ssize_t k = 0; k < n; k++) {
         const uint8_t *P = prev + k * ww, *C = curr + k * ww;
         double *fl = flow + k * nb * 2;
         int8_t *st = status + k * nb;
         double *sm = sadmin + k * nb, *di = distinct + k * nb, *tx = texture + k * nb;
-        for (int b0 = 0; b0 < nb; b0 += CHUNK) {
-            const int bn = nb - b0 < CHUNK ? nb - b0 : CHUNK;
+        for (int b0 = 0; b0 < nb; b0 += FLOWC_CHUNK) {
+            const int bn = nb - b0 < FLOWC_CHUNK ? nb - b0 : FLOWC_CHUNK;
             for (int b = 0; b < bn; b++) {
                 const int y0 = (int)p->ys[b0 + b], x0 = (int)p->xs[b0 + b];
                 const uint8_t *pb = P + (size_t)y0 * W + x0, *cb = C + (size_t)(y0 - 4) * W + x0 - 4;
@@ -394,9 +454,16 @@ static void match_pairs8_avx2(const uint8_t *prev, const uint8_t *curr, Py_ssize
                     _mm_sad_epu8(_mm_setr_epi32(r0, r1, r2, 0), _mm_setr_epi32(r1, r2, r3, 0)),
                     _mm_sad_epu8(_mm_and_si128(h, _mm_set1_epi32(0x00ffffff)), _mm_srli_epi32(h, 8)));
                 int32_t gate = _mm_cvtsi128_si32(gs) + _mm_extract_epi16(gs, 4);
-                finish_block(P, C, p, 8, 4, b, y0, x0, bv, sec, ox - 4, oy - 4, nl, nr, nu, nd, gate, fl + 2 * b0,
-                             st + b0, sm + b0, di + b0, tx + b0);
+                if (p->mode == 1 || p->mode == 2) {     /* the bilinear fits read the frames: one block at a time */
+                    finish_block(P, C, p, 8, 4, b, y0, x0, bv, sec, ox - 4, oy - 4, nl, nr, nu, nd, gate, fl + 2 * b0,
+                                 st + b0, sm + b0, di + b0, tx + b0);
+                    continue;
+                }
+                iv[0][b] = (int32_t)bv; iv[1][b] = (int32_t)sec; iv[2][b] = gate; iv[3][b] = ox - 4; iv[4][b] = oy - 4;
+                iv[5][b] = (int32_t)nl; iv[6][b] = (int32_t)nr; iv[7][b] = (int32_t)nu; iv[8][b] = (int32_t)nd;
             }
+            if (p->mode != 1 && p->mode != 2)
+                finish_blocks_avx2(p, bn, iv, fl + 2 * b0, st + b0, sm + b0, di + b0, tx + b0);
         }
     }
 }
