@@ -8,10 +8,13 @@
  * so the outputs are bit-identical (integer SADs; the fit and the aggregation in double precision,
  * in the same order, without contraction into fused multiply-adds: numba does not contract either).
  *
- * Frames stay in their natural layout (N, W, W) uint8, row-major: no transpose. An 8x8 block's SAD at
- * one offset is 4 SSE2 psadbw on two-row registers where SSE2 is present (x86-64 always; compiled for
- * AVX2 as well where GCC can dispatch at load time), a plain C loop elsewhere. The Python side (kernel.py) checks shapes and dtypes; the functions here check that
- * every buffer is large enough for what they read or write, and release the GIL while they compute.
+ * Frames stay in their natural layout (N, W, W) uint8, row-major: no transpose. The default search (8x8
+ * blocks, +/-4 px) runs match_pairs8_avx2 where the CPU has AVX2 (mpsadbw: 8 offsets of a row an
+ * instruction, the selection and the fit on vectors); otherwise an 8x8 block's SAD at one offset is 4 SSE2
+ * psadbw on two-row registers where SSE2 is present (x86-64 always; compiled for AVX2 as well where GCC can
+ * dispatch at load time), a plain C loop elsewhere. Every path gives the same bits. The Python side
+ * (kernel.py) checks shapes and dtypes; the functions here check that every buffer is large enough for what
+ * they read or write, and release the GIL while they compute.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -55,10 +58,10 @@
 #include <immintrin.h>
 #define FLOWC_AVX2 1
 #define FLOWC_TARGET_AVX2 __attribute__((target("avx2")))
+static int flowc_have_avx2 = 0;       /* set by PyInit__flowc */
 #else
 #define FLOWC_AVX2 0
 #endif
-static int flowc_have_avx2 = 0;       /* set by PyInit__flowc */
 
 #define MAX_SEARCH 15                 /* FlowConfig allows search <= 15 */
 #define MAX_SIDE (2 * MAX_SEARCH + 1)
