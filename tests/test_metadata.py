@@ -54,6 +54,20 @@ def test_the_launcher_and_python_m_share_one_cache_and_skip_importlib_metadata(c
     assert len(list(cache_dir.iterdir())) == 1
 
 
+def test_another_search_path_keeps_its_own_cache_file(cache_dir, monkeypatch):
+    """pytest, or a checkout on PYTHONPATH, between two commands: each keeps its answer, neither is rewritten."""
+    md.entry_points()
+    path = md.cache_path()
+    written = path.stat().st_mtime_ns
+    monkeypatch.setattr(sys, "path", [*sys.path, str(cache_dir.parent / "elsewhere")])
+    assert md.cache_path() != path
+    assert _answer() == _truth()
+    monkeypatch.undo()
+    monkeypatch.setenv("ROBOCAL_CACHE_DIR", str(cache_dir))
+    assert md.cache_path() == path and path.stat().st_mtime_ns == written
+    assert md._load_cache(path) is not None  # still valid for the first search path: no importlib.metadata
+
+
 def test_the_cache_is_used_while_its_key_holds_and_rebuilt_when_it_changes(cache_dir):
     md.entry_points()
     path = md.cache_path()

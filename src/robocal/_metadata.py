@@ -67,15 +67,20 @@ def cache_dir() -> Path | None:
 def cache_path() -> Path | None:
     """Where the cache lives (None when ``ROBOCAL_NO_CACHE`` is set).
 
-    One file per environment and Python (``sys.prefix`` + ``sys.version``):
-    two virtual environments never share an answer.
+    One file per environment, Python and search path (``sys.prefix`` +
+    ``sys.version`` + ``sys.path`` as :func:`_key` reads it): two virtual
+    environments never share an answer, and a process with another search
+    path (pytest's, a ``PYTHONPATH`` checkout) keeps its own file instead of
+    rewriting the commands' one (each rewrite: importlib.metadata again,
+    ~60-70 ms of the next command's start-up, issue 16).
     """
     root = cache_dir()
     if root is None:
         return None
     # crc32, not ``hash`` (salted per process); not sys.executable: the launcher's shebang names
     # bin/python3 where a shell says bin/python
-    tag = zlib.crc32(f"{sys.prefix}\0{sys.version}".encode("utf-8", "surrogateescape"))
+    paths = sys.path if getattr(sys.flags, "safe_path", False) else sys.path[1:]
+    tag = zlib.crc32("\0".join((sys.prefix, sys.version, *paths)).encode("utf-8", "surrogateescape"))
     return root / f"metadata-{tag:08x}.json"
 
 
