@@ -203,3 +203,37 @@ def test_every_sensor_of_the_example_log_gives_the_numba_bits(builds):
     frames = read_frames_npz(EX / "frames" / "frames.npz")["frames"]
     for s in range(frames.shape[0]):
         _same(builds, frames[s, :-1], frames[s, 1:])
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2**32 - 1), values=st.sampled_from(["ties", "signed zeros", "spread"]))
+def test_the_aggregation_gives_the_numba_bits(builds, seed, values):
+    """The per-frame median (ranks instead of an insertion sort in C) and the trimmed mean: flows with many
+    equal values, -0.0 beside 0.0 (equal for '<', different bits: the stable sort's order decides which is
+    the median), odd and even accepted counts, every aggregation mode."""
+    from robocal.rigs.flow.kernel_compiled import _aggregate_frames
+
+    rng = np.random.default_rng(seed)
+    n, nb = 64, 25
+    if values == "ties":
+        flow = rng.integers(-3, 4, (n, nb, 2)) * 0.25
+    elif values == "signed zeros":
+        flow = rng.choice(np.array([-0.0, 0.0, 0.5, -0.5]), (n, nb, 2))
+    else:
+        flow = rng.normal(0, 2, (n, nb, 2))
+    status = np.where(rng.random((n, nb)) < 0.7, 0, rng.integers(1, 4, (n, nb))).astype(np.int8)
+    cen = rng.normal(0, 10, (nb, 2))
+    for mode in (0, 1, 2):
+        outs = []
+        for impl in ("numba", *builds):
+            used, out, agr, spr, c = (np.empty((n, nb), np.bool_), np.empty((n, 2)), np.empty(n), np.empty(n),
+                                      np.empty((n, 2)))
+            if impl == "numba":
+                _aggregate_frames(flow, status, cen, mode, 1.0, used, out, agr, spr, c)
+            else:
+                builds[impl].aggregate(flow, status, cen, n, nb, mode, 1.0, used, out, agr, spr, c)
+            outs.append((used, out, agr, spr, c))
+        for got in outs[1:]:
+            for a, b in zip(got, outs[0]):
+                # bits, not values: np.array_equal calls -0.0 and 0.0 equal
+                assert np.array_equal(np.asarray(a).view(np.uint8), np.asarray(b).view(np.uint8)), (values, mode)
