@@ -357,7 +357,7 @@ static void match_pairs8_avx2(const uint8_t *prev, const uint8_t *curr, Py_ssize
     uint32_t mpbuf[FLOWC_CHUNK * 9], e8buf[FLOWC_CHUNK];
     /* per block for the third pass: least SAD, second, gate, dx, dy, the SADs left, right, above, below */
     _Alignas(32) int32_t iv[9][FLOWC_CHUNK];
-    memset(iv, 0, sizeof iv);            /* the lanes past the last block compute on zeros, never stored */
+    memset(iv, 0, sizeof iv);   /* lanes past a chunk's last block compute on zeros or stale blocks, never stored */
     for (Py_ssize_t k = 0; k < n; k++) {
         const uint8_t *P = prev + k * ww, *C = curr + k * ww;
         double *fl = flow + k * nb * 2;
