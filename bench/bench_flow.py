@@ -10,6 +10,9 @@ in the C-peer table, the numba fallback too (``ROBOCAL_FLOW_KERNEL``).
                                           # 30 s, 3-sensor, 400 Hz frames log vs real time, the
                                           # command's fixed cost, the library from files (about 3 min;
                                           # DIR keeps the simulated log for the next run)
+    python bench/bench_flow.py --fixed DIR [--repeats N]  # the fixed cost against its floors (NumPy +
+                                          # PyYAML, the CLI) in N interleaved rounds, least and median
+                                          # (DIR from --command; default 61 rounds, about 2 min)
     python bench/bench_flow.py --scaling  # do two CPUs run the C kernel side by side (processes, threads)
     python bench/bench_flow.py --seeds    # calibration accuracy and fresh-run ATE/RPE over
                                           # seeds 100-103 (docs/rigs/flow.md; about 2 min)
@@ -380,6 +383,45 @@ def command(duration=30.0, folder=None):
         shutil.rmtree(base, ignore_errors=True)
 
 
+def fixed(folder, rounds=61):
+    """The command's fixed cost against its floors, in interleaved rounds (least and median of ``rounds``):
+    ``robocal flow odometry`` on the 0.1 s log (with its 0.1 s reference and wheel CSVs) that
+    ``--command DIR`` left in ``DIR/short``, ``python -c "import numpy, yaml"`` (what robocal cannot avoid),
+    ``import robocal.cli.main`` and ``python -c pass``. The median shows what a loaded machine gives; the
+    least, what the code costs."""
+    import subprocess
+    import sys as _sys
+    from pathlib import Path
+
+    short = Path(folder) / "short" / "run.yaml"
+    if not short.is_file():
+        raise SystemExit(f"{short} is missing: run 'python bench/bench_flow.py --command {folder}' first")
+    py = _sys.executable
+    outs = iter(range(10**6))
+    cases = {
+        "robocal flow odometry --no-report, 0.1 s log and CSVs (the fixed cost)":
+            lambda: [py, "-m", "robocal", "flow", "odometry", str(short), "--no-progress", "--no-report", "--out",
+                     str(Path(folder) / f"fixed{next(outs)}")],
+        "floor: python -c 'import numpy, yaml'": lambda: [py, "-c", "import numpy, yaml"],
+        "python -c 'import robocal.cli.main'": lambda: [py, "-c", "import robocal.cli.main"],
+        "python -c pass": lambda: [py, "-c", "pass"],
+    }
+    env = {k: v for k, v in os.environ.items() if k not in (K.THREADS_ENV, K.KERNEL_ENV, "PYTHONDONTWRITEBYTECODE")}
+    for argv in cases.values():         # warm-up: .pyc files, the metadata and digest caches
+        subprocess.run(argv(), check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+    times = {k: [] for k in cases}
+    for _ in range(rounds):
+        for label, argv in cases.items():
+            t0 = time.perf_counter()
+            subprocess.run(argv(), check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+            times[label].append(time.perf_counter() - t0)
+    print(f"{rounds} interleaved rounds, wall seconds\n")
+    print("| what | least | median |")
+    print("|---|---:|---:|")
+    for label, t in times.items():
+        print(f"| {label} | {min(t):.3f} | {float(np.median(t)):.3f} |")
+
+
 def scaling(rounds=40):
     """Whether the machine's CPUs run the C kernel side by side: the least time of 3000 pairs alone, of two
     processes doing 3000 pairs each at once, and of 6000 pairs on the kernel's two threads (rounds
@@ -557,6 +599,12 @@ if __name__ == "__main__":
         s270()
     elif "--scaling" in sys.argv[1:]:
         scaling()
+    elif "--fixed" in sys.argv[1:]:
+        rest = sys.argv[sys.argv.index("--fixed") + 1:]
+        if "--repeats" in rest:
+            fixed(rest[0], int(rest[rest.index("--repeats") + 1]))
+        else:
+            fixed(rest[0])
     elif "--command" in sys.argv[1:]:
         if "--repeats" in sys.argv[1:]:
             REPEATS = int(sys.argv.pop(sys.argv.index("--repeats") + 1))
