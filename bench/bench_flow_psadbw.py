@@ -4,7 +4,8 @@ spread gate as :func:`robocal.rigs.flow.kernel.compute_flow` with its defaults (
 8x8, +/-4 px), compiled by the bench where a C compiler is present.
 
     python bench/bench_flow_psadbw.py     # compiles, checks it against compute_flow, prints the rates
-                                          # (the C-peer table of bench_flow.py alone, ~30 s)
+                                          # (the C-peer table of bench_flow.py alone, ~30 s, and the
+                                          # C extension's block matching alone against the peer's)
 
 ``psadbw`` (``_mm_sad_epu8``) sums the absolute differences of 8 byte pairs in one instruction, so an
 8x8 block's SAD at one offset is 4 instructions on two-row registers: the firmware's own trick on its
@@ -188,6 +189,39 @@ def c_sad_argmin(so, prev, curr, best):
     so.sad_argmin(prev, curr, len(prev), best)
 
 
+def kernel_alone(prev, curr, rounds=15):
+    """The C extension's block matching alone (``_flowc.match``: SAD, best and second minimum, texture gate,
+    tests, equiangular fit; no aggregation, no Python per pair), one call on one thread, against the C peer's
+    SAD + argmin on the same pairs: interleaved rounds, the least time of each. Issue 16's kernel goal was
+    >= ~250k pairs/s on one thread."""
+    import time
+
+    import robocal.rigs.flow.kernel as K
+
+    so, mod = load(), K._flowc()
+    if so is None or mod is None:
+        return "kernel alone: no C compiler or no C extension: not measured"
+    cfg = K.FlowConfig()
+    o1 = K.block_origins(cfg)
+    ys, xs = np.repeat(o1, 5).astype(np.int64), np.tile(o1, 5).astype(np.int64)
+    prev, curr = np.ascontiguousarray(prev), np.ascontiguousarray(curr)
+    n = len(prev)
+    outs = [np.empty((n, 25, 2)), np.empty((n, 25), np.int8), np.empty((n, 25)), np.empty((n, 25)), np.empty((n, 25))]
+    best_o = np.empty((n, 25), np.int32)
+    args = (64, 8, 4, ys, xs, float(cfg.feature_threshold), float(cfg.sad_limit), float(cfg.min_distinctness),
+            K.SUBPIXEL_MODES.index(cfg.subpixel))
+    fns = {"ours": lambda: mod.match(prev, curr, 0, 0, n, *args, *outs), "c": lambda: c_sad_argmin(so, prev, curr, best_o)}
+    t = dict.fromkeys(fns, np.inf)
+    for _ in range(rounds):
+        for k, fn in fns.items():
+            t0 = time.perf_counter()
+            fn()
+            t[k] = min(t[k], time.perf_counter() - t0)
+    return (f"kernel alone, one thread, {n} gravel pairs, least of {rounds} interleaved rounds: "
+            f"ours _flowc.match ({mod.SIMD}; SAD, selection, gate, tests, fit) {n / t['ours']:,.0f} pairs/s, "
+            f"C SAD + argmin only {n / t['c']:,.0f} pairs/s: ours / C {t['c'] / t['ours']:.2f}")
+
+
 if __name__ == "__main__":
     from bench_flow import c_peer
 
@@ -204,3 +238,6 @@ if __name__ == "__main__":
     sads = np.empty((25, 81, 256), np.uint16)
     keys = np.empty((25, 256), np.int32)
     print(c_peer(prev, curr, (lambda: K._sad8_batch(pt, ct, 0, ys, xs, 4, sads, keys), 256)))
+    print()
+    print(kernel_alone(prev, curr))
+
