@@ -1,5 +1,3 @@
-import sys
+from robocal.cli.main import entry
 
-from robocal.cli.main import main
-
-sys.exit(main())
+entry()

@@ -105,3 +105,19 @@ def test_the_geometry_facade_exports_what_its_submodules_define():
     assert geometry._fits is modules[4]
     with pytest.raises(AttributeError, match="no_such_name"):
         geometry.no_such_name  # noqa: B018
+
+
+def test_the_program_exits_with_mains_status_and_skips_the_final_collection(monkeypatch):
+    """``entry`` (the launcher, ``python -m robocal``) exits with :func:`main`'s status, the live objects frozen
+    so that the interpreter's shutdown does not walk them all (issue 16: ~25 ms after a 30 s flow log)."""
+    import gc
+
+    from robocal.cli import main as cli_main
+
+    monkeypatch.setattr(cli_main, "main", lambda: 2)
+    try:
+        with pytest.raises(SystemExit) as exc:
+            cli_main.entry()
+        assert exc.value.code == 2 and gc.get_freeze_count() > 0
+    finally:
+        gc.unfreeze()
