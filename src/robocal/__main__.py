@@ -1,3 +1,3 @@
-from robocal.cli.main import entry
+from robocal._program import run
 
-entry()
+run()

@@ -107,17 +107,27 @@ def test_the_geometry_facade_exports_what_its_submodules_define():
         geometry.no_such_name  # noqa: B018
 
 
-def test_the_program_exits_with_mains_status_and_skips_the_final_collection(monkeypatch):
-    """``entry`` (the launcher, ``python -m robocal``) exits with :func:`main`'s status, the live objects frozen
-    so that the interpreter's shutdown does not walk them all (issue 16: ~25 ms after a 30 s flow log)."""
+def test_the_program_exits_with_mains_status_and_freezes_what_lives_to_the_end(monkeypatch):
+    """``robocal._program.run`` (the launcher, ``python -m robocal``) exits with :func:`main`'s status, the
+    collector on while the command runs and the live objects frozen so that the interpreter's shutdown does
+    not walk them all (issue 16: ~25 ms after a 30 s flow log)."""
     import gc
 
+    from robocal import _program
     from robocal.cli import main as cli_main
 
-    monkeypatch.setattr(cli_main, "main", lambda: 2)
+    seen = []
+    monkeypatch.setattr(cli_main, "main", lambda: seen.append(gc.isenabled()) or 2)
     try:
         with pytest.raises(SystemExit) as exc:
-            cli_main.entry()
-        assert exc.value.code == 2 and gc.get_freeze_count() > 0
+            _program.run()
+        assert exc.value.code == 2 and seen == [True] and gc.isenabled() and gc.get_freeze_count() > 0
     finally:
         gc.unfreeze()
+
+
+def test_the_launcher_runs_the_program():
+    launcher = Path(sys.executable).parent / "robocal"
+    if not launcher.is_file():
+        pytest.skip("robocal is not installed with its launcher here")
+    assert "robocal._program" in launcher.read_text(errors="replace")

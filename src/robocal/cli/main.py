@@ -13,7 +13,6 @@ removed only when the command finishes (see ``docs/results.md``).
 from __future__ import annotations
 
 import argparse
-import gc
 import shlex
 import sys
 import time
@@ -301,17 +300,5 @@ def main(argv=None) -> int:
         set_command_line(None)
 
 
-def entry() -> None:
-    """The ``robocal`` program (its launcher and ``python -m robocal``): :func:`main`, then exit with its status."""
-    code = main()
-    # The process ends here. Python's shutdown would first run a full garbage collection over every object
-    # still alive (25 ms after a 30 s flow log: a tenth of a command's fixed-cost budget, issue 16) only to
-    # free memory the system takes back at exit; frozen objects are left out of it. The command's files are
-    # written and closed, atexit handlers and the modules' teardown still run; only unreachable reference
-    # cycles are not finalized, which nothing of robocal's relies on.
-    gc.freeze()
-    sys.exit(code)
-
-
 if __name__ == "__main__":  # pragma: no cover
-    entry()
+    sys.exit(main())
