@@ -59,10 +59,7 @@ def add_workflow_commands(parser: argparse.ArgumentParser, wf: Workflow) -> None
             add_out_argument(p)
             p.set_defaults(func=lambda a, wf=wf, opts=opts: run_simulate(wf, a, opts))
 
-        sub.add_parser("simulate", help=wf.simulate_help, description=wf.simulate_description or None,
-                       formatter_class=RawHelp,
-                       epilog=examples_epilog(*wf.simulate_examples) if wf.simulate_examples else None,
-                       build=build_simulate)
+        _add_step(sub, "simulate", wf.simulate_help, wf.simulate_description, wf.simulate_examples, build_simulate)
     if wf.calibrate is not None:
         opts = _with_step(wf.calibrate_options, "calibrate")
 
@@ -75,10 +72,8 @@ def add_workflow_commands(parser: argparse.ArgumentParser, wf: Workflow) -> None
             add_out_argument(p)
             p.set_defaults(func=lambda a, wf=wf, opts=opts: run_calibrate(wf, a, opts))
 
-        sub.add_parser("calibrate", help=wf.calibrate_help, description=wf.calibrate_description or None,
-                       formatter_class=RawHelp,
-                       epilog=examples_epilog(*wf.calibrate_examples) if wf.calibrate_examples else None,
-                       build=build_calibrate)
+        _add_step(sub, "calibrate", wf.calibrate_help, wf.calibrate_description, wf.calibrate_examples,
+                  build_calibrate)
     if wf.build_report is not None:
         def build_report(p):
             p.add_argument("result", type=Path, help=f"result.json written by 'robocal {wf.name} calibrate'")
@@ -101,8 +96,13 @@ def _add_command(sub, wf: Workflow, cmd: Command) -> None:
             add_out_argument(p)
         p.set_defaults(func=lambda a, run=cmd.run: _call(run, a))
 
-    sub.add_parser(cmd.name, help=cmd.help, description=cmd.description or None, formatter_class=RawHelp,
-                   epilog=examples_epilog(*cmd.examples) if cmd.examples else None, build=build)
+    _add_step(sub, cmd.name, cmd.help, cmd.description, cmd.examples, build)
+
+
+def _add_step(sub, name: str, help_line: str, description: str | None, examples, build) -> None:
+    """A rig command's parser (built by ``build`` when the command is parsed), its examples as the epilog."""
+    sub.add_parser(name, help=help_line, description=description or None, formatter_class=RawHelp,
+                   epilog=examples_epilog(*examples) if examples else None, build=build)
 
 
 def _call(run, args) -> int:
