@@ -10,9 +10,10 @@ in the C-peer table, the numba fallback too (``ROBOCAL_FLOW_KERNEL``).
                                           # 30 s, 3-sensor, 400 Hz frames log vs real time, the
                                           # command's fixed cost, the library from files (about 3 min;
                                           # DIR keeps the simulated log for the next run)
-    python bench/bench_flow.py --fixed DIR [--repeats N]  # the fixed cost against its floors (NumPy +
-                                          # PyYAML, the CLI) in N interleaved rounds, least and median
-                                          # (DIR from --command; default 61 rounds, about 2 min)
+    python bench/bench_flow.py --fixed DIR [--repeats N]  # the 30 s command and the fixed cost against
+                                          # their floors (NumPy + PyYAML, the CLI) in N interleaved
+                                          # rounds, least and median (DIR from --command; default 61
+                                          # rounds, about 3 min)
     python bench/bench_flow.py --scaling  # do two CPUs run the C kernel side by side (processes, threads)
     python bench/bench_flow.py --seeds    # calibration accuracy and fresh-run ATE/RPE over
                                           # seeds 100-103 (docs/rigs/flow.md; about 2 min)
@@ -384,9 +385,10 @@ def command(duration=30.0, folder=None):
 
 
 def fixed(folder, rounds=61):
-    """The command's fixed cost against its floors, in interleaved rounds (least and median of ``rounds``):
-    ``robocal flow odometry`` on the 0.1 s log (with its 0.1 s reference and wheel CSVs) that
-    ``--command DIR`` left in ``DIR/short``, ``python -c "import numpy, yaml"`` (what robocal cannot avoid),
+    """The command and its fixed cost against their floors, in interleaved rounds (least and median of
+    ``rounds``): ``robocal flow odometry`` on the 30 s log and on the 0.1 s log (with its 0.1 s reference and
+    wheel CSVs) that ``--command DIR`` left in ``DIR/run30`` and ``DIR/short``, ``python -c "import numpy,
+    yaml"`` (what robocal cannot avoid),
     ``import robocal.cli.main`` and ``python -c pass``. The median shows what a loaded machine gives; the
     least, what the code costs."""
     import subprocess
@@ -398,7 +400,11 @@ def fixed(folder, rounds=61):
         raise SystemExit(f"{short} is missing: run 'python bench/bench_flow.py --command {folder}' first")
     py = _sys.executable
     outs = iter(range(10**6))
+    full = Path(folder) / "run30" / "run.yaml"
     cases = {
+        "robocal flow odometry --no-report, the 30 s log":
+            lambda: [py, "-m", "robocal", "flow", "odometry", str(full), "--no-progress", "--no-report", "--out",
+                     str(Path(folder) / f"fixed{next(outs)}")],
         "robocal flow odometry --no-report, 0.1 s log and CSVs (the fixed cost)":
             lambda: [py, "-m", "robocal", "flow", "odometry", str(short), "--no-progress", "--no-report", "--out",
                      str(Path(folder) / f"fixed{next(outs)}")],
