@@ -35,10 +35,9 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import threading
 import time
 
-from robocal._metadata import cache_dir
+from robocal._metadata import cache_dir, store_cache_file
 
 __all__ = ["sha256_file", "entry_path", "MIN_BYTES", "SETTLE_NS"]
 
@@ -63,10 +62,13 @@ def _identity(st: os.stat_result) -> list:
 
 def entry_path(path) -> os.PathLike | None:
     """Where the digest of ``path`` is kept (None when caching is off)."""
+    return _entry(os.path.realpath(path))
+
+
+def _entry(real: str):
     root = cache_dir()
     if root is None:
         return None
-    real = os.path.realpath(path)
     name = hashlib.blake2s(os.fsencode(real), digest_size=16).hexdigest()
     return root / "sha256" / f"{name}.json"
 
@@ -84,30 +86,15 @@ def _read_entry(where, real: str, ident: list) -> str | None:
     return None
 
 
-def _write_entry(where, doc: dict) -> None:
-    # a unique temporary name, then an atomic rename: concurrent commands on one input each write a whole
-    # entry (the same digest); no tempfile module (its import is ~9 ms of a command's start-up)
-    tmp = where.with_name(f".{where.name}.{os.getpid()}.{threading.get_ident()}.tmp")
-    try:
-        where.parent.mkdir(parents=True, exist_ok=True)
-        with open(tmp, "w", encoding="utf-8") as fh:
-            json.dump(doc, fh)
-        os.replace(tmp, where)
-    except OSError:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass  # a read-only cache: the digest is simply not kept
-
-
 def sha256_file(path) -> str:
     """SHA-256 (hex) of the content of the file ``path``; for a file of at least :data:`MIN_BYTES`, the
     digest stored by an earlier call when the file has not changed since (module docstring)."""
     st = os.stat(path)
-    where = entry_path(path) if st.st_size >= MIN_BYTES else None
+    real = os.path.realpath(path) if st.st_size >= MIN_BYTES else None
+    where = _entry(real) if real is not None else None
     if where is None:
         return _hash(path)
-    real, ident = os.path.realpath(path), _identity(st)
+    ident = _identity(st)
     digest = _read_entry(where, real, ident)
     if digest is not None:
         return digest
@@ -115,5 +102,5 @@ def sha256_file(path) -> str:
     digest = _hash(path)
     settled = max(st.st_mtime_ns, st.st_ctime_ns) <= started - SETTLE_NS
     if settled and _identity(os.stat(path)) == ident:
-        _write_entry(where, {"schema": _SCHEMA, "path": real, "stat": ident, "sha256": digest})
+        store_cache_file(where, {"schema": _SCHEMA, "path": real, "stat": ident, "sha256": digest})
     return digest

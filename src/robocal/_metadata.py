@@ -29,7 +29,7 @@ from importlib import import_module
 from pathlib import Path
 from typing import NamedTuple
 
-__all__ = ["version", "entry_points", "cache_dir", "cache_path", "forget", "RIG_GROUP"]
+__all__ = ["version", "entry_points", "cache_dir", "cache_path", "store_cache_file", "forget", "RIG_GROUP"]
 
 RIG_GROUP = "robocal.rigs"
 _SCHEMA = "robocal.metadata-cache/1"
@@ -142,17 +142,25 @@ def _load_cache(path: Path) -> dict | None:
     return None
 
 
-def _store_cache(path: Path, doc: dict) -> None:
-    import tempfile  # only when the cache is (re)written: its imports cost ~9 ms
+def store_cache_file(path: Path, doc) -> None:
+    """Write ``doc`` as JSON to the cache file ``path`` whole or not at all; a cache that cannot be written
+    (a read-only home) is left as it is: the caller works without it."""
+    import tempfile  # only when a cache file is (re)written: its imports cost ~9 ms
 
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError:
+        return
+    try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             json.dump(doc, fh)
         os.replace(tmp, path)  # concurrent commands each write a whole file; the last one stays
     except OSError:
-        pass  # a read-only home: every command reads the metadata itself, as without a cache
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
 
 
 def _answer() -> dict:
@@ -163,7 +171,7 @@ def _answer() -> dict:
         if doc is None:
             doc = _read_metadata()
             if path is not None:
-                _store_cache(path, doc)
+                store_cache_file(path, doc)
         _memo = doc
     return _memo
 
